@@ -1,0 +1,1 @@
+"""Exports of the predicted skeleton: JSON, TexGen .tg3, VTK .vtp."""

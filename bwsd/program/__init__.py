@@ -1,0 +1,1 @@
+"""The .bws program language: parser, validation and generators."""
