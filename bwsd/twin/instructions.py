@@ -47,10 +47,13 @@ class Program:
 
     ``fill`` lists the filled cells (row, col) in fill order (row by row, then column),
     which is also the order of the warp yarn ids. ``lines`` gives the source line of each
-    instruction (the same line repeats when it sits inside a REPEAT).
+    instruction (the same line repeats when it sits inside a REPEAT). ``cycle_length`` is
+    the number of instructions in one pass of the program's outermost REPEAT body (the
+    machine cycle), None when the program has no REPEAT.
     """
 
     diameter: float | None
     fill: tuple[tuple[int, int], ...]
     instructions: tuple[Instruction, ...]
     lines: tuple[int, ...] = ()
+    cycle_length: int | None = None

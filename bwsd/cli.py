@@ -1,0 +1,43 @@
+"""Command line: `bwsd simulate`, `bwsd program`, `bwsd slice`, `bwsd metrics`, `bwsd demo`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from bwsd import __version__
+from bwsd.errors import BwsdError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered."""
+    from bwsd.export import cli as export_cli
+    from bwsd.program import cli as program_cli
+    from bwsd.twin import cli as twin_cli
+
+    parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"bwsd {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    twin_cli.configure(sub)
+    program_cli.configure(sub)
+    export_cli.configure(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `bwsd` console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        status: int = args.handler(args)
+    except BwsdError as exc:
+        print(f"bwsd: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 1
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,24 @@
+"""The digital twin: the collision model of TWIN.md. Pure: numpy in, numpy out, no I/O."""
+
+from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp, Weft
+from bwsd.twin.machine import Machine
+from bwsd.twin.model import NodeInsert, Prediction, Snapshot, Twin, replay, simulate
+from bwsd.twin.skeleton import ContactData, SkeletonData, YarnData
+
+__all__ = [
+    "ContactData",
+    "Instruction",
+    "Machine",
+    "NodeInsert",
+    "Prediction",
+    "Program",
+    "Shift",
+    "SkeletonData",
+    "Snapshot",
+    "TakeUp",
+    "Twin",
+    "Weft",
+    "YarnData",
+    "replay",
+    "simulate",
+]
