@@ -12,14 +12,14 @@ from bwsd.errors import BwsdError
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
+    from bwsd import run
     from bwsd.export import cli as export_cli
     from bwsd.program import cli as program_cli
-    from bwsd.twin import cli as twin_cli
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
     parser.add_argument("--version", action="version", version=f"bwsd {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    twin_cli.configure(sub)
+    run.configure(sub)
     program_cli.configure(sub)
     export_cli.configure(sub)
     return parser

@@ -1,1 +1,49 @@
-"""Exports of the predicted skeleton: JSON, TexGen .tg3, VTK .vtp."""
+"""Exports of the predicted skeleton: JSON, TexGen .tg3, VTK .vtu; slices and metrics."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from bwsd.export.errors import ExportError
+from bwsd.twin.skeleton import SkeletonData
+
+__all__ = ["FORMATS", "ExportError", "export"]
+
+# Suffix -> what it writes; the writers are imported on use (pytexgen and meshio are large).
+FORMATS: dict[str, str] = {
+    ".json": "skeleton JSON (docs/skeleton-json.md)",
+    ".tg3": "TexGen model",
+    ".vtu": "VTK unstructured grid of line cells (ParaView)",
+}
+
+
+def _writer(suffix: str) -> Callable[[SkeletonData, Path], None]:
+    if suffix == ".json":
+        from bwsd.export.skeleton_json import write_skeleton_json
+
+        return write_skeleton_json
+    if suffix == ".tg3":
+        from bwsd.export.texgen import write_tg3
+
+        return write_tg3
+    from bwsd.export.vtk import write_vtu
+
+    return write_vtu
+
+
+def export(sk: SkeletonData, path: str | Path) -> None:
+    """Write the skeleton in the format its suffix names (see ``FORMATS``)."""
+    target = Path(path)
+    suffix = target.suffix.lower()
+    if suffix == ".vtp":
+        raise ExportError(
+            "VTK PolyData (.vtp) is not written; use .vtu, which ParaView opens the same way",
+            path=str(target),
+        )
+    if suffix not in FORMATS:
+        known = ", ".join(f"{s} ({what})" for s, what in FORMATS.items())
+        raise ExportError(
+            f"unknown export format {suffix or '(no suffix)'!r}; known: {known}", path=str(target)
+        )
+    _writer(suffix)(sk, target)

@@ -173,18 +173,24 @@ def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
 
 
 def rest_point(hit: Hit, a1: FloatArray, a2: FloatArray, diameter: float) -> FloatArray:
-    """X = P - d n: the moving yarn rests against the hit one on the side it came from."""
+    """X = P - d n: the moving yarn rests against the hit one on the side it came from.
+
+    Scalar float formulas in a fixed order (the exact reference repeats them).
+    """
     if diameter == 0:
         return hit.point.copy()
-    move = a2 - a1
-    axis = hit.d - hit.c
-    axis = axis / math.sqrt(float(axis @ axis))
-    across = move - float(move @ axis) * axis
-    size = math.sqrt(float(across @ across))
-    if size <= PARALLEL * math.sqrt(float(move @ move)):
+    mx, my, mz = (float(v) for v in a2 - a1)
+    ax, ay, az = (float(v) for v in hit.d - hit.c)
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / norm, ay / norm, az / norm
+    along = mx * ax + my * ay + mz * az
+    nx, ny, nz = mx - along * ax, my - along * ay, mz - along * az
+    size = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if size <= PARALLEL * math.sqrt(mx * mx + my * my + mz * mz):
         return hit.point.copy()
-    result: FloatArray = hit.point - (diameter / size) * across
-    return result
+    k = diameter / size
+    px, py, pz = (float(v) for v in hit.point)
+    return np.array((px - k * nx, py - k * ny, pz - k * nz))
 
 
 def sweep(state: State, w: int, a2: FloatArray, instruction: int) -> None:

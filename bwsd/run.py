@@ -1,0 +1,117 @@
+"""`bwsd simulate` and `bwsd demo`: run a program through the twin and write its exports."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from bwsd.config import load_config
+from bwsd.errors import ProgramError, TwinError
+from bwsd.twin import Machine, Program, Twin, simulate
+from bwsd.twin.model import ProgressFn
+
+DEMO_PROGRAM = "examples/braid-2x2.bws"
+DEMO_CONFIG = "config/braid-2x2.toml"
+
+
+def configure(sub: Any) -> None:
+    """Register `simulate` and `demo`."""
+    p = sub.add_parser("simulate", help="run a program through the twin")
+    p.add_argument("program", help="a .bws program")
+    p.add_argument("--config", required=True, help="machine config (TOML)")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.add_argument("--skeleton", metavar="FILE", help="write the skeleton as JSON")
+    p.add_argument("--export", metavar="FILE", action="append", default=[],
+                   help="write FILE.tg3 (TexGen), FILE.vtp (ParaView) or FILE.json; repeatable")
+    p.set_defaults(handler=_simulate_cmd)
+    d = sub.add_parser("demo", help="simulate a shipped example and write its exports")
+    d.add_argument("--out", default="out", help="folder for the exports (default: out)")
+    d.set_defaults(handler=_demo_cmd)
+
+
+def load_and_simulate(program_path: str, config_path: str,
+                      progress: ProgressFn | None = None) -> tuple[Machine, Program, Twin]:
+    """Load config and program, run the program; a refused instruction names its line."""
+    from bwsd.program.validate import load_program
+
+    machine = load_config(config_path).machine
+    program = load_program(program_path, machine)
+    try:
+        twin = simulate(machine, program, progress)
+    except TwinError as exc:
+        line = program.lines[exc.instruction - 1] if 0 < exc.instruction <= len(program.lines) else 0
+        raise ProgramError(f"instruction {exc.instruction}: {exc.reason}", line=line, column=1,
+                           source=program_path) from None
+    return machine, program, twin
+
+
+@contextmanager
+def _progress(enabled: bool) -> Iterator[ProgressFn | None]:
+    if not enabled:
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True) as bar:
+        task = bar.add_task("simulating", total=None)
+
+        def report(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield report
+
+
+def _summary(twin: Twin, seconds: float) -> dict[str, Any]:
+    return {
+        "yarns": twin.yarn_count,
+        "nodes": twin.node_count,
+        "contacts": twin.contact_count,
+        "instructions": twin.done,
+        "takeup": twin.takeup,
+        "seconds": round(seconds, 6),
+    }
+
+
+def _write_exports(twin: Twin, skeleton: str | None, exports: list[str]) -> None:
+    from bwsd.export import export
+    from bwsd.export.skeleton_json import write_skeleton_json
+
+    sk = twin.skeleton()
+    if skeleton:
+        write_skeleton_json(sk, skeleton)
+    for path in exports:
+        export(sk, path)
+
+
+def _simulate_cmd(args: argparse.Namespace) -> int:
+    start = time.perf_counter()
+    with _progress(sys.stderr.isatty() and not args.json) as progress:
+        _, _, twin = load_and_simulate(args.program, args.config, progress)
+    seconds = time.perf_counter() - start
+    _write_exports(twin, args.skeleton, args.export)
+    summary = _summary(twin, seconds)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(", ".join(f"{k} {v}" for k, v in summary.items()))
+    return 0
+
+
+def _demo_cmd(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    _, _, twin = load_and_simulate(DEMO_PROGRAM, DEMO_CONFIG)
+    files = [str(out / name) for name in ("braid-2x2.tg3", "braid-2x2.vtp")]
+    _write_exports(twin, str(out / "braid-2x2.json"), files)
+    summary = _summary(twin, 0.0)
+    del summary["seconds"]
+    print(f"simulated {DEMO_PROGRAM}: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
+    for name in ("braid-2x2.json", *(Path(f).name for f in files)):
+        print(f"wrote {out / name}")
+    return 0
