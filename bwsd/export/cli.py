@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from bwsd.twin.instructions import Program
@@ -119,7 +120,7 @@ def _section_table(section: dict[str, Any] | None) -> Table:
 def _angle_table(angles: dict[str, dict[str, Any]]) -> Table:
     table = Table(title="Yarn angle to the production axis (length-weighted)")
     for name in ("family", "segments", "length [mm]", "mean [deg]", "spread [deg]"):
-        table.add_column(name, justify="left" if name == "family" else "right")
+        table.add_column(escape(name), justify="left" if name == "family" else "right")
     for family, a in angles.items():
         table.add_row(
             family, str(a["segments"]), _number(a["length"]), _number(a["mean"]), _number(a["std"])

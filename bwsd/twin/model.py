@@ -11,8 +11,7 @@ from bwsd.errors import TwinError
 from bwsd.twin.instructions import Instruction, Program
 from bwsd.twin.machine import Machine
 from bwsd.twin.moves import execute
-from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData
-from bwsd.twin.predicates import FloatArray
+from bwsd.twin.skeleton import ContactData, FloatArray, IntArray, SkeletonData, YarnData, YarnKind
 from bwsd.twin.state import State
 from bwsd.twin.sweep import index_from_end
 
@@ -70,7 +69,7 @@ class Twin:
         for row, col in fill:
             if not machine.inside(row, col):
                 raise TwinError(f"fill cell ({row}, {col}) is outside the matrix")
-            if self._state.occupancy[row, col] >= 0:
+            if self._state.occupancy[row][col] >= 0:
                 raise TwinError(f"fill cell ({row}, {col}) is filled twice")
             self._state.add_warp(row, col)
         self.done = 0
@@ -92,7 +91,7 @@ class Twin:
         st = self._state
         mark = len(st.log)
         before = self._path_lengths()
-        nodes0, contacts0, yarns0 = st.pos.size, st.contacts.size, len(st.yarns)
+        contacts0, yarns0 = st.contact_count, len(st.yarns)
         index = self.done + 1
         try:
             moved = execute(st, instruction, index)
@@ -100,7 +99,7 @@ class Twin:
             st.undo_to(mark)
             raise
         self._token += 1
-        pred = self._describe(index, instruction, moved, before, nodes0, contacts0, yarns0)
+        pred = self._describe(index, instruction, moved, before, contacts0, yarns0)
         self._pending, self._pending_mark = pred, mark
         return pred
 
@@ -166,7 +165,7 @@ class Twin:
     def occupancy(self) -> IntArray:
         """Yarn id of the case in each cell, -1 where empty (a copy)."""
         self._settle()
-        return self._state.occupancy.copy()
+        return np.array(self._state.occupancy, dtype=np.int64)
 
     @property
     def takeup(self) -> float:
@@ -176,12 +175,12 @@ class Twin:
     @property
     def contact_count(self) -> int:
         self._settle()
-        return self._state.contacts.size
+        return self._state.contact_count
 
     @property
     def node_count(self) -> int:
         self._settle()
-        return self._state.pos.size
+        return self._state.node_count
 
     @property
     def yarn_count(self) -> int:
@@ -192,58 +191,54 @@ class Twin:
         """A read-only copy of the whole skeleton."""
         self._settle()
         st = self._state
-        pos = st.pos.view()
+        pos = np.array(st.pos, dtype=np.float64).reshape(-1, 3)
         yarns = []
         for i, nodes in enumerate(st.yarns):
-            ids = np.frombuffer(nodes, dtype=np.int64).copy()
-            kind = "warp" if i < st.n_warps else "weft"
-            yarns.append(YarnData(i, kind, ids, pos[ids].copy(), st.yarn_cell[i],
-                                  st.yarn_angle[i]))
-        contacts = tuple(ContactData(*map(int, row)) for row in st.contacts.view())
+            ids = np.array(nodes, dtype=np.int64)
+            kind: YarnKind = "warp" if i < st.n_warps else "weft"
+            yarns.append(YarnData(i, kind, ids, pos[ids], st.yarn_cell[i], st.yarn_angle[i]))
+        table = np.array(st.contacts, dtype=np.int64).reshape(-1, 5).tolist()
+        contacts = tuple(ContactData(*row) for row in table)
         return SkeletonData(self.machine, self.diameter, st.takeup, self.done, tuple(yarns),
-                            contacts, st.occupancy.copy())
+                            contacts, self.occupancy)
 
     def path_length(self, yarn: int) -> float:
         """Length of a yarn's polyline, free segment included."""
         self._settle()
         st = self._state
         if yarn >= st.n_warps:
-            return float(st.yarn_len.data[yarn])
+            return float(st.yarn_len[yarn])
         return float(self._path_lengths()[yarn])
 
     def _path_lengths(self) -> FloatArray:
         """Path length of every warp: its fixed part plus its free segment."""
         st = self._state
-        pos = st.pos.data
         n = st.n_warps
-        free = pos[st.free_node.data[:n]] - pos[st.last_fixed.data[:n]]
-        result: FloatArray = st.yarn_len.data[:n] + np.sqrt(np.einsum("ij,ij->i", free, free))
+        pos = np.array(st.pos, dtype=np.float64).reshape(-1, 3)
+        free = pos[np.array(st.free_node, dtype=np.int64)] - pos[np.array(st.last_fixed)]
+        fixed = np.array(st.yarn_len, dtype=np.float64)[:n]
+        result: FloatArray = fixed + np.sqrt(np.einsum("ij,ij->i", free, free))
         return result
 
     def _describe(self, index: int, instruction: Instruction, moved: list[int],
-                  before: FloatArray, nodes0: int, contacts0: int,
-                  yarns0: int) -> Prediction:
+                  before: FloatArray, contacts0: int, yarns0: int) -> Prediction:
         st = self._state
-        pos = st.pos.data
-        contacts = tuple(ContactData(*map(int, row)) for row in st.contacts.view()[contacts0:])
-        inserted = []
+        rows = np.array(st.contacts[5 * contacts0:], dtype=np.int64).reshape(-1, 5).tolist()
+        contacts = tuple(ContactData(*row) for row in rows)
         owner = {c.moving_node: c.moving_yarn for c in contacts}
         owner.update({c.hit_node: c.hit_yarn for c in contacts})
+        inserted = []
         for node, yarn in sorted(owner.items()):
             nodes = st.yarns[yarn]
             at = index_from_end(nodes, node)
-            inserted.append(NodeInsert(yarn, node, int(nodes[at - 1]), _xyz(pos[node])))
-        free = {w: _xyz(pos[st.free_node.data[w]]) for w in moved}
+            inserted.append(NodeInsert(yarn, node, nodes[at - 1], st.xyz(node)))
+        free = {w: st.xyz(st.free_node[w]) for w in moved}
         cases = {w: st.warp_cell[w] for w in moved}
         after = self._path_lengths()
         change = {int(y): float(after[y] - before[y]) for y in np.nonzero(after != before)[0]}
         return Prediction(index, instruction, contacts, tuple(inserted), free, cases,
-                          st.occupancy.copy(), st.takeup, tuple(range(yarns0, len(st.yarns))),
-                          change, self._token)
-
-
-def _xyz(p: np.ndarray) -> tuple[float, float, float]:  # type: ignore[type-arg]
-    return float(p[0]), float(p[1]), float(p[2])
+                          np.array(st.occupancy, dtype=np.int64), st.takeup,
+                          tuple(range(yarns0, len(st.yarns))), change, self._token)
 
 
 ProgressFn = Callable[[int, int], None]

@@ -4,17 +4,15 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from bwsd.errors import MoveError, ShedClosedError
 from bwsd.twin.instructions import Instruction, Shift, TakeUp, Weft
-from bwsd.twin.predicates import FloatArray
+from bwsd.twin.predicates import Vec
 from bwsd.twin.state import State
 from bwsd.twin.sweep import sweep
 
 
 def execute(state: State, instruction: Instruction, index: int) -> list[int]:
-    """Run one instruction in place (logged); returns the yarns whose free node moved."""
+    """Run one instruction in place (logged); returns the warps whose free node moved."""
     if isinstance(instruction, Shift):
         return _shift(state, instruction, index)
     if isinstance(instruction, TakeUp):
@@ -23,110 +21,100 @@ def execute(state: State, instruction: Instruction, index: int) -> list[int]:
     return []
 
 
-def shift_order(state: State, instruction: Shift, entry: int) -> list[tuple[int, tuple[int, int]]]:
-    """The cases of one entry of a shift, leading case first, with their target cells."""
-    line, k = instruction.moves[entry]
+def line_cases(state: State, axis: str, line: int, k: int) -> list[tuple[int, int]]:
+    """(warp, index along the line) of the cases of one line, leading case first."""
     m = state.machine
-    limit = m.rows if instruction.axis == "row" else m.cols
-    if not 0 <= line < limit:
-        raise MoveError(f"{instruction.axis.upper()} {line} is outside the matrix", instruction=0)
-    occ = state.occupancy[line, :] if instruction.axis == "row" else state.occupancy[:, line]
-    cells = [i for i in range(len(occ)) if occ[i] >= 0]
-    cells.sort(reverse=k > 0)
-    out = []
-    for i in cells:
-        target = (line, i + k) if instruction.axis == "row" else (i + k, line)
-        out.append((int(occ[i]), target))
-    return out
+    occ = state.occupancy
+    if axis == "row":
+        cases = [(occ[line][i], i) for i in range(m.cols) if occ[line][i] >= 0]
+    else:
+        cases = [(occ[i][line], i) for i in range(m.rows) if occ[i][line] >= 0]
+    cases.sort(key=lambda case: case[1], reverse=k > 0)
+    return cases
 
 
 def _shift(state: State, instruction: Shift, index: int) -> list[int]:
     m = state.machine
     z = m.d_mat + state.takeup
     moved: list[int] = []
-    for entry in range(len(instruction.moves)):
-        try:
-            order = shift_order(state, instruction, entry)
-        except MoveError as exc:
-            raise MoveError(exc.reason, instruction=index) from None
-        for warp, (row, col) in order:
-            if not m.inside(row, col):
-                raise MoveError(
-                    f"case of yarn {warp} would leave the matrix at cell ({row}, {col})",
-                    instruction=index,
-                )
-            if state.occupancy[row, col] >= 0:
-                other = int(state.occupancy[row, col])
-                raise MoveError(
-                    f"case of yarn {warp} would land on cell ({row}, {col}), occupied by yarn "
-                    f"{other}",
-                    instruction=index,
-                )
+    for line, k in instruction.moves:
+        limit = m.rows if instruction.axis == "row" else m.cols
+        if not 0 <= line < limit:
+            raise MoveError(f"{instruction.axis.upper()} {line} is outside the matrix",
+                            instruction=index)
+        for warp, at in line_cases(state, instruction.axis, line, k):
+            row, col = (line, at + k) if instruction.axis == "row" else (at + k, line)
+            _check_target(state, warp, row, col, index)
             state.place(warp, (row, col))
             gx, gy = m.guide_xy(row, col)
-            sweep(state, warp, np.array((gx, gy, z)), index)
+            sweep(state, warp, (gx, gy, z), index)
             moved.append(warp)
     return moved
 
 
+def _check_target(state: State, warp: int, row: int, col: int, index: int) -> None:
+    if not state.machine.inside(row, col):
+        raise MoveError(f"case of yarn {warp} would leave the matrix at cell ({row}, {col})",
+                        instruction=index)
+    other = state.occupancy[row][col]
+    if other >= 0:
+        raise MoveError(
+            f"case of yarn {warp} would land on cell ({row}, {col}), occupied by yarn {other}",
+            instruction=index,
+        )
+
+
 def _takeup(state: State, instruction: TakeUp, index: int) -> list[int]:
-    step = np.array((0.0, 0.0, instruction.length))
-    state.set_takeup(state.takeup + instruction.length)
+    p = instruction.length
+    state.set_takeup(state.takeup + p)
     for warp in range(state.n_warps):
-        free = int(state.free_node.data[warp])
-        sweep(state, warp, state.pos.data[free] + step, index)
+        x, y, z = state.xyz(state.free_node[warp])
+        sweep(state, warp, (x + 0.0, y + 0.0, z + p), index)
     return list(range(state.n_warps))
 
 
-def segment_distances(p0: FloatArray, p1: FloatArray, q0: FloatArray, q1: FloatArray) -> FloatArray:
-    """Distances between segment p0-p1 and each segment q0[i]-q1[i] (closest points, clamped)."""
-    u = p1 - p0
-    v = q1 - q0
-    w = p0 - q0
-    a = float(u @ u)
-    b = v @ u
-    c = np.einsum("ij,ij->i", v, v)
-    d = w @ u
-    e = np.einsum("ij,ij->i", v, w)
+def segment_distance(p0: Vec, p1: Vec, q0: Vec, q1: Vec) -> float:
+    """Shortest distance between segments p0-p1 and q0-q1 (closest points, clamped)."""
+    u = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])
+    v = (q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2])
+    w = (p0[0] - q0[0], p0[1] - q0[1], p0[2] - q0[2])
+    a = u[0] * u[0] + u[1] * u[1] + u[2] * u[2]
+    b = u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+    c = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2]
+    e = v[0] * w[0] + v[1] * w[1] + v[2] * w[2]
     den = a * c - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(den > 1e-12 * a * c, (b * e - c * d) / den, 0.0)
-    s = np.clip(s, 0.0, 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(c > 0, (b * s + e) / c, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(a > 0, np.clip((b * t - d) / a, 0.0, 1.0), 0.0)
-    gap = w + s[:, None] * u - t[:, None] * v
-    result: FloatArray = np.sqrt(np.einsum("ij,ij->i", gap, gap))
-    return result
+    s = min(max((b * e - c * d) / den, 0.0), 1.0) if den > 1e-12 * a * c else 0.0
+    t = min(max((b * s + e) / c, 0.0), 1.0) if c > 0 else 0.0
+    s = min(max((b * t - d) / a, 0.0), 1.0) if a > 0 else 0.0
+    gap = [w[i] + s * u[i] - t * v[i] for i in range(3)]
+    return math.sqrt(gap[0] ** 2 + gap[1] ** 2 + gap[2] ** 2)
 
 
 def _weft(state: State, instruction: Weft, index: int) -> None:
     d = state.diameter
     rad = math.radians(instruction.angle)
-    axis = np.array((math.cos(rad), math.sin(rad), 0.0))
-    centre = np.array((instruction.x, instruction.y, state.takeup + instruction.z))
-    p0 = centre - instruction.length / 2 * axis
-    p1 = centre + instruction.length / 2 * axis
-    reach = np.full(3, d)
-    lo, hi = np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach
-    pos = state.pos.data
-    fixed = state.segments_near(lo, hi)
-    warps = np.arange(state.n_warps)
-    q0 = np.concatenate((pos[state.seg_c.data[fixed]], pos[state.last_fixed.data[warps]]))
-    q1 = np.concatenate((pos[state.seg_d.data[fixed]], pos[state.free_node.data[warps]]))
-    yarns = np.concatenate((state.seg_yarn.data[fixed], warps))
-    if len(yarns):
-        gaps = segment_distances(p0, p1, q0, q1)
-        closed = np.nonzero((gaps < d) | (gaps == 0))[0]
-        if closed.size:
-            i = int(closed[np.argmin(gaps[closed])])
-            raise ShedClosedError(
-                f"shed closed: the weft passes {float(gaps[i]):.4g} mm from yarn {int(yarns[i])}"
-                f" (yarn diameter {d:g} mm)",
-                instruction=index,
-            )
+    ax, ay = math.cos(rad), math.sin(rad)
+    half = instruction.length / 2
+    cz = state.takeup + instruction.z
+    p0 = (instruction.x - half * ax, instruction.y - half * ay, cz)
+    p1 = (instruction.x + half * ax, instruction.y + half * ay, cz)
+    lo = (min(p0[0], p1[0]) - d, min(p0[1], p1[1]) - d, cz - d)
+    hi = (max(p0[0], p1[0]) + d, max(p0[1], p1[1]) + d, cz + d)
+    segments = [(state.seg_yarn[s], state.seg_c[s], state.seg_d[s])
+                for s in state.fixed_near(lo, hi, hi)]
+    segments += [(w, state.last_fixed[w], state.free_node[w]) for w in state.free_near(lo, hi, hi)]
+    closest: tuple[float, int] | None = None
+    for yarn, c, e in segments:
+        gap = segment_distance(p0, p1, state.xyz(c), state.xyz(e))
+        if (gap < d or gap == 0) and (closest is None or gap < closest[0]):
+            closest = (gap, yarn)
+    if closest is not None:
+        raise ShedClosedError(
+            f"shed closed: the weft passes {closest[0]:.4g} mm from yarn {closest[1]}"
+            f" (yarn diameter {d:g} mm)",
+            instruction=index,
+        )
     start = state.new_node(p0)
     end = state.new_node(p1)
     state.add_weft(start, end, instruction.angle)

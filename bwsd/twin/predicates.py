@@ -1,109 +1,101 @@
-"""Exact orientation signs: a float filter with a proven bound, fractions where it cannot decide.
+"""Exact orientation signs: a float filter with a proven bound, integers where it cannot decide.
 
 ``orient(p0, p1, p2, p3) = det[p1 - p0, p2 - p0, p3 - p0]``. The float value is computed as the
-three 2x2 minors of two difference vectors dotted with the third; Shewchuk's analysis of this
-form ("Adaptive Precision Floating-Point Arithmetic and Fast Robust Geometric Predicates",
-1997, bound o3derrboundA = (7 + 56 eps) eps * permanent, eps = 2**-53) bounds its error by
-that constant times the permanent (the same sum with every product taken in absolute value).
-We use a slightly larger constant. Where |det| does not exceed the bound, or the permanent is
-so small that underflow could void the analysis, the sign is recomputed with exact rationals
-from the same float64 inputs.
+three 2x2 minors of two difference vectors dotted with the third, summed left to right.
+Shewchuk's analysis of this form ("Adaptive Precision Floating-Point Arithmetic and Fast
+Robust Geometric Predicates", 1997: o3derrboundA = (7 + 56 eps) eps, eps = 2**-53) bounds its
+error by that constant times the permanent (the same sum with every product in absolute
+value, itself computed in floating point). We use a slightly larger constant. Where |det|
+does not exceed the bound, or the permanent is so small that underflow could void the
+analysis, the sign is recomputed exactly from the same float64 inputs.
+
+The float formulas are part of the contract: the sweep reuses these values for its
+constructions, and the exact reference in the test suite repeats them operation by operation.
 """
 
 from __future__ import annotations
 
-# The float formulas below are part of the contract: the constructions of the sweep reuse
-# these values, and the exact reference in the test suite recomputes them operation by
-# operation, so they are written out in a fixed order.
-
 from fractions import Fraction
 
-import numpy as np
-import numpy.typing as npt
-
-FloatArray = npt.NDArray[np.float64]
-SignArray = npt.NDArray[np.int8]
+Vec = tuple[float, float, float]
 
 ERRBOUND = 8.0e-16  # > (7 + 56 * 2**-53) * 2**-53 = 7.7716e-16
 TINY = 1.0e-200  # below this permanent the float analysis is not trusted (underflow)
 
 
-def exact_orient(p0: FloatArray, p1: FloatArray, p2: FloatArray, p3: FloatArray) -> Fraction:
+def _exact_scaled(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> tuple[int, int]:
+    """The exact determinant as (integer numerator, power-of-two denominator).
+
+    Every float64 is an integer times a power of two: scaling all twelve coordinates by the
+    largest denominator turns them into integers, and Python's integers are exact.
+    """
+    ratios = [v.as_integer_ratio() for p in (p0, p1, p2, p3) for v in p]
+    den = max(d for _, d in ratios)
+    n = [num * (den // d) for num, d in ratios]
+    ax, ay, az = n[3] - n[0], n[4] - n[1], n[5] - n[2]
+    bx, by, bz = n[6] - n[0], n[7] - n[1], n[8] - n[2]
+    cx, cy, cz = n[9] - n[0], n[10] - n[1], n[11] - n[2]
+    det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+    return det, den**3
+
+
+def exact_orient(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> Fraction:
     """det[p1 - p0, p2 - p0, p3 - p0] in exact rational arithmetic."""
-    o = [Fraction(float(v)) for v in p0]
-    a = [Fraction(float(v)) - w for v, w in zip(p1, o, strict=True)]
-    b = [Fraction(float(v)) - w for v, w in zip(p2, o, strict=True)]
-    c = [Fraction(float(v)) - w for v, w in zip(p3, o, strict=True)]
-    return (
-        a[0] * (b[1] * c[2] - b[2] * c[1])
-        + a[1] * (b[2] * c[0] - b[0] * c[2])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
-    )
+    return Fraction(*_exact_scaled(p0, p1, p2, p3))
 
 
-def _sign(value: Fraction) -> int:
-    return (value > 0) - (value < 0)
+def exact_sign(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> int:
+    """Sign of det[p1 - p0, p2 - p0, p3 - p0], exactly."""
+    num, _ = _exact_scaled(p0, p1, p2, p3)
+    return (num > 0) - (num < 0)
 
 
-def _minors(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """a x b and the matching absolute 'permanent' minors, row-wise on (..., 3) arrays."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    p0, p1 = ay * bz, az * by
-    p2, p3 = az * bx, ax * bz
-    p4, p5 = ax * by, ay * bx
-    cross = np.stack((p0 - p1, p2 - p3, p4 - p5), axis=-1)
-    perm = np.stack(
-        (np.abs(p0) + np.abs(p1), np.abs(p2) + np.abs(p3), np.abs(p4) + np.abs(p5)), axis=-1
-    )
-    return cross, perm
-
-
-def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Row-wise dot product summed left to right (no BLAS, no fused multiply-add)."""
-    result: FloatArray = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-    return result
-
-
-def _finish(
-    det: FloatArray,
-    perm: FloatArray,
-    points: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
-) -> tuple[FloatArray, SignArray, FloatArray]:
+def orient(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> tuple[float, int, float]:
+    """Float value, exact sign and error bound of det[p1 - p0, p2 - p0, p3 - p0]."""
+    ox, oy, oz = p0
+    ax, ay, az = p1[0] - ox, p1[1] - oy, p1[2] - oz
+    bx, by, bz = p2[0] - ox, p2[1] - oy, p2[2] - oz
+    cx, cy, cz = p3[0] - ox, p3[1] - oy, p3[2] - oz
+    m0, m1 = ay * bz, az * by
+    m2, m3 = az * bx, ax * bz
+    m4, m5 = ax * by, ay * bx
+    det = cx * (m0 - m1) + cy * (m2 - m3) + cz * (m4 - m5)
+    perm = abs(cx) * (abs(m0) + abs(m1)) + abs(cy) * (abs(m2) + abs(m3))
+    perm = perm + abs(cz) * (abs(m4) + abs(m5))
     bound = ERRBOUND * perm
-    sign = np.sign(det).astype(np.int8)
-    unsure = np.nonzero((np.abs(det) <= bound) | (perm < TINY))[0]
-    if unsure.size:
-        p0, p1, p2, p3 = (np.broadcast_to(p, det.shape + (3,)) for p in points)
-        for i in unsure.tolist():
-            sign[i] = _sign(exact_orient(p0[i], p1[i], p2[i], p3[i]))
-    return det, sign, bound
+    if det > bound and perm >= TINY:
+        return det, 1, bound
+    if -det > bound and perm >= TINY:
+        return det, -1, bound
+    return det, exact_sign(p0, p1, p2, p3), bound
 
 
-def side_signs(
-    b: FloatArray, a1: FloatArray, a2: FloatArray, x: FloatArray
-) -> tuple[FloatArray, SignArray, FloatArray]:
-    """orient(b, a1, a2, x[i]) for one plane (b, a1, a2) and many points x (n, 3).
+class Plane:
+    """The plane of a sweep triangle (b, a1, a2) with its minors, for many side tests."""
 
-    Returns the float values (used for constructions only), their exact signs and the bound
-    on the float values' error.
-    """
-    cross, perm3 = _minors(a1 - b, a2 - b)
-    c = x - b
-    det = _dot(c, cross)
-    perm = _dot(np.abs(c), perm3)
-    return _finish(det, perm, (b, a1, a2, x))
+    __slots__ = ("b", "m", "n0", "n1", "n2", "p0", "p1", "p2", "pts")
 
+    def __init__(self, b: Vec, a1: Vec, a2: Vec) -> None:
+        self.b = b
+        self.pts = (b, a1, a2)
+        bx, by, bz = b
+        ax, ay, az = a1[0] - bx, a1[1] - by, a1[2] - bz
+        cx, cy, cz = a2[0] - bx, a2[1] - by, a2[2] - bz
+        m0, m1, m2, m3, m4, m5 = ay * cz, az * cy, az * cx, ax * cz, ax * cy, ay * cx
+        self.n0, self.n1, self.n2 = m0 - m1, m2 - m3, m4 - m5
+        self.p0, self.p1, self.p2 = abs(m0) + abs(m1), abs(m2) + abs(m3), abs(m4) + abs(m5)
 
-def edge_signs(
-    c: FloatArray, d: FloatArray, q: FloatArray, r: FloatArray
-) -> tuple[FloatArray, SignArray, FloatArray]:
-    """orient(c[i], d[i], q, r) for many segments c-d (n, 3) and one edge q-r.
-
-    Returns the float values, their exact signs and the bound on the float values' error.
-    """
-    u = d - c
-    cross, perm3 = _minors(q - c, r - c)
-    det = _dot(u, cross)
-    perm = _dot(np.abs(u), perm3)
-    return _finish(det, perm, (c, d, q, r))
+    def side(self, x: Vec) -> tuple[float, int]:
+        """orient(b, a1, a2, x): float value (for constructions) and exact sign."""
+        bx, by, bz = self.b
+        cx, cy, cz = x[0] - bx, x[1] - by, x[2] - bz
+        det = cx * self.n0 + cy * self.n1 + cz * self.n2
+        perm = abs(cx) * self.p0 + abs(cy) * self.p1 + abs(cz) * self.p2
+        bound = ERRBOUND * perm
+        if perm >= TINY:
+            if det > bound:
+                return det, 1
+            if -det > bound:
+                return det, -1
+        b, a1, a2 = self.pts
+        return det, exact_sign(b, a1, a2, x)

@@ -1,8 +1,10 @@
-"""The sweep of one free node (TWIN.md, "The sweep"), vectorised over candidate segments.
+"""The sweep of one free node (TWIN.md, "The sweep").
 
-Decisions (which segment is hit, and in which order) use exact signs from
-``bwsd.twin.predicates``; constructions (the new nodes' coordinates) are float64, computed by
-fixed formulas, and snap to the exact value where a decision says a quantity is exactly zero.
+Candidates come from the grids of ``State``; each is tested by exact predicates
+(``bwsd.twin.predicates``). Constructions (new nodes, the restart point) are float64 formulas
+in a fixed order, snapped to the exact value where a decision says a quantity is exactly zero:
+a crossing exactly at a segment's end is that end, a touch of the final edge restarts exactly
+at the new guide.
 """
 
 from __future__ import annotations
@@ -12,125 +14,119 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
-import numpy as np
-
 from bwsd.errors import TwinError
-from bwsd.twin.predicates import FloatArray, edge_signs, exact_orient, side_signs
+from bwsd.twin.predicates import Plane, Vec, exact_orient, orient
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
 PARALLEL = 1e-12  # |component of the move across the hit segment| / |move| treated as zero
 
 
-@dataclass
+@dataclass(slots=True)
 class Hit:
-    """The first contact of a sweep step."""
+    """A contact candidate of one sweep step."""
 
-    t: float
+    t: float  # float sweep time (exactly 1.0 when ``t_one``)
+    slack: float  # bound on |t - exact t|
+    t_one: bool  # exactly on the final edge
     yarn: int
     seg: int  # fixed segment id, or -(warp + 1) for a warp's free segment
-    c: FloatArray
-    d: FloatArray
-    point: FloatArray
+    c: Vec
+    d: Vec
+    point: Vec
 
 
-@dataclass
-class Candidates:
-    """Segments that may be hit: endpoints, yarn, and segment reference."""
-
-    c: FloatArray
-    d: FloatArray
-    yarn: np.ndarray[Any, Any]
-    ref: np.ndarray[Any, Any]
-
-
-def _gather(state: State, w: int, lo: FloatArray, hi: FloatArray, skip: tuple[int, ...],
-            skip_warp: int) -> Candidates:
-    pos = state.pos.data
-    fixed = state.segments_near(lo, hi)
-    if skip:
-        fixed = fixed[~np.isin(fixed, skip)]
-    fixed = fixed[state.seg_yarn.data[fixed] != w]
-    warps = np.arange(state.n_warps)
-    keep = warps != w
-    if skip_warp >= 0:
-        keep &= warps != skip_warp
-    warps = warps[keep]
-    c = np.concatenate((pos[state.seg_c.data[fixed]], pos[state.last_fixed.data[warps]]))
-    d = np.concatenate((pos[state.seg_d.data[fixed]], pos[state.free_node.data[warps]]))
-    yarn = np.concatenate((state.seg_yarn.data[fixed], warps))
-    ref = np.concatenate((fixed, -(warps + 1)))
-    box = np.all(np.maximum(c, d) >= lo, axis=1) & np.all(np.minimum(c, d) <= hi, axis=1)
-    return Candidates(c[box], d[box], yarn[box], ref[box])
-
-
-def first_contact(state: State, w: int, b: FloatArray, a1: FloatArray, a2: FloatArray,
-                  skip: tuple[int, ...], skip_warp: int) -> Hit | None:
-    """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
-    lo = np.minimum(np.minimum(b, a1), a2)
-    hi = np.maximum(np.maximum(b, a1), a2)
-    cand = _gather(state, w, lo, hi, skip, skip_warp)
-    n = len(cand.yarn)
-    if n == 0:
-        return None
-    o, s, _ = side_signs(b, a1, a2, np.concatenate((cand.c, cand.d)))
-    oc, od, sc, sd = o[:n], o[n:], s[:n], s[n:]
-    cross = np.nonzero((sc >= 0) != (sd >= 0))[0]
-    if cross.size == 0:
-        return None
-    c, d = cand.c[cross], cand.d[cross]
-    vb, sb, _ = edge_signs(c, d, a1, a2)
-    v1, s1, e1 = edge_signs(c, d, a2, b)
-    v2, s2, e2 = edge_signs(c, d, b, a1)
-    ok = (sb != 0) & (s2 == sb) & ((s1 == 0) | (s1 == sb))
-    idx = np.nonzero(ok)[0]
-    if idx.size == 0:
-        return None
-    best = _earliest(idx, v1, v2, s1, e1, e2, c, d, b, a1, a2, cand.yarn[cross], cand.ref[cross],
-                     state)
-    i = int(cross[best])
-    t = 1.0 if s1[best] == 0 else float(v2[best] / (v1[best] + v2[best]))
-    point = _crossing(cand.c[i], cand.d[i], float(oc[i]), float(od[i]), int(sc[i]), int(sd[i]))
-    return Hit(t, int(cand.yarn[i]), int(cand.ref[i]), cand.c[i], cand.d[i], point)
-
-
-def _crossing(c: FloatArray, d: FloatArray, oc: float, od: float, sc: int, sd: int) -> FloatArray:
+def _crossing(c: Vec, d: Vec, oc: float, od: float, sc: int, sd: int) -> Vec:
     """Where segment c-d meets the plane; exactly an endpoint when that endpoint lies on it."""
     if sc == 0:
-        return c.copy()
+        return c
     if sd == 0:
-        return d.copy()
-    result: FloatArray = c + (oc / (oc - od)) * (d - c)
-    return result
+        return d
+    s = oc / (oc - od)
+    return c[0] + s * (d[0] - c[0]), c[1] + s * (d[1] - c[1]), c[2] + s * (d[2] - c[2])
 
 
-def _earliest(idx: np.ndarray[Any, Any], v1: FloatArray, v2: FloatArray, s1: Any,
-              e1: FloatArray, e2: FloatArray, c: FloatArray, d: FloatArray, b: FloatArray,
-              a1: FloatArray, a2: FloatArray, yarn: np.ndarray[Any, Any],
-              ref: np.ndarray[Any, Any], state: State) -> int:
-    """Index (into the crossing arrays) of the hit with the smallest exact t, ties broken."""
-    if idx.size == 1:
-        return int(idx[0])
-    x, y = np.abs(v2[idx]), np.abs(v1[idx])
-    ex, ey = e2[idx], e1[idx]
-    exact_one = s1[idx] == 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(exact_one, 1.0, x / (x + y))
-        slack = np.where(exact_one, 0.0, (ex + ey) / np.maximum(x + y - ex - ey, 0.0))
-    slack = np.nan_to_num(slack, nan=np.inf) + 4e-16
-    lo, hi = t - slack, t + slack
-    near = idx[lo <= hi.min()]
-    if near.size == 1:
-        return int(near[0])
-    keys = [(_exact_t(c[i], d[i], b, a1, a2), int(yarn[i]), _seg_rank(state, int(ref[i])), int(i))
-            for i in near.tolist()]
-    return min(keys)[3]
+def _test(plane: Plane, b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec) -> Hit | None:
+    """Exact contact test of segment c-d against triangle (b, a1, a2); None if no contact."""
+    oc, sc = plane.side(c)
+    od, sd = plane.side(d)
+    if (sc >= 0) == (sd >= 0):
+        return None
+    _, sb, _ = orient(c, d, a1, a2)
+    if sb == 0:
+        return None
+    v2, s2, e2 = orient(c, d, b, a1)
+    if s2 != sb:
+        return None
+    v1, s1, e1 = orient(c, d, a2, b)
+    if s1 != 0 and s1 != sb:
+        return None
+    point = _crossing(c, d, oc, od, sc, sd)
+    if s1 == 0:
+        return Hit(1.0, 0.0, True, -1, 0, c, d, point)
+    x, y = abs(v2), abs(v1)
+    room = x + y - e1 - e2
+    slack = (e1 + e2) / room + 4e-16 if room > 0 else math.inf
+    return Hit(v2 / (v1 + v2), slack, False, -1, 0, c, d, point)
 
 
-def _exact_t(c: FloatArray, d: FloatArray, b: FloatArray, a1: FloatArray,
-             a2: FloatArray) -> Fraction:
-    w1 = exact_orient(c, d, a2, b)
-    w2 = exact_orient(c, d, b, a1)
+def _candidates(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
+                skip_warp: int) -> list[tuple[int, int, int, int]]:
+    """(yarn, segment ref, node c, node d) of every segment that may meet the triangle."""
+    out = []
+    seg_yarn, seg_c, seg_d = state.seg_yarn, state.seg_c, state.seg_d
+    for s in state.fixed_near(b, a1, a2):
+        yarn = seg_yarn[s]
+        if yarn != w and s not in skip:
+            out.append((yarn, s, seg_c[s], seg_d[s]))
+    last, free = state.last_fixed, state.free_node
+    for warp in state.free_near(b, a1, a2):
+        if warp != w and warp != skip_warp:
+            out.append((warp, -warp - 1, last[warp], free[warp]))
+    return out
+
+
+def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
+                  skip_warp: int) -> Hit | None:
+    """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
+    lox, loy, loz = min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2])
+    hix, hiy, hiz = max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2])
+    plane = Plane(b, a1, a2)
+    xyz = state.xyz
+    hits: list[Hit] = []
+    for yarn, ref, cn, dn in _candidates(state, w, b, a1, a2, skip, skip_warp):
+        c, d = xyz(cn), xyz(dn)
+        if (
+            max(c[0], d[0]) < lox or min(c[0], d[0]) > hix
+            or max(c[1], d[1]) < loy or min(c[1], d[1]) > hiy
+            or max(c[2], d[2]) < loz or min(c[2], d[2]) > hiz
+        ):
+            continue
+        hit = _test(plane, b, a1, a2, c, d)
+        if hit is not None:
+            hit.yarn, hit.seg = yarn, ref
+            hits.append(hit)
+    if not hits:
+        return None
+    return _earliest(state, hits, b, a1, a2)
+
+
+def _earliest(state: State, hits: list[Hit], b: Vec, a1: Vec, a2: Vec) -> Hit:
+    """The hit with the smallest exact t; ties: smaller yarn id, then nearer the yarn's start."""
+    if len(hits) == 1:
+        return hits[0]
+    ceiling = min(h.t + h.slack for h in hits)
+    near = [h for h in hits if h.t - h.slack <= ceiling]
+    if len(near) == 1:
+        return near[0]
+    return min(near, key=lambda h: (_exact_t(h, b, a1, a2), h.yarn, _seg_rank(state, h.seg)))
+
+
+def _exact_t(hit: Hit, b: Vec, a1: Vec, a2: Vec) -> Fraction:
+    if hit.t_one:
+        return Fraction(1)
+    w1 = exact_orient(hit.c, hit.d, a2, b)
+    w2 = exact_orient(hit.c, hit.d, b, a1)
     return w2 / (w1 + w2)
 
 
@@ -138,8 +134,7 @@ def _seg_rank(state: State, ref: int) -> int:
     """Position of a segment along its yarn (0 = the segment at the yarn's start)."""
     if ref < 0:
         return len(state.yarns[-ref - 1]) - 2
-    seg_start = int(state.seg_c.data[ref])
-    return state.yarns[int(state.seg_yarn.data[ref])].index(seg_start)
+    return index_from_end(state.yarns[state.seg_yarn[ref]], state.seg_c[ref])
 
 
 def index_from_end(nodes: Any, node: int) -> int:
@@ -153,18 +148,19 @@ def index_from_end(nodes: Any, node: int) -> int:
 def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
     """Insert Y into the hit yarn; returns Y and what this sweep skips next (segments, warp)."""
     y = state.new_node(hit.point)
-    yarn = state.yarns[hit.yarn]
+    nodes = state.yarns[hit.yarn]
     grow = math.dist(hit.c, hit.point)
     if hit.seg < 0:
         warp = -hit.seg - 1
-        b = int(state.last_fixed.data[warp])
-        state.insert_node(hit.yarn, len(yarn) - 1, y)
+        b = state.last_fixed[warp]
+        state.insert_node(hit.yarn, len(nodes) - 1, y)
         seg = state.add_segment(hit.yarn, b, y)
         state.set_last_fixed(warp, y)
+        state.register_free(warp)
         state.add_length(hit.yarn, grow)
         return y, (seg,), warp
-    c, d = int(state.seg_c.data[hit.seg]), int(state.seg_d.data[hit.seg])
-    state.insert_node(hit.yarn, index_from_end(yarn, d), y)
+    c, d = state.seg_c[hit.seg], state.seg_d[hit.seg]
+    state.insert_node(hit.yarn, index_from_end(nodes, d), y)
     state.kill_segment(hit.seg)
     first = state.add_segment(hit.yarn, c, y)
     second = state.add_segment(hit.yarn, y, d)
@@ -172,47 +168,50 @@ def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
     return y, (first, second), -1
 
 
-def rest_point(hit: Hit, a1: FloatArray, a2: FloatArray, diameter: float) -> FloatArray:
-    """X = P - d n: the moving yarn rests against the hit one on the side it came from.
-
-    Scalar float formulas in a fixed order (the exact reference repeats them).
-    """
+def rest_point(hit: Hit, a1: Vec, a2: Vec, diameter: float) -> Vec:
+    """X = P - d n: the moving yarn rests against the hit one on the side it came from."""
     if diameter == 0:
-        return hit.point.copy()
-    mx, my, mz = (float(v) for v in a2 - a1)
-    ax, ay, az = (float(v) for v in hit.d - hit.c)
+        return hit.point
+    mx, my, mz = a2[0] - a1[0], a2[1] - a1[1], a2[2] - a1[2]
+    ax, ay, az = hit.d[0] - hit.c[0], hit.d[1] - hit.c[1], hit.d[2] - hit.c[2]
     norm = math.sqrt(ax * ax + ay * ay + az * az)
     ax, ay, az = ax / norm, ay / norm, az / norm
     along = mx * ax + my * ay + mz * az
     nx, ny, nz = mx - along * ax, my - along * ay, mz - along * az
     size = math.sqrt(nx * nx + ny * ny + nz * nz)
     if size <= PARALLEL * math.sqrt(mx * mx + my * my + mz * mz):
-        return hit.point.copy()
+        return hit.point
     k = diameter / size
-    px, py, pz = (float(v) for v in hit.point)
-    return np.array((px - k * nx, py - k * ny, pz - k * nz))
+    px, py, pz = hit.point
+    return px - k * nx, py - k * ny, pz - k * nz
 
 
-def sweep(state: State, w: int, a2: FloatArray, instruction: int) -> None:
+def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
     """Move warp w's free node to a2, inserting a node pair at every contact on the way."""
-    free = int(state.free_node.data[w])
-    a1 = state.pos.data[free].copy()
+    free = state.free_node[w]
+    a1 = state.xyz(free)
     skip: tuple[int, ...] = ()
     skip_warp = -1
     for _ in range(MAX_CONTACTS_PER_SWEEP):
-        apex = int(state.last_fixed.data[w])
-        b = state.pos.data[apex].copy()
+        apex = state.last_fixed[w]
+        b = state.xyz(apex)
         hit = first_contact(state, w, b, a1, a2, skip, skip_warp)
         if hit is None:
             state.move_node(free, a2)
+            state.register_free(w)
             return
         y, skip, skip_warp = split_hit(state, hit)
         x = state.new_node(rest_point(hit, a1, a2, state.diameter))
         state.insert_node(w, len(state.yarns[w]) - 1, x)
         state.add_segment(w, apex, x)
         state.set_last_fixed(w, x)
-        state.add_length(w, math.dist(b, state.pos.data[x]))
+        state.add_length(w, math.dist(b, state.xyz(x)))
         state.add_contact((instruction, w, x, hit.yarn, y))
-        a1 = a2.copy() if hit.t == 1.0 else a1 + hit.t * (a2 - a1)
+        if hit.t_one:
+            a1 = a2
+        else:
+            t = hit.t
+            a1 = (a1[0] + t * (a2[0] - a1[0]), a1[1] + t * (a2[1] - a1[1]),
+                  a1[2] + t * (a2[2] - a1[2]))
     raise TwinError(f"yarn {w}: more than {MAX_CONTACTS_PER_SWEEP} contacts in one sweep",
                     instruction=instruction)

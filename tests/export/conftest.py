@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -10,8 +11,9 @@ import pytest
 from bwsd.twin.machine import Machine
 from bwsd.twin.skeleton import ContactData, SkeletonData, YarnData
 
-MACHINE = Machine(rows=2, cols=2, pitch_x=10.0, pitch_y=10.0, d_mat=100.0, c_mat=0.5,
-                  yarn_diameter=1.0)
+MACHINE = Machine(
+    rows=2, cols=2, pitch_x=10.0, pitch_y=10.0, d_mat=100.0, c_mat=0.5, yarn_diameter=1.0
+)
 
 Point = tuple[float, float, float]
 
@@ -24,10 +26,15 @@ def weft(nodes: Sequence[Point], angle: float = 0.0) -> dict[str, object]:
     return {"kind": "weft", "nodes": nodes, "angle": angle}
 
 
-def build(yarns: Sequence[dict[str, object]],
-          contacts: Sequence[tuple[int, int, int, int, int]] = (), *, diameter: float = 1.0,
-          takeup: float = 20.0, instructions: int = 6,
-          occupancy: Sequence[Sequence[int]] = ((0, 1), (-1, 2))) -> SkeletonData:
+def build(
+    yarns: Sequence[dict[str, object]],
+    contacts: Sequence[tuple[int, int, int, int, int]] = (),
+    *,
+    diameter: float = 1.0,
+    takeup: float = 20.0,
+    instructions: int = 6,
+    occupancy: Sequence[Sequence[int]] = ((0, 1), (-1, 2)),
+) -> SkeletonData:
     """A skeleton of the given yarns, node ids numbered 0, 1, ... in yarn order.
 
     ``contacts`` are (instruction, moving yarn, moving node, hit yarn, hit node).
@@ -37,11 +44,23 @@ def build(yarns: Sequence[dict[str, object]],
         nodes = np.array(spec["nodes"], dtype=np.float64)
         ids = np.arange(next_id, next_id + len(nodes), dtype=np.int64)
         next_id += len(nodes)
-        out.append(YarnData(id=i, kind=spec["kind"], node_ids=ids, nodes=nodes,
-                            cell=spec.get("cell"), angle=spec.get("angle")))
+        out.append(
+            YarnData(
+                id=i,
+                kind=spec["kind"],
+                node_ids=ids,
+                nodes=nodes,
+                cell=spec.get("cell"),
+                angle=spec.get("angle"),
+            )
+        )
     return SkeletonData(
-        machine=MACHINE, diameter=diameter, takeup=takeup, instructions=instructions,
-        yarns=tuple(out), contacts=tuple(ContactData(*c) for c in contacts),
+        machine=MACHINE,
+        diameter=diameter,
+        takeup=takeup,
+        instructions=instructions,
+        yarns=tuple(out),
+        contacts=tuple(ContactData(*c) for c in contacts),
         occupancy=np.array(occupancy, dtype=np.int64),
     )
 
@@ -71,3 +90,15 @@ def small() -> SkeletonData:
 @pytest.fixture
 def centreline() -> SkeletonData:
     return small_skeleton(diameter=0.0)
+
+
+def missing(*names: str) -> str | None:
+    """Why one of the dotted ``module.attribute`` names cannot be imported yet, or None."""
+    for dotted in names:
+        module, _, name = dotted.rpartition(".")
+        try:
+            if not hasattr(importlib.import_module(module), name):
+                return f"{dotted} is not there yet"
+        except ImportError as exc:
+            return f"{module} is not importable yet: {exc}"
+    return None

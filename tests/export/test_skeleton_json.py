@@ -37,8 +37,15 @@ def test_top_level_fields(small):
     assert d["schema"] == "bwsd-skeleton"
     assert d["version"] == 1
     assert (d["frame"], d["units"]) == ("preform", "mm")
-    assert d["machine"] == {"rows": 2, "cols": 2, "pitch_x": 10.0, "pitch_y": 10.0,
-                            "d_mat": 100.0, "c_mat": 0.5, "yarn_diameter": 1.0}
+    assert d["machine"] == {
+        "rows": 2,
+        "cols": 2,
+        "pitch_x": 10.0,
+        "pitch_y": 10.0,
+        "d_mat": 100.0,
+        "c_mat": 0.5,
+        "yarn_diameter": 1.0,
+    }
     assert (d["diameter"], d["takeup"], d["instructions"]) == (1.0, 20.0, 6)
     assert d["occupancy"] == [[0, 1], [-1, 2]]
 

@@ -84,8 +84,9 @@ def test_nothing_on_piped_stdout(tmp_path):
         f"write_tg3(small_skeleton(), {str(tmp_path / 'm.tg3')!r})\n"
         f"print(len(read_tg3({str(tmp_path / 'm.tg3')!r})))\n"
     )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          check=True)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
     assert done.stdout == "4\n"
 
 

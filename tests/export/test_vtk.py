@@ -53,8 +53,14 @@ def test_contact_links_join_the_contact_nodes(small, mesh):
 
 
 def test_family_codes_in_yarn_order():
-    sk = build([weft([(0, 0, 1), (1, 0, 1)], 90), warp([(0, 0, 0), (0, 0, 9)]),
-                weft([(0, 0, 2), (0, 1, 2)], 0), weft([(0, 0, 3), (0, 1, 3)], 90)])
+    sk = build(
+        [
+            weft([(0, 0, 1), (1, 0, 1)], 90),
+            warp([(0, 0, 0), (0, 0, 9)]),
+            weft([(0, 0, 2), (0, 1, 2)], 0),
+            weft([(0, 0, 3), (0, 1, 3)], 90),
+        ]
+    )
     assert family_codes(sk) == {"warp": 0, "weft-90": 1, "weft-0": 2}
 
 

@@ -45,12 +45,8 @@ def orient_float(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> float:
 
 
 def edge_float(c: Vec, d: Vec, q: Vec, r: Vec) -> float:
-    """The kernel's float formula for orient(c, d, q, r): (d-c) . ((q-c) x (r-c))."""
-    ux, uy, uz = d[0] - c[0], d[1] - c[1], d[2] - c[2]
-    qx, qy, qz = q[0] - c[0], q[1] - c[1], q[2] - c[2]
-    rx, ry, rz = r[0] - c[0], r[1] - c[1], r[2] - c[2]
-    n0, n1, n2 = qy * rz - qz * ry, qz * rx - qx * rz, qx * ry - qy * rx
-    return ux * n0 + uy * n1 + uz * n2
+    """The kernel's float formula for orient(c, d, q, r) (same form as orient_float)."""
+    return orient_float(c, d, q, r)
 
 
 def _sign(v: Fraction) -> int:

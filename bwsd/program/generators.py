@@ -1,0 +1,46 @@
+"""Program generators: pure functions returning a program and the machine it is written for.
+
+Every generator returns a :class:`Generated` whose ``program`` passes ``validate`` on its
+``machine`` and brings every case back to its cell at the end of each cycle.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from bwsd.program.braid import BraidPlan, braid4, plan_braid, section_cells, twist
+from bwsd.program.render import Generated, config_toml
+from bwsd.program.weave import shed_clearance, warp_cells, weave_3d, weave_plain
+
+GENERATORS: dict[str, Callable[..., Generated]] = {
+    "twist": twist,
+    "braid4": braid4,
+    "weave-plain": weave_plain,
+    "weave-3d": weave_3d,
+}
+
+# The shipped examples: file stem -> the generator call that prints them.
+EXAMPLES: dict[str, Callable[[], Generated]] = {
+    "twist": lambda: twist(turns=4),
+    "braid-2x2": lambda: braid4(2, 2, cycles=10),
+    "braid-L": lambda: braid4(cycles=10, shape="L", flange=(2, 6), web=(4, 2)),
+    "braid-24x24": lambda: braid4(24, 24, cycles=10, d_mat=300.0, c_mat=0.3),
+    "weave-plain": lambda: weave_plain(warps=10, cycles=10),
+    "weave-U": lambda: weave_3d(5, 6, cycles=10, shape="U", leg=2, base=2),
+}
+
+__all__ = [
+    "EXAMPLES",
+    "GENERATORS",
+    "BraidPlan",
+    "Generated",
+    "braid4",
+    "config_toml",
+    "plan_braid",
+    "section_cells",
+    "shed_clearance",
+    "twist",
+    "warp_cells",
+    "weave_3d",
+    "weave_plain",
+]

@@ -1,0 +1,101 @@
+"""Tokens of the .bws language: words with their columns, numbers, key=value and i:k entries."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from bwsd.errors import ProgramError
+
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_INDEX = re.compile(r"\d+")
+_SHIFT = re.compile(r"[+-]?\d+")
+
+
+@dataclass(frozen=True)
+class Token:
+    """A whitespace-separated word of one source line; ``column`` is 1-based."""
+
+    text: str
+    column: int
+
+
+@dataclass(frozen=True)
+class Where:
+    """The place errors of one statement are reported at: source name and line number."""
+
+    source: str
+    line: int
+
+    def error(self, message: str, column: int) -> ProgramError:
+        """A ProgramError at ``column`` of this line."""
+        return ProgramError(message, line=self.line, column=column, source=self.source)
+
+
+def strip_comment(line: str) -> str:
+    """The line without its ``#`` comment (columns of what is left are unchanged)."""
+    cut = line.find("#")
+    return line if cut < 0 else line[:cut]
+
+
+def tokenize(line: str) -> list[Token]:
+    """The words of a line, comment removed."""
+    return [Token(m.group(), m.start() + 1) for m in re.finditer(r"\S+", strip_comment(line))]
+
+
+def number(text: str, column: int, where: Where, what: str) -> float:
+    """A decimal number (integer, fraction or exponent form); nan and inf are refused."""
+    if not _NUMBER.fullmatch(text):
+        raise where.error(f"{what}: expected a number, got {text!r}", column)
+    return float(text)
+
+
+def integer(text: str, column: int, where: Where, what: str) -> int:
+    """A signed decimal integer."""
+    if not _SHIFT.fullmatch(text):
+        raise where.error(f"{what}: expected an integer, got {text!r}", column)
+    return int(text)
+
+
+def key_values(tokens: list[Token], keys: tuple[str, ...], where: Where,
+               keyword: Token) -> dict[str, tuple[str, int]]:
+    """Parse ``key=value`` tokens: every key of ``keys`` exactly once, nothing else.
+
+    Returns key -> (value text, value column). Keys are case-insensitive.
+    """
+    found: dict[str, tuple[str, int]] = {}
+    for tok in tokens:
+        key, sep, value = tok.text.partition("=")
+        if not sep or not key:
+            raise where.error(f"malformed entry {tok.text!r}: expected key=value", tok.column)
+        name = key.lower()
+        if name not in keys:
+            raise where.error(f"unknown key {key!r} (expected {', '.join(keys)})", tok.column)
+        if name in found:
+            raise where.error(f"key {key!r} given twice", tok.column)
+        value_column = tok.column + len(key) + 1
+        if not value:
+            raise where.error(f"key {key!r} has no value", value_column)
+        found[name] = (value, value_column)
+    missing = [k for k in keys if k not in found]
+    if missing:
+        raise where.error(f"{keyword.text} needs {', '.join(k + '=' for k in missing)}",
+                          keyword.column)
+    return found
+
+
+def shift_entry(tok: Token, where: Where, axis: str) -> tuple[int, int, int]:
+    """Parse an ``i:k`` entry: returns (line index, shift, column of the index)."""
+    index_text, sep, shift_text = tok.text.partition(":")
+    if not sep:
+        raise where.error(f"malformed entry {tok.text!r}: expected {axis}:shift", tok.column)
+    if not _INDEX.fullmatch(index_text):
+        raise where.error(f"bad {axis} index {index_text!r}: expected an integer >= 0",
+                          tok.column)
+    shift_column = tok.column + len(index_text) + 1
+    if not _SHIFT.fullmatch(shift_text):
+        raise where.error(f"bad shift {shift_text!r}: expected a signed integer", shift_column)
+    shift = int(shift_text)
+    if shift == 0:
+        raise where.error("shift must not be zero", shift_column)
+    return int(index_text), shift, tok.column

@@ -1,0 +1,127 @@
+"""Dry run of a program on the occupancy grid alone: refuses impossible moves before anything moves."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bwsd.errors import ProgramError
+from bwsd.program.parser import SourceMap, parse_program_with_positions
+from bwsd.twin.instructions import Program, Shift
+from bwsd.twin.machine import Machine
+
+Cell = tuple[int, int]
+
+
+class Occupancy:
+    """Which cells hold a case: the machine's matrix without any geometry."""
+
+    def __init__(self, machine: Machine) -> None:
+        self.rows = machine.rows
+        self.cols = machine.cols
+        self.cells: set[Cell] = set()
+
+    def inside(self, cell: Cell) -> bool:
+        """True when ``cell`` lies in the matrix."""
+        return 0 <= cell[0] < self.rows and 0 <= cell[1] < self.cols
+
+    def fill(self, cell: Cell) -> str | None:
+        """Put a case into ``cell``; returns the reason when that is impossible."""
+        if not self.inside(cell):
+            return f"fill cell {cell} is outside the {self.rows} x {self.cols} matrix"
+        if cell in self.cells:
+            return f"cell {cell} is filled twice"
+        self.cells.add(cell)
+        return None
+
+    def move(self, src: Cell, dst: Cell) -> str | None:
+        """Move the case in ``src`` to ``dst``; returns the reason when that is impossible."""
+        if not self.inside(dst):
+            return f"the case in {src} would leave the matrix (to {dst})"
+        if dst in self.cells:
+            return f"the case in {src} would land on the occupied cell {dst}"
+        self.cells.remove(src)
+        self.cells.add(dst)
+        return None
+
+    def line_size(self, axis: str) -> int:
+        """How many lines of ``axis`` the matrix has."""
+        return self.rows if axis == "row" else self.cols
+
+    def shift(self, axis: str, index: int, k: int) -> str | None:
+        """Shift every case of one line by k cells, the leading case first (TWIN.md, Moves)."""
+        if axis == "row":
+            line = [(index, c) for c in range(self.cols)]
+            step = (0, k)
+        else:
+            line = [(r, index) for r in range(self.rows)]
+            step = (k, 0)
+        cases = [cell for cell in line if cell in self.cells]
+        for src in reversed(cases) if k > 0 else cases:
+            reason = self.move(src, (src[0] + step[0], src[1] + step[1]))
+            if reason is not None:
+                return reason
+        return None
+
+
+def _fail(message: str, program: Program, positions: SourceMap | None, source: str,
+          index: int, entry: int | None) -> ProgramError:
+    """A ProgramError for instruction ``index`` (0-based), at its entry ``entry`` if known."""
+    line = program.lines[index] if index < len(program.lines) else 0
+    column = 0
+    if positions is not None and index < len(positions.keywords):
+        column = positions.keywords[index]
+        if entry is not None and entry < len(positions.entries[index]):
+            column = positions.entries[index][entry]
+    return ProgramError(f"instruction {index + 1}: {message}", line=line, column=column,
+                        source=source)
+
+
+def _check_fill(program: Program, grid: Occupancy, positions: SourceMap | None,
+                source: str) -> None:
+    for i, cell in enumerate(program.fill):
+        reason = grid.fill(cell)
+        if reason is not None:
+            line, column = positions.fill[i] if positions is not None else (0, 0)
+            raise ProgramError(reason, line=line, column=column, source=source)
+
+
+def _check_shift(shift: Shift, grid: Occupancy) -> tuple[int, str] | None:
+    """Apply one ROW/COL to the grid; returns (entry, reason) of the first fault."""
+    size = grid.line_size(shift.axis)
+    for entry, (index, k) in enumerate(shift.moves):
+        if not 0 <= index < size:
+            return entry, f"{shift.axis} {index} is outside the matrix (0 to {size - 1})"
+        reason = grid.shift(shift.axis, index, k)
+        if reason is not None:
+            return entry, reason
+    return None
+
+
+def validate(program: Program, machine: Machine, source: str = "<program>",
+             positions: SourceMap | None = None) -> None:
+    """Refuse a program whose fill or moves are impossible on ``machine``.
+
+    Runs the fill and every ROW/COL on the occupancy grid only (no geometry). Errors name
+    the line (from ``program.lines``) and, when ``positions`` is given, the column.
+    """
+    grid = Occupancy(machine)
+    _check_fill(program, grid, positions, source)
+    for i, instruction in enumerate(program.instructions):
+        if isinstance(instruction, Shift):
+            fault = _check_shift(instruction, grid)
+            if fault is not None:
+                raise _fail(fault[1], program, positions, source, i, fault[0])
+
+
+def load_program(path: str | Path, machine: Machine) -> Program:
+    """Read, parse and validate a .bws file for ``machine``."""
+    name = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProgramError(f"cannot read: {exc.strerror}", source=name) from exc
+    except UnicodeDecodeError as exc:
+        raise ProgramError(f"not UTF-8 text: {exc.reason}", source=name) from exc
+    program, positions = parse_program_with_positions(text, name)
+    validate(program, machine, name, positions)
+    return program

@@ -1,0 +1,45 @@
+"""export(): dispatch on the suffix."""
+
+from __future__ import annotations
+
+import json
+
+import meshio
+import pytest
+
+from bwsd.errors import BwsdError
+from bwsd.export import FORMATS, ExportError, export
+from bwsd.export.texgen import read_tg3
+
+
+def test_json(small, tmp_path):
+    export(small, tmp_path / "s.JSON")
+    assert json.loads((tmp_path / "s.JSON").read_text())["schema"] == "bwsd-skeleton"
+
+
+def test_tg3(small, tmp_path):
+    export(small, tmp_path / "s.tg3")
+    assert len(read_tg3(tmp_path / "s.tg3")) == 4
+
+
+def test_vtu(small, tmp_path):
+    export(small, str(tmp_path / "s.vtu"))
+    assert len(meshio.read(tmp_path / "s.vtu").points) == 13
+
+
+def test_formats_listed():
+    assert set(FORMATS) == {".json", ".tg3", ".vtu"}
+
+
+@pytest.mark.parametrize("name", ["s.obj", "s", "s.vtk"])
+def test_unknown_suffix(small, tmp_path, name):
+    with pytest.raises(ExportError, match="unknown export format") as info:
+        export(small, tmp_path / name)
+    assert isinstance(info.value, BwsdError)
+    assert ".json" in str(info.value) and ".vtu" in str(info.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_vtp_points_to_vtu(small, tmp_path):
+    with pytest.raises(ExportError, match=r"use \.vtu"):
+        export(small, tmp_path / "s.vtp")
