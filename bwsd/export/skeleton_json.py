@@ -57,7 +57,10 @@ def skeleton_to_dict(sk: SkeletonData) -> dict[str, Any]:
 
 def write_skeleton_json(sk: SkeletonData, path: str | Path) -> None:
     """Write ``skeleton_to_dict(sk)`` to ``path`` as UTF-8 JSON."""
-    text = json.dumps(skeleton_to_dict(sk), indent=1, allow_nan=False)
+    try:
+        text = json.dumps(skeleton_to_dict(sk), indent=1, allow_nan=False)
+    except ValueError as exc:
+        raise ExportError("the skeleton holds a non-finite number", path=str(path)) from exc
     try:
         Path(path).write_text(text + "\n", encoding="utf-8")
     except OSError as exc:

@@ -115,7 +115,10 @@ def _draw(ax: Axes, sk: SkeletonData, found: list[Crossing], strips: list[Band])
     for c in found:
         colour = f"C{codes[c.family] % 10}"
         if radius > 0:
-            circle = Circle((c.x, c.y), radius, edgecolor=colour, facecolor=colour, fill=not c.free)
+            edge = colour if c.free else "black"  # a dark rim tells touching yarns apart
+            circle = Circle(
+                (c.x, c.y), radius, edgecolor=edge, facecolor=colour, fill=not c.free, linewidth=0.6
+            )
             ax.add_patch(circle)
         else:
             ax.plot([c.x], [c.y], marker="x" if c.free else "o", color=colour, markersize=4)
