@@ -1,6 +1,7 @@
 """The skeleton as a VTK unstructured grid (.vtu) of line cells, through meshio.
 
-meshio writes no VTK PolyData (.vtp); a .vtu of line cells opens in ParaView the same way.
+Every yarn segment is its own two-point line cell. The PolyData export (.vtp, one
+polyline per yarn) is written by VTK itself, in ``bwsd.export.vtp``.
 """
 
 from __future__ import annotations
@@ -12,10 +13,17 @@ import numpy as np
 
 from bwsd.export.errors import ExportError
 from bwsd.export.families import family_codes
+from bwsd.export.layout import (
+    KIND_CONTACT,
+    KIND_SEGMENT,
+    contact_links,
+    node_points,
+    point_arrays,
+    require_yarns,
+)
 from bwsd.twin.skeleton import IntArray, SkeletonData
 
-KIND_SEGMENT = 0
-KIND_CONTACT = 1
+__all__ = ["KIND_CONTACT", "KIND_SEGMENT", "skeleton_mesh", "write_vtu"]
 
 
 def _segments(sk: SkeletonData, codes: dict[str, int]) -> tuple[IntArray, IntArray]:
@@ -31,32 +39,12 @@ def _segments(sk: SkeletonData, codes: dict[str, int]) -> tuple[IntArray, IntArr
     return np.vstack(pairs).reshape(-1, 2), np.vstack(owners).reshape(-1, 2)
 
 
-def _links(sk: SkeletonData, codes: dict[str, int]) -> tuple[IntArray, IntArray]:
-    """Point-index pairs of every contact link, and (moving yarn, family, instruction)."""
-    index: dict[int, int] = {}
-    for yarn in sk.yarns:
-        for nid in yarn.node_ids.tolist():
-            index[int(nid)] = len(index)
-    family = {y.id: codes[y.family] for y in sk.yarns}
-    try:
-        pairs = [(index[c.moving_node], index[c.hit_node]) for c in sk.contacts]
-        info = [(c.moving_yarn, family[c.moving_yarn], c.instruction) for c in sk.contacts]
-    except KeyError as exc:
-        raise ExportError(f"a contact names node or yarn {exc.args[0]}, unknown here") from exc
-    return (
-        np.array(pairs, dtype=np.int64).reshape(-1, 2),
-        np.array(info, dtype=np.int64).reshape(-1, 3),
-    )
-
-
 def skeleton_mesh(sk: SkeletonData) -> meshio.Mesh:
     """One point per node, one "line" cell per yarn segment and per contact link."""
-    if not sk.yarns:
-        raise ExportError("the skeleton has no yarns to export")
+    require_yarns(sk)
     codes = family_codes(sk)
     seg, seg_owner = _segments(sk, codes)
-    link, link_info = _links(sk, codes)
-    points = np.vstack([np.asarray(y.nodes, dtype=np.float64) for y in sk.yarns])
+    link, link_info = contact_links(sk, codes)
     n_seg, n_link = len(seg), len(link)
     kind = np.concatenate([np.full(n_seg, KIND_SEGMENT), np.full(n_link, KIND_CONTACT)])
     cell_data = {
@@ -65,14 +53,10 @@ def skeleton_mesh(sk: SkeletonData) -> meshio.Mesh:
         "kind": kind.astype(np.int64),
         "instruction": np.concatenate([np.zeros(n_seg, dtype=np.int64), link_info[:, 2]]),
     }
-    point_data = {
-        "node_id": np.concatenate([y.node_ids for y in sk.yarns]).astype(np.int64),
-        "yarn": np.concatenate([np.full(len(y.node_ids), y.id) for y in sk.yarns]),
-    }
     return meshio.Mesh(
-        points,
+        node_points(sk),
         [("line", np.vstack([seg, link]))],
-        point_data=point_data,
+        point_data=point_arrays(sk),
         cell_data={k: [v.astype(np.int64)] for k, v in cell_data.items()},
     )
 

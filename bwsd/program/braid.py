@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass
 
 from bwsd.program import render
@@ -30,29 +29,37 @@ def twist(turns: int = 4, *, pitch: float = 10.0, d_mat: float = 100.0, c_mat: f
 
 
 def section_cells(shape: str, rows: int = 2, cols: int = 2, flange: Block = (2, 6),
-                  web: Block = (4, 2)) -> frozenset[Cell]:
-    """The body cells of a section, its bounding box starting at (0, 0).
+                  web: Block = (4, 2)) -> tuple[frozenset[Cell], set[int], set[int]]:
+    """The body cells of a section (bounding box from (0, 0)) and its held rows and columns.
 
     rect: rows x cols. L: the web (a vertical leg) on top of the flange, both flush left.
-    T: the flange on top, the web centred below. I: flange, centred web, flange.
+    T: the flange on top, the web centred below. I: flange, centred web, flange. The held
+    lines are those at the junctions: the web rows touching a flange and the flange
+    columns flanking the web (docs/program.md explains why).
     """
     for name, (r, c) in (("body", (rows, cols)), ("flange", flange), ("web", web)):
         if r < 1 or c < 1:
             raise ValueError(f"{name} must be at least 1 x 1")
     if shape == "rect":
-        return _block(0, 0, rows, cols)
+        return _block(0, 0, rows, cols), set(), set()
     (fr, fc), (wr, wc) = flange, web
     if shape == "L":
-        if fc <= wc:
-            raise ValueError("an L section needs a flange wider than its web")
-        return _block(0, 0, wr, wc) | _block(wr, 0, fr, fc)
+        if fc - wc < 2 or wr < 2:
+            raise ValueError("an L section needs a flange at least 2 cells wider than its"
+                             " web and a web of at least 2 rows")
+        return _block(0, 0, wr, wc) | _block(wr, 0, fr, fc), {wr - 1}, {wc}
     if shape not in ("T", "I"):
         raise ValueError(f"unknown shape {shape!r} (known: {', '.join(SHAPES)})")
-    if fc - wc < 2:
-        raise ValueError(f"a {shape} section needs a flange at least 2 cells wider than its web")
+    min_web = 2 if shape == "T" else 3
+    if fc - wc < 4 or wr < min_web:
+        raise ValueError(f"a {shape} section needs a flange at least 4 cells wider than its"
+                         f" web and a web of at least {min_web} rows")
     off = (fc - wc) // 2
     cells = _block(0, 0, fr, fc) | _block(fr, off, wr, wc)
-    return cells | _block(fr + wr, 0, fr, fc) if shape == "I" else cells
+    held_cols = {off - 1, off + wc}
+    if shape == "T":
+        return cells, {fr}, held_cols
+    return cells | _block(fr + wr, 0, fr, fc), {fr, fr + wr - 1}, held_cols
 
 
 def _block(row: int, col: int, rows: int, cols: int) -> frozenset[Cell]:
@@ -96,32 +103,31 @@ def _conflicts(row_runs: dict[int, list[tuple[int, int]]],
     return found | {(r, c) for c in cols for r in _ends(col_runs[c]) if r in rows}
 
 
-def _shifted_lines(body: frozenset[Cell]) -> tuple[set[int], set[int]]:
-    """Hold lines greedily until no shifted line ends its window on another shifted line."""
-    row_runs, col_runs = _lines(body, 0), _lines(body, 1)
-    rows, cols = set(row_runs), set(col_runs)
-    while conflicts := _conflicts(row_runs, col_runs, rows, cols):
-        degree = Counter([(0, r) for r, _ in conflicts] + [(1, c) for _, c in conflicts])
-        axis, index = min(degree, key=lambda key: (-degree[key], key))
-        (rows if axis == 0 else cols).discard(index)
-    return rows, cols
-
-
-def plan_braid(cells: frozenset[Cell]) -> BraidPlan:
+def plan_braid(cells: frozenset[Cell], held_rows: set[int] | None = None,
+               held_cols: set[int] | None = None) -> BraidPlan:
     """Place a section in a matrix with a one-cell margin and plan its 4-step braid.
 
-    Each shifted line gets one edge carrier per body run, at the run's low end when the
-    line moves +1 in step 1 (odd index) and at its high end otherwise.
+    Every body line shifts except the held ones (given in the coordinates of ``cells``).
+    Each shifted line gets one edge carrier per body run: at the run's low end when the
+    line moves +1 in step 1 (odd matrix index), at its high end otherwise. Refused when a
+    shifted line's window would end on a shifted perpendicular line (the cycle would then
+    not bring every case back) or when a case could never move.
     """
     body = frozenset((r + 1, c + 1) for r, c in cells)
-    rows, cols = _shifted_lines(body)
+    row_runs, col_runs = _lines(body, 0), _lines(body, 1)
+    rows = set(row_runs) - {r + 1 for r in held_rows or set()}
+    cols = set(col_runs) - {c + 1 for c in held_cols or set()}
+    clash = sorted(_conflicts(row_runs, col_runs, rows, cols))
+    if clash:
+        raise ValueError(f"cannot plan: row {clash[0][0]} and column {clash[0][1]} both shift"
+                         " and one ends its run on the other")
     stuck = sorted(cell for cell in body if cell[0] not in rows and cell[1] not in cols)
     if stuck:
         raise ValueError(f"section too thin: the case in {stuck[0]} could never move")
     row_dirs = {r: 1 if r % 2 else -1 for r in sorted(rows)}
     col_dirs = {c: 1 if c % 2 else -1 for c in sorted(cols)}
     edges = set()
-    for dirs, runs, axis in ((row_dirs, _lines(body, 0), 0), (col_dirs, _lines(body, 1), 1)):
+    for dirs, runs, axis in ((row_dirs, row_runs, 0), (col_dirs, col_runs, 1)):
         for i, d in dirs.items():
             for lo, hi in runs[i]:
                 end = lo - 1 if d > 0 else hi + 1
@@ -152,7 +158,7 @@ def braid4(rows: int = 2, cols: int = 2, cycles: int = 10, *, shape: str = "rect
         raise ValueError("cycles must be at least 1")
     if takeup <= 0:
         raise ValueError("take-up must be positive")
-    plan = plan_braid(section_cells(shape, rows, cols, flange, web))
+    plan = plan_braid(*section_cells(shape, rows, cols, flange, web))
     machine = Machine(plan.rows, plan.cols, pitch, pitch, d_mat, c_mat, diameter)
     if shape == "rect":
         what = [render.option("rows", rows), render.option("cols", cols)]

@@ -17,7 +17,13 @@ from __future__ import annotations
 
 from fractions import Fraction
 
+import numpy as np
+import numpy.typing as npt
+
 Vec = tuple[float, float, float]
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 ERRBOUND = 8.0e-16  # > (7 + 56 * 2**-53) * 2**-53 = 7.7716e-16
 TINY = 1.0e-200  # below this permanent the float analysis is not trusted (underflow)
@@ -70,32 +76,41 @@ def orient(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> tuple[float, int, float]:
     return det, exact_sign(p0, p1, p2, p3), bound
 
 
-class Plane:
-    """The plane of a sweep triangle (b, a1, a2) with its minors, for many side tests."""
+def plane_sides(b: Vec, a1: Vec, a2: Vec, x: FloatArray) -> tuple[FloatArray, IntArray, BoolArray]:
+    """orient(b, a1, a2, x[i]) for many points x (n, 3).
 
-    __slots__ = ("b", "m", "n0", "n1", "n2", "p0", "p1", "p2", "pts")
+    Returns the float values (same formula as ``orient``), the exact signs, and a flag for
+    points known to lie exactly on the line a1-a2 (the guide path: other guides of the
+    moving line sit there), whose sign is zero without any arithmetic.
+    """
+    bx, by, bz = b
+    ax, ay, az = a1[0] - bx, a1[1] - by, a1[2] - bz
+    cx, cy, cz = a2[0] - bx, a2[1] - by, a2[2] - bz
+    m0, m1, m2, m3, m4, m5 = ay * cz, az * cy, az * cx, ax * cz, ax * cy, ay * cx
+    rel = x - np.array(b)
+    det = rel[:, 0] * (m0 - m1) + rel[:, 1] * (m2 - m3) + rel[:, 2] * (m4 - m5)
+    arel = np.abs(rel)
+    perm = arel[:, 0] * (abs(m0) + abs(m1)) + arel[:, 1] * (abs(m2) + abs(m3))
+    perm = perm + arel[:, 2] * (abs(m4) + abs(m5))
+    bound = ERRBOUND * perm
+    trusted = perm >= TINY
+    sign = np.where(trusted & (det > bound), 1, np.where(trusted & (-det > bound), -1, 0))
+    on_line = np.zeros(len(det), dtype=np.bool_)
+    unsure = np.nonzero(sign == 0)[0]
+    if unsure.size:
+        on_line[unsure] = _on_axis_line(a1, a2, x[unsure])
+        for i in unsure[~on_line[unsure]].tolist():
+            sign[i] = exact_sign(b, a1, a2, tuple(x[i].tolist()))  # type: ignore[arg-type]
+    return det, sign.astype(np.int64), on_line
 
-    def __init__(self, b: Vec, a1: Vec, a2: Vec) -> None:
-        self.b = b
-        self.pts = (b, a1, a2)
-        bx, by, bz = b
-        ax, ay, az = a1[0] - bx, a1[1] - by, a1[2] - bz
-        cx, cy, cz = a2[0] - bx, a2[1] - by, a2[2] - bz
-        m0, m1, m2, m3, m4, m5 = ay * cz, az * cy, az * cx, ax * cz, ax * cy, ay * cx
-        self.n0, self.n1, self.n2 = m0 - m1, m2 - m3, m4 - m5
-        self.p0, self.p1, self.p2 = abs(m0) + abs(m1), abs(m2) + abs(m3), abs(m4) + abs(m5)
 
-    def side(self, x: Vec) -> tuple[float, int]:
-        """orient(b, a1, a2, x): float value (for constructions) and exact sign."""
-        bx, by, bz = self.b
-        cx, cy, cz = x[0] - bx, x[1] - by, x[2] - bz
-        det = cx * self.n0 + cy * self.n1 + cz * self.n2
-        perm = abs(cx) * self.p0 + abs(cy) * self.p1 + abs(cz) * self.p2
-        bound = ERRBOUND * perm
-        if perm >= TINY:
-            if det > bound:
-                return det, 1
-            if -det > bound:
-                return det, -1
-        b, a1, a2 = self.pts
-        return det, exact_sign(b, a1, a2, x)
+def _on_axis_line(a1: Vec, a2: Vec, x: FloatArray) -> BoolArray:
+    """Points exactly on line a1-a2 when that line runs along a coordinate axis."""
+    same = [a1[k] == a2[k] for k in range(3)]
+    if sum(same) < 2:
+        return np.zeros(len(x), dtype=np.bool_)
+    mask = np.ones(len(x), dtype=np.bool_)
+    for k in range(3):
+        if same[k]:
+            mask &= x[:, k] == a1[k]
+    return mask

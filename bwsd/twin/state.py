@@ -1,14 +1,15 @@
-"""Mutable state of the twin with an undo log: nodes, yarns, segments and their grids.
+"""Mutable state of the twin with an undo log: nodes, yarns, segments, occupancy.
 
-Storage is flat (``array``) so that a long preform costs a few tens of bytes per node. Every
-change goes through a method here and is logged, so a prediction can run in place and be
-rolled back (``undo_to``) or kept (``forget_log``) in O(changes).
+Storage is flat (``array`` and numpy) so that a long preform costs a few tens of bytes per
+node. Every change goes through a method here and is logged, so a prediction can run in
+place and be rolled back (``undo_to``) or kept (``forget_log``) in O(changes).
 
-Two uniform grids select the segments near a sweep: fixed segments (both ends fixed) are
-registered once in every 3-D cell their box touches, so a query never looks below the
-moving yarn's last fixed node, however long the preform; each warp's free segment (last
-fixed node to guide) is registered in the 2-D (x, y) cells its box touches and re-registered
-when it changes.
+Broad phase: a sweep triangle never reaches below its apex (the moving yarn's last fixed
+node), and the apexes rise with the preform. Fixed segments (both ends fixed) keep their
+coordinates in numpy arrays; an *active set* holds the ids of those reaching above a floor
+set below every apex, so a query's cost follows the working zone, not the preform's length.
+A query whose box reaches below the floor rebuilds the set with a lower floor (exact, rare).
+Each warp's free segment (last fixed node to guide) is read from the node coordinates.
 """
 
 from __future__ import annotations
@@ -17,15 +18,34 @@ import math
 from array import array
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from bwsd.twin.machine import Machine
 from bwsd.twin.predicates import Vec
 
-Cell3 = tuple[int, int, int]
-Cell2 = tuple[int, int]
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class GrowArray:
+    """A numpy array that grows by doubling along its first axis."""
+
+    def __init__(self, dtype: Any, width: int = 0) -> None:
+        self.data: np.ndarray[Any, Any] = np.zeros((64, width) if width else (64,), dtype=dtype)
+        self.size = 0
+
+    def append(self, value: Any) -> None:
+        if self.size == len(self.data):
+            grown = np.zeros((2 * len(self.data),) + self.data.shape[1:], dtype=self.data.dtype)
+            grown[: self.size] = self.data[: self.size]
+            self.data = grown
+        self.data[self.size] = value
+        self.size += 1
 
 
 class State:
-    """Nodes, yarns, fixed and free segments, occupancy, take-up, contacts."""
+    """Nodes, yarns, fixed segments, occupancy, take-up, contacts."""
 
     def __init__(self, machine: Machine, diameter: float) -> None:
         self.machine = machine
@@ -42,15 +62,15 @@ class State:
         self.occupancy = [[-1] * machine.cols for _ in range(machine.rows)]
         self.takeup = 0.0
         self.contacts = array("q")  # instruction, moving, its node, hit, its node (5 a row)
-        self.seg_c = array("q")
+        self.seg_c = array("q")  # node ids of each fixed segment's ends
         self.seg_d = array("q")
-        self.seg_yarn = array("q")
-        self.seg_alive = bytearray()
-        self.grid: dict[Cell3, array[int]] = {}
-        self.free_grid: dict[Cell2, set[int]] = {}
-        self.free_cells: list[list[Cell2]] = []
-        side = max(machine.pitch_x, machine.pitch_y)
-        self.cell = (machine.pitch_x, machine.pitch_y, side)
+        self.seg_xyz = GrowArray(np.float64, 6)  # cx, cy, cz, dx, dy, dz
+        self.seg_yarn = GrowArray(np.int64)
+        self.seg_alive = GrowArray(np.bool_)
+        self.active = np.empty(0, dtype=np.int64)  # ids below active_from reaching the floor
+        self.active_from = 0
+        self.floor = math.inf
+        self.margin = 4 * max(machine.pitch_x, machine.pitch_y, diameter)
         self.log: list[tuple[Any, ...]] = []
 
     # ----- reading -----
@@ -66,6 +86,14 @@ class State:
     @property
     def contact_count(self) -> int:
         return len(self.contacts) // 5
+
+    def free_segments(self) -> tuple[FloatArray, FloatArray]:
+        """Every warp's last fixed node and free node, as two (n_warps, 3) arrays (copies)."""
+        pos = np.frombuffer(self.pos, dtype=np.float64).reshape(-1, 3)
+        b = pos[np.frombuffer(self.last_fixed, dtype=np.int64)]
+        a = pos[np.frombuffer(self.free_node, dtype=np.int64)]
+        del pos  # release the buffer: the array may grow again
+        return b, a
 
     # ----- building (before the first instruction; never undone) -----
     def add_warp(self, row: int, col: int) -> int:
@@ -84,9 +112,7 @@ class State:
         self.free_node.append(guide)
         self.warp_cell.append((row, col))
         self.occupancy[row][col] = yarn
-        self.free_cells.append([])
         self.n_warps += 1
-        self._set_free_cells(yarn, [], self.cells2(self.xyz(fell), self.xyz(guide)))
         return yarn
 
     def _append_node(self, xyz: Vec) -> int:
@@ -146,45 +172,19 @@ class State:
         return yarn
 
     def add_segment(self, yarn: int, c: int, d: int) -> int:
-        """Register the fixed segment c-d of ``yarn`` in the 3-D grid."""
+        """Add the fixed segment c-d of ``yarn``."""
         seg = len(self.seg_c)
         self.seg_c.append(c)
         self.seg_d.append(d)
+        self.seg_xyz.append(self.xyz(c) + self.xyz(d))
         self.seg_yarn.append(yarn)
-        self.seg_alive.append(1)
-        cells = self.cells3(self.xyz(c), self.xyz(d))
-        grid = self.grid
-        for cell in cells:
-            bucket = grid.get(cell)
-            if bucket is None:
-                bucket = grid[cell] = array("q")
-            bucket.append(seg)
-        self.log.append(("seg", cells))
+        self.seg_alive.append(True)
+        self.log.append(("seg",))
         return seg
 
     def kill_segment(self, seg: int) -> None:
-        self.seg_alive[seg] = 0
+        self.seg_alive.data[seg] = False
         self.log.append(("kill", seg))
-
-    def register_free(self, warp: int) -> None:
-        """(Re-)register warp's free segment in the 2-D grid."""
-        old = self.free_cells[warp]
-        new = self.cells2(self.xyz(self.last_fixed[warp]), self.xyz(self.free_node[warp]))
-        if new == old:
-            return
-        self._set_free_cells(warp, old, new)
-        self.log.append(("free", warp, old, new))
-
-    def _set_free_cells(self, warp: int, old: list[Cell2], new: list[Cell2]) -> None:
-        grid = self.free_grid
-        for cell in old:
-            grid[cell].discard(warp)
-        for cell in new:
-            bucket = grid.get(cell)
-            if bucket is None:
-                bucket = grid[cell] = set()
-            bucket.add(warp)
-        self.free_cells[warp] = new
 
     # ----- undo -----
     def undo_to(self, mark: int) -> None:
@@ -192,9 +192,14 @@ class State:
         log = self.log
         while len(log) > mark:
             self._undo(log.pop())
+        n = len(self.seg_c)
+        if self.active_from > n:
+            self.active = self.active[self.active < n]
+            self.active_from = n
 
     def forget_log(self) -> None:
         self.log.clear()
+        self._maybe_compact()
 
     def _undo(self, op: tuple[Any, ...]) -> None:
         kind = op[0]
@@ -221,59 +226,41 @@ class State:
             self.yarn_cell.pop()
             self.yarn_len.pop()
         elif kind == "seg":
-            self._unsegment(op[1])
+            self.seg_c.pop()
+            self.seg_d.pop()
+            for grow in (self.seg_xyz, self.seg_yarn, self.seg_alive):
+                grow.size -= 1
         elif kind == "kill":
-            self.seg_alive[op[1]] = 1
-        elif kind == "free":
-            self._set_free_cells(op[1], op[3], op[2])
+            self.seg_alive.data[op[1]] = True
 
-    def _unsegment(self, cells: list[Cell3]) -> None:
-        for cell in cells:
-            self.grid[cell].pop()
-        self.seg_c.pop()
-        self.seg_d.pop()
-        self.seg_yarn.pop()
-        self.seg_alive.pop()
+    # ----- broad phase -----
+    def _refresh_active(self, floor: float) -> None:
+        """Rebuild the active set: every fixed segment reaching above ``floor``."""
+        n = len(self.seg_c)
+        xyz = self.seg_xyz.data[:n]
+        self.active = np.nonzero(np.maximum(xyz[:, 2], xyz[:, 5]) >= floor)[0]
+        self.active_from = n
+        self.floor = floor
 
-    # ----- grid cells -----
-    def cells3(self, *points: Vec) -> list[Cell3]:
-        """3-D grid cells overlapping the box of ``points``."""
-        hx, hy, hz = self.cell
-        xs, ys, zs = zip(*points, strict=True)
-        return [
-            (i, j, k)
-            for i in range(math.floor(min(xs) / hx), math.floor(max(xs) / hx) + 1)
-            for j in range(math.floor(min(ys) / hy), math.floor(max(ys) / hy) + 1)
-            for k in range(math.floor(min(zs) / hz), math.floor(max(zs) / hz) + 1)
-        ]
+    def _maybe_compact(self) -> None:
+        """Drop segments sunk below every apex once the recent tail outgrows the active set."""
+        tail = len(self.seg_c) - self.active_from
+        if tail > max(4096, 2 * len(self.active)) and self.n_warps:
+            apex, _ = self.free_segments()
+            self._refresh_active(float(apex[:, 2].min()) - self.margin)
 
-    def cells2(self, *points: Vec) -> list[Cell2]:
-        """2-D (x, y) grid cells overlapping the box of ``points``."""
-        hx, hy, _ = self.cell
-        xs, ys, _ = zip(*points, strict=True)
-        return [
-            (i, j)
-            for i in range(math.floor(min(xs) / hx), math.floor(max(xs) / hx) + 1)
-            for j in range(math.floor(min(ys) / hy), math.floor(max(ys) / hy) + 1)
-        ]
-
-    def fixed_near(self, b: Vec, a1: Vec, a2: Vec) -> set[int]:
-        """Live fixed segments registered in cells overlapping the box of the triangle."""
-        grid = self.grid
-        alive = self.seg_alive
-        found: set[int] = set()
-        for cell in self.cells3(b, a1, a2):
-            bucket = grid.get(cell)
-            if bucket is not None:
-                found.update(bucket)
-        return {s for s in found if alive[s]}
-
-    def free_near(self, b: Vec, a1: Vec, a2: Vec) -> set[int]:
-        """Warps whose free segment is registered in cells overlapping the triangle's box."""
-        grid = self.free_grid
-        found: set[int] = set()
-        for cell in self.cells2(b, a1, a2):
-            bucket = grid.get(cell)
-            if bucket:
-                found.update(bucket)
-        return found
+    def fixed_near(self, lo: FloatArray, hi: FloatArray) -> IntArray:
+        """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
+        if lo[2] < self.floor:
+            self._refresh_active(float(lo[2]) - self.margin)
+        n = len(self.seg_c)
+        ids = self.active
+        if self.active_from < n:
+            ids = np.concatenate((ids, np.arange(self.active_from, n)))
+        xyz = self.seg_xyz.data[ids]
+        c, d = xyz[:, :3], xyz[:, 3:]
+        keep = self.seg_alive.data[ids]
+        keep &= np.all(np.maximum(c, d) >= lo, axis=1)
+        keep &= np.all(np.minimum(c, d) <= hi, axis=1)
+        result: IntArray = ids[keep]
+        return result

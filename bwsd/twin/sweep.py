@@ -15,7 +15,9 @@ from fractions import Fraction
 from typing import Any
 
 from bwsd.errors import TwinError
-from bwsd.twin.predicates import Plane, Vec, exact_orient, orient
+import numpy as np
+
+from bwsd.twin.predicates import FloatArray, IntArray, Vec, exact_orient, orient, plane_sides
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
@@ -46,12 +48,9 @@ def _crossing(c: Vec, d: Vec, oc: float, od: float, sc: int, sd: int) -> Vec:
     return c[0] + s * (d[0] - c[0]), c[1] + s * (d[1] - c[1]), c[2] + s * (d[2] - c[2])
 
 
-def _test(plane: Plane, b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec) -> Hit | None:
-    """Exact contact test of segment c-d against triangle (b, a1, a2); None if no contact."""
-    oc, sc = plane.side(c)
-    od, sd = plane.side(d)
-    if (sc >= 0) == (sd >= 0):
-        return None
+def _edges(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, oc: float, od: float, sc: int,
+           sd: int) -> Hit | None:
+    """Exact barycentric test of a segment crossing the plane; None if no contact."""
     _, sb, _ = orient(c, d, a1, a2)
     if sb == 0:
         return None
@@ -64,47 +63,52 @@ def _test(plane: Plane, b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec) -> Hit | None:
     point = _crossing(c, d, oc, od, sc, sd)
     if s1 == 0:
         return Hit(1.0, 0.0, True, -1, 0, c, d, point)
-    x, y = abs(v2), abs(v1)
-    room = x + y - e1 - e2
+    room = abs(v2) + abs(v1) - e1 - e2
     slack = (e1 + e2) / room + 4e-16 if room > 0 else math.inf
     return Hit(v2 / (v1 + v2), slack, False, -1, 0, c, d, point)
 
 
-def _candidates(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
-                skip_warp: int) -> list[tuple[int, int, int, int]]:
-    """(yarn, segment ref, node c, node d) of every segment that may meet the triangle."""
-    out = []
-    seg_yarn, seg_c, seg_d = state.seg_yarn, state.seg_c, state.seg_d
-    for s in state.fixed_near(b, a1, a2):
-        yarn = seg_yarn[s]
-        if yarn != w and s not in skip:
-            out.append((yarn, s, seg_c[s], seg_d[s]))
-    last, free = state.last_fixed, state.free_node
-    for warp in state.free_near(b, a1, a2):
-        if warp != w and warp != skip_warp:
-            out.append((warp, -warp - 1, last[warp], free[warp]))
-    return out
+def _gather(state: State, w: int, lo: FloatArray, hi: FloatArray, skip: tuple[int, ...],
+            skip_warp: int) -> tuple[FloatArray, FloatArray, IntArray, IntArray]:
+    """Endpoints, yarn and reference of every segment whose box meets [lo, hi]."""
+    fixed = state.fixed_near(lo, hi)
+    yarns = state.seg_yarn.data[fixed]
+    keep = yarns != w
+    if skip:
+        keep &= ~np.isin(fixed, skip)
+    fixed, yarns = fixed[keep], yarns[keep]
+    fb, fa = state.free_segments()
+    box = np.all(np.maximum(fb, fa) >= lo, axis=1) & np.all(np.minimum(fb, fa) <= hi, axis=1)
+    box[w] = False
+    if skip_warp >= 0:
+        box[skip_warp] = False
+    warps = np.nonzero(box)[0]
+    xyz = state.seg_xyz.data[fixed]
+    c = np.concatenate((xyz[:, :3], fb[warps]))
+    d = np.concatenate((xyz[:, 3:], fa[warps]))
+    return c, d, np.concatenate((yarns, warps)), np.concatenate((fixed, -warps - 1))
 
 
 def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
                   skip_warp: int) -> Hit | None:
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
-    lox, loy, loz = min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2])
-    hix, hiy, hiz = max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2])
-    plane = Plane(b, a1, a2)
-    xyz = state.xyz
-    hits: list[Hit] = []
-    for yarn, ref, cn, dn in _candidates(state, w, b, a1, a2, skip, skip_warp):
-        c, d = xyz(cn), xyz(dn)
-        if (
-            max(c[0], d[0]) < lox or min(c[0], d[0]) > hix
-            or max(c[1], d[1]) < loy or min(c[1], d[1]) > hiy
-            or max(c[2], d[2]) < loz or min(c[2], d[2]) > hiz
-        ):
-            continue
-        hit = _test(plane, b, a1, a2, c, d)
+    lo = np.minimum(np.minimum(b, a1), a2)
+    hi = np.maximum(np.maximum(b, a1), a2)
+    c, d, yarn, ref = _gather(state, w, lo, hi, skip, skip_warp)
+    n = len(yarn)
+    if n == 0:
+        return None
+    o, s, on_line = plane_sides(b, a1, a2, np.concatenate((c, d)))
+    crossing = np.nonzero((s[:n] >= 0) != (s[n:] >= 0))[0]
+    hits = []
+    for i in crossing.tolist():
+        sc, sd = int(s[i]), int(s[n + i])
+        if (sc == 0 and on_line[i]) or (sd == 0 and on_line[n + i]):
+            continue  # crosses on the guide path itself: never strictly inside
+        ci, di = tuple(c[i].tolist()), tuple(d[i].tolist())
+        hit = _edges(b, a1, a2, ci, di, float(o[i]), float(o[n + i]), sc, sd)  # type: ignore[arg-type]
         if hit is not None:
-            hit.yarn, hit.seg = yarn, ref
+            hit.yarn, hit.seg = int(yarn[i]), int(ref[i])
             hits.append(hit)
     if not hits:
         return None
@@ -134,7 +138,7 @@ def _seg_rank(state: State, ref: int) -> int:
     """Position of a segment along its yarn (0 = the segment at the yarn's start)."""
     if ref < 0:
         return len(state.yarns[-ref - 1]) - 2
-    return index_from_end(state.yarns[state.seg_yarn[ref]], state.seg_c[ref])
+    return index_from_end(state.yarns[int(state.seg_yarn.data[ref])], state.seg_c[ref])
 
 
 def index_from_end(nodes: Any, node: int) -> int:
@@ -156,7 +160,6 @@ def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
         state.insert_node(hit.yarn, len(nodes) - 1, y)
         seg = state.add_segment(hit.yarn, b, y)
         state.set_last_fixed(warp, y)
-        state.register_free(warp)
         state.add_length(hit.yarn, grow)
         return y, (seg,), warp
     c, d = state.seg_c[hit.seg], state.seg_d[hit.seg]
@@ -198,7 +201,6 @@ def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
         hit = first_contact(state, w, b, a1, a2, skip, skip_warp)
         if hit is None:
             state.move_node(free, a2)
-            state.register_free(w)
             return
         y, skip, skip_warp = split_hit(state, hit)
         x = state.new_node(rest_point(hit, a1, a2, state.diameter))
