@@ -1,4 +1,4 @@
-"""Exports of the predicted skeleton: JSON, TexGen .tg3, VTK .vtu; slices and metrics."""
+"""Exports of the predicted skeleton: JSON, TexGen .tg3, VTK .vtp and .vtu; slices and metrics."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ from bwsd.twin.skeleton import SkeletonData
 
 __all__ = ["FORMATS", "ExportError", "export"]
 
-# Suffix -> what it writes; the writers are imported on use (pytexgen and meshio are large).
+# Suffix -> what it writes; the writers are imported on use (pytexgen, VTK and meshio are large).
 FORMATS: dict[str, str] = {
     ".json": "skeleton JSON (docs/skeleton-json.md)",
     ".tg3": "TexGen model",
+    ".vtp": "VTK PolyData: a polyline per yarn, a line per contact (ParaView)",
     ".vtu": "VTK unstructured grid of line cells (ParaView)",
 }
 
@@ -27,6 +28,10 @@ def _writer(suffix: str) -> Callable[[SkeletonData, Path], None]:
         from bwsd.export.texgen import write_tg3
 
         return write_tg3
+    if suffix == ".vtp":
+        from bwsd.export.vtp import write_vtp
+
+        return write_vtp
     from bwsd.export.vtk import write_vtu
 
     return write_vtu
@@ -36,11 +41,6 @@ def export(sk: SkeletonData, path: str | Path) -> None:
     """Write the skeleton in the format its suffix names (see ``FORMATS``)."""
     target = Path(path)
     suffix = target.suffix.lower()
-    if suffix == ".vtp":
-        raise ExportError(
-            "VTK PolyData (.vtp) is not written; use .vtu, which ParaView opens the same way",
-            path=str(target),
-        )
     if suffix not in FORMATS:
         known = ", ".join(f"{s} ({what})" for s, what in FORMATS.items())
         raise ExportError(

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from bwsd.errors import MoveError, ShedClosedError
 from bwsd.twin.instructions import Instruction, Shift, TakeUp, Weft
 from bwsd.twin.predicates import Vec
@@ -101,18 +99,15 @@ def _weft(state: State, instruction: Weft, index: int) -> None:
     cz = state.takeup + instruction.z
     p0 = (instruction.x - half * ax, instruction.y - half * ay, cz)
     p1 = (instruction.x + half * ax, instruction.y + half * ay, cz)
-    lo = np.array((min(p0[0], p1[0]) - d, min(p0[1], p1[1]) - d, cz - d))
-    hi = np.array((max(p0[0], p1[0]) + d, max(p0[1], p1[1]) + d, cz + d))
-    fixed = state.fixed_near(lo, hi)
-    xyz = state.seg_xyz.data[fixed].tolist()
-    segments = [(int(y), tuple(e[:3]), tuple(e[3:]))
-                for y, e in zip(state.seg_yarn.data[fixed].tolist(), xyz, strict=True)]
-    fb, fa = state.free_segments()
-    box = np.all(np.maximum(fb, fa) >= lo, axis=1) & np.all(np.minimum(fb, fa) <= hi, axis=1)
-    segments += [(w, tuple(fb[w].tolist()), tuple(fa[w].tolist())) for w in np.nonzero(box)[0]]
+    lo = (min(p0[0], p1[0]) - d, min(p0[1], p1[1]) - d, cz - d)
+    hi = (max(p0[0], p1[0]) + d, max(p0[1], p1[1]) + d, cz + d)
+    segments = [(int(state.seg_yarn.data[s]), state.xyz(state.seg_c[s]), state.xyz(state.seg_d[s]))
+                for s in state.fixed_near(lo, hi)]
+    segments += [(w, state.xyz(state.last_fixed[w]), state.xyz(state.free_node[w]))
+                 for w in state.free_near(lo, hi)]
     closest: tuple[float, int] | None = None
     for yarn, c, e in segments:
-        gap = segment_distance(p0, p1, c, e)  # type: ignore[arg-type]
+        gap = segment_distance(p0, p1, c, e)
         if (gap < d or gap == 0) and (closest is None or gap < closest[0]):
             closest = (gap, yarn)
     if closest is not None:

@@ -76,41 +76,60 @@ def orient(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> tuple[float, int, float]:
     return det, exact_sign(p0, p1, p2, p3), bound
 
 
-def plane_sides(b: Vec, a1: Vec, a2: Vec, x: FloatArray) -> tuple[FloatArray, IntArray, BoolArray]:
-    """orient(b, a1, a2, x[i]) for many points x (n, 3).
+class Plane:
+    """The plane of a sweep triangle (b, a1, a2): side tests of one point or of many.
 
-    Returns the float values (same formula as ``orient``), the exact signs, and a flag for
-    points known to lie exactly on the line a1-a2 (the guide path: other guides of the
-    moving line sit there), whose sign is zero without any arithmetic.
+    Both give the float value of ``orient(b, a1, a2, x)`` (same formula as ``orient``), its
+    exact sign, and whether x is known to lie exactly on the line a1-a2 (the guide path:
+    other guides of the moving line sit there), whose sign is zero without any arithmetic.
     """
-    bx, by, bz = b
-    ax, ay, az = a1[0] - bx, a1[1] - by, a1[2] - bz
-    cx, cy, cz = a2[0] - bx, a2[1] - by, a2[2] - bz
-    m0, m1, m2, m3, m4, m5 = ay * cz, az * cy, az * cx, ax * cz, ax * cy, ay * cx
-    rel = x - np.array(b)
-    det = rel[:, 0] * (m0 - m1) + rel[:, 1] * (m2 - m3) + rel[:, 2] * (m4 - m5)
-    arel = np.abs(rel)
-    perm = arel[:, 0] * (abs(m0) + abs(m1)) + arel[:, 1] * (abs(m2) + abs(m3))
-    perm = perm + arel[:, 2] * (abs(m4) + abs(m5))
-    bound = ERRBOUND * perm
-    trusted = perm >= TINY
-    sign = np.where(trusted & (det > bound), 1, np.where(trusted & (-det > bound), -1, 0))
-    on_line = np.zeros(len(det), dtype=np.bool_)
-    unsure = np.nonzero(sign == 0)[0]
-    if unsure.size:
-        on_line[unsure] = _on_axis_line(a1, a2, x[unsure])
+
+    def __init__(self, b: Vec, a1: Vec, a2: Vec) -> None:
+        self.b, self.a1, self.a2 = b, a1, a2
+        bx, by, bz = b
+        ax, ay, az = a1[0] - bx, a1[1] - by, a1[2] - bz
+        cx, cy, cz = a2[0] - bx, a2[1] - by, a2[2] - bz
+        m0, m1, m2, m3, m4, m5 = ay * cz, az * cy, az * cx, ax * cz, ax * cy, ay * cx
+        self.n = (m0 - m1, m2 - m3, m4 - m5)
+        self.p = (abs(m0) + abs(m1), abs(m2) + abs(m3), abs(m4) + abs(m5))
+        same = [a1[k] == a2[k] for k in range(3)]
+        self.line_axes = [k for k in range(3) if same[k]] if sum(same) >= 2 else []
+
+    def side(self, x: Vec) -> tuple[float, int, bool]:
+        bx, by, bz = self.b
+        cx, cy, cz = x[0] - bx, x[1] - by, x[2] - bz
+        n0, n1, n2 = self.n
+        p0, p1, p2 = self.p
+        det = cx * n0 + cy * n1 + cz * n2
+        perm = abs(cx) * p0 + abs(cy) * p1 + abs(cz) * p2
+        bound = ERRBOUND * perm
+        if perm >= TINY:
+            if det > bound:
+                return det, 1, False
+            if -det > bound:
+                return det, -1, False
+        axes = self.line_axes
+        if axes and all(x[k] == self.a1[k] for k in axes):
+            return det, 0, True
+        return det, exact_sign(self.b, self.a1, self.a2, x), False
+
+    def sides(self, x: FloatArray) -> tuple[FloatArray, IntArray, BoolArray]:
+        rel = x - np.array(self.b)
+        n0, n1, n2 = self.n
+        p0, p1, p2 = self.p
+        det = rel[:, 0] * n0 + rel[:, 1] * n1 + rel[:, 2] * n2
+        arel = np.abs(rel)
+        perm = arel[:, 0] * p0 + arel[:, 1] * p1 + arel[:, 2] * p2
+        bound = ERRBOUND * perm
+        trusted = perm >= TINY
+        sign = np.where(trusted & (det > bound), 1, np.where(trusted & (-det > bound), -1, 0))
+        on_line = np.zeros(len(det), dtype=np.bool_)
+        unsure = np.nonzero(sign == 0)[0]
+        if unsure.size and self.line_axes:
+            hit = np.ones(unsure.size, dtype=np.bool_)
+            for k in self.line_axes:
+                hit &= x[unsure, k] == self.a1[k]
+            on_line[unsure] = hit
         for i in unsure[~on_line[unsure]].tolist():
-            sign[i] = exact_sign(b, a1, a2, tuple(x[i].tolist()))  # type: ignore[arg-type]
-    return det, sign.astype(np.int64), on_line
-
-
-def _on_axis_line(a1: Vec, a2: Vec, x: FloatArray) -> BoolArray:
-    """Points exactly on line a1-a2 when that line runs along a coordinate axis."""
-    same = [a1[k] == a2[k] for k in range(3)]
-    if sum(same) < 2:
-        return np.zeros(len(x), dtype=np.bool_)
-    mask = np.ones(len(x), dtype=np.bool_)
-    for k in range(3):
-        if same[k]:
-            mask &= x[:, k] == a1[k]
-    return mask
+            sign[i] = exact_sign(self.b, self.a1, self.a2, tuple(x[i].tolist()))  # type: ignore[arg-type]
+        return det, sign.astype(np.int64), on_line

@@ -67,7 +67,10 @@ class State:
         self.seg_xyz = GrowArray(np.float64, 6)  # cx, cy, cz, dx, dy, dz
         self.seg_yarn = GrowArray(np.int64)
         self.seg_alive = GrowArray(np.bool_)
+        self.free_box = GrowArray(np.float64, 6)  # per warp: box of its free segment (lo, hi)
         self.active = np.empty(0, dtype=np.int64)  # ids below active_from reaching the floor
+        self.active_lo = np.empty((0, 3))
+        self.active_hi = np.empty((0, 3))
         self.active_from = 0
         self.floor = math.inf
         self.margin = 4 * max(machine.pitch_x, machine.pitch_y, diameter)
@@ -87,14 +90,6 @@ class State:
     def contact_count(self) -> int:
         return len(self.contacts) // 5
 
-    def free_segments(self) -> tuple[FloatArray, FloatArray]:
-        """Every warp's last fixed node and free node, as two (n_warps, 3) arrays (copies)."""
-        pos = np.frombuffer(self.pos, dtype=np.float64).reshape(-1, 3)
-        b = pos[np.frombuffer(self.last_fixed, dtype=np.int64)]
-        a = pos[np.frombuffer(self.free_node, dtype=np.int64)]
-        del pos  # release the buffer: the array may grow again
-        return b, a
-
     # ----- building (before the first instruction; never undone) -----
     def add_warp(self, row: int, col: int) -> int:
         """Fill a case into (row, col): a fixed node at the fell and a free node at the guide."""
@@ -112,7 +107,9 @@ class State:
         self.free_node.append(guide)
         self.warp_cell.append((row, col))
         self.occupancy[row][col] = yarn
+        self.free_box.append(np.zeros(6))
         self.n_warps += 1
+        self._box_free(yarn)
         return yarn
 
     def _append_node(self, xyz: Vec) -> int:
@@ -128,14 +125,22 @@ class State:
         self.yarns[yarn].insert(index, node)
         self.log.append(("ins", yarn, index))
 
-    def move_node(self, node: int, xyz: Vec) -> None:
-        i = 3 * node
-        self.log.append(("pos", i, self.pos[i], self.pos[i + 1], self.pos[i + 2]))
+    def move_free(self, warp: int, xyz: Vec) -> None:
+        """Move warp's free node to ``xyz``."""
+        i = 3 * self.free_node[warp]
+        self.log.append(("free", warp, self.pos[i], self.pos[i + 1], self.pos[i + 2]))
         self.pos[i], self.pos[i + 1], self.pos[i + 2] = xyz
+        self._box_free(warp)
 
     def set_last_fixed(self, warp: int, node: int) -> None:
         self.log.append(("last", warp, self.last_fixed[warp]))
         self.last_fixed[warp] = node
+        self._box_free(warp)
+
+    def _box_free(self, warp: int) -> None:
+        b, a = self.xyz(self.last_fixed[warp]), self.xyz(self.free_node[warp])
+        self.free_box.data[warp] = (min(b[0], a[0]), min(b[1], a[1]), min(b[2], a[2]),
+                                    max(b[0], a[0]), max(b[1], a[1]), max(b[2], a[2]))
 
     def add_length(self, yarn: int, delta: float) -> None:
         self.log.append(("len", yarn, self.yarn_len[yarn]))
@@ -194,7 +199,9 @@ class State:
             self._undo(log.pop())
         n = len(self.seg_c)
         if self.active_from > n:
-            self.active = self.active[self.active < n]
+            keep = self.active < n
+            self.active, self.active_lo = self.active[keep], self.active_lo[keep]
+            self.active_hi = self.active_hi[keep]
             self.active_from = n
 
     def forget_log(self) -> None:
@@ -207,11 +214,13 @@ class State:
             del self.pos[-3:]
         elif kind == "ins":
             del self.yarns[op[1]][op[2]]
-        elif kind == "pos":
-            i = op[1]
+        elif kind == "free":
+            i = 3 * self.free_node[op[1]]
             self.pos[i], self.pos[i + 1], self.pos[i + 2] = op[2], op[3], op[4]
+            self._box_free(op[1])
         elif kind == "last":
             self.last_fixed[op[1]] = op[2]
+            self._box_free(op[1])
         elif kind == "len":
             self.yarn_len[op[1]] = op[2]
         elif kind == "place":
@@ -234,33 +243,58 @@ class State:
             self.seg_alive.data[op[1]] = True
 
     # ----- broad phase -----
-    def _refresh_active(self, floor: float) -> None:
-        """Rebuild the active set: every fixed segment reaching above ``floor``."""
+    def _refresh_active(self, floor: float, ids: IntArray | None = None) -> None:
+        """Rebuild the active set from ``ids`` (all segments when None) above ``floor``.
+
+        Dead segments stay in (a prediction may be rolled back and revive them); queries
+        check liveness.
+        """
         n = len(self.seg_c)
-        xyz = self.seg_xyz.data[:n]
-        self.active = np.nonzero(np.maximum(xyz[:, 2], xyz[:, 5]) >= floor)[0]
+        if ids is None:
+            ids = np.arange(n)
+        xyz = self.seg_xyz.data[ids]
+        lo, hi = np.minimum(xyz[:, :3], xyz[:, 3:]), np.maximum(xyz[:, :3], xyz[:, 3:])
+        keep = hi[:, 2] >= floor
+        self.active, self.active_lo, self.active_hi = ids[keep], lo[keep], hi[keep]
         self.active_from = n
         self.floor = floor
 
     def _maybe_compact(self) -> None:
-        """Drop segments sunk below every apex once the recent tail outgrows the active set."""
-        tail = len(self.seg_c) - self.active_from
-        if tail > max(4096, 2 * len(self.active)) and self.n_warps:
-            apex, _ = self.free_segments()
-            self._refresh_active(float(apex[:, 2].min()) - self.margin)
+        """Fold the recent segments into the active set, dropping those sunk below the apexes.
 
-    def fixed_near(self, lo: FloatArray, hi: FloatArray) -> IntArray:
+        Segments below the floor stay out: a later query that reaches below the floor
+        rebuilds the set from every segment.
+        """
+        n = len(self.seg_c)
+        if self.active_from == n or not self.n_warps:
+            return
+        pos = np.frombuffer(self.pos, dtype=np.float64)
+        apex = float(pos[3 * np.frombuffer(self.last_fixed, dtype=np.int64) + 2].min())
+        del pos  # release the buffer: the array may grow again
+        floor = apex - self.margin
+        if floor < self.floor:
+            self._refresh_active(floor)
+        else:
+            self._refresh_active(floor, np.concatenate((self.active, np.arange(self.active_from, n))))
+
+    def fixed_near(self, lo: Vec, hi: Vec) -> list[int]:
         """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
         if lo[2] < self.floor:
-            self._refresh_active(float(lo[2]) - self.margin)
+            self._refresh_active(lo[2] - self.margin)
+        keep = (self.active_hi >= lo).all(axis=1) & (self.active_lo <= hi).all(axis=1)
+        found = self.active[keep]
         n = len(self.seg_c)
-        ids = self.active
         if self.active_from < n:
-            ids = np.concatenate((ids, np.arange(self.active_from, n)))
-        xyz = self.seg_xyz.data[ids]
-        c, d = xyz[:, :3], xyz[:, 3:]
-        keep = self.seg_alive.data[ids]
-        keep &= np.all(np.maximum(c, d) >= lo, axis=1)
-        keep &= np.all(np.minimum(c, d) <= hi, axis=1)
-        result: IntArray = ids[keep]
+            tail = self.seg_xyz.data[self.active_from : n]
+            c, d = tail[:, :3], tail[:, 3:]
+            near = (np.maximum(c, d) >= lo).all(axis=1) & (np.minimum(c, d) <= hi).all(axis=1)
+            found = np.concatenate((found, self.active_from + np.nonzero(near)[0]))
+        ids: list[int] = found[self.seg_alive.data[found]].tolist()
+        return ids
+
+    def free_near(self, lo: Vec, hi: Vec) -> list[int]:
+        """Warps whose free segment's box meets the closed box [lo, hi]."""
+        box = self.free_box.data[: self.n_warps]
+        keep = (box[:, 3:] >= lo).all(axis=1) & (box[:, :3] <= hi).all(axis=1)
+        result: list[int] = np.nonzero(keep)[0].tolist()
         return result

@@ -17,7 +17,7 @@ from typing import Any
 from bwsd.errors import TwinError
 import numpy as np
 
-from bwsd.twin.predicates import FloatArray, IntArray, Vec, exact_orient, orient, plane_sides
+from bwsd.twin.predicates import Plane, Vec, exact_orient, orient
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
@@ -68,47 +68,63 @@ def _edges(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, oc: float, od: float, sc: i
     return Hit(v2 / (v1 + v2), slack, False, -1, 0, c, d, point)
 
 
-def _gather(state: State, w: int, lo: FloatArray, hi: FloatArray, skip: tuple[int, ...],
-            skip_warp: int) -> tuple[FloatArray, FloatArray, IntArray, IntArray]:
+SCALAR_LIMIT = 24  # up to this many candidates the scalar side test beats numpy's overhead
+
+
+def _gather(state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...],
+            skip_warp: int) -> tuple[list[Vec], list[Vec], list[int], list[int]]:
     """Endpoints, yarn and reference of every segment whose box meets [lo, hi]."""
-    fixed = state.fixed_near(lo, hi)
-    yarns = state.seg_yarn.data[fixed]
-    keep = yarns != w
-    if skip:
-        keep &= ~np.isin(fixed, skip)
-    fixed, yarns = fixed[keep], yarns[keep]
-    fb, fa = state.free_segments()
-    box = np.all(np.maximum(fb, fa) >= lo, axis=1) & np.all(np.minimum(fb, fa) <= hi, axis=1)
-    box[w] = False
-    if skip_warp >= 0:
-        box[skip_warp] = False
-    warps = np.nonzero(box)[0]
-    xyz = state.seg_xyz.data[fixed]
-    c = np.concatenate((xyz[:, :3], fb[warps]))
-    d = np.concatenate((xyz[:, 3:], fa[warps]))
-    return c, d, np.concatenate((yarns, warps)), np.concatenate((fixed, -warps - 1))
+    cs: list[Vec] = []
+    ds: list[Vec] = []
+    yarns: list[int] = []
+    refs: list[int] = []
+    seg_c, seg_d, seg_yarn, xyz = state.seg_c, state.seg_d, state.seg_yarn.data, state.xyz
+    for s in state.fixed_near(lo, hi):
+        yarn = int(seg_yarn[s])
+        if yarn != w and s not in skip:
+            cs.append(xyz(seg_c[s]))
+            ds.append(xyz(seg_d[s]))
+            yarns.append(yarn)
+            refs.append(s)
+    last, free = state.last_fixed, state.free_node
+    for warp in state.free_near(lo, hi):
+        if warp != w and warp != skip_warp:
+            cs.append(xyz(last[warp]))
+            ds.append(xyz(free[warp]))
+            yarns.append(warp)
+            refs.append(-warp - 1)
+    return cs, ds, yarns, refs
+
+
+def _sides(plane: Plane, cs: list[Vec], ds: list[Vec]) -> list[tuple[float, int, bool]]:
+    """Side of every endpoint, c's then d's: scalar for a few, vectorised for many."""
+    if len(cs) <= SCALAR_LIMIT:
+        return [plane.side(p) for p in cs + ds]
+    det, sign, on_line = plane.sides(np.array(cs + ds))
+    return list(zip(det.tolist(), sign.tolist(), on_line.tolist(), strict=True))
 
 
 def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
                   skip_warp: int) -> Hit | None:
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
-    lo = np.minimum(np.minimum(b, a1), a2)
-    hi = np.maximum(np.maximum(b, a1), a2)
-    c, d, yarn, ref = _gather(state, w, lo, hi, skip, skip_warp)
-    n = len(yarn)
+    lo = (min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2]))
+    hi = (max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2]))
+    cs, ds, yarns, refs = _gather(state, w, lo, hi, skip, skip_warp)
+    n = len(cs)
     if n == 0:
         return None
-    o, s, on_line = plane_sides(b, a1, a2, np.concatenate((c, d)))
-    crossing = np.nonzero((s[:n] >= 0) != (s[n:] >= 0))[0]
+    sides = _sides(Plane(b, a1, a2), cs, ds)
     hits = []
-    for i in crossing.tolist():
-        sc, sd = int(s[i]), int(s[n + i])
-        if (sc == 0 and on_line[i]) or (sd == 0 and on_line[n + i]):
+    for i in range(n):
+        oc, sc, c_on_line = sides[i]
+        od, sd, d_on_line = sides[n + i]
+        if (sc >= 0) == (sd >= 0):
+            continue
+        if (sc == 0 and c_on_line) or (sd == 0 and d_on_line):
             continue  # crosses on the guide path itself: never strictly inside
-        ci, di = tuple(c[i].tolist()), tuple(d[i].tolist())
-        hit = _edges(b, a1, a2, ci, di, float(o[i]), float(o[n + i]), sc, sd)  # type: ignore[arg-type]
+        hit = _edges(b, a1, a2, cs[i], ds[i], oc, od, sc, sd)
         if hit is not None:
-            hit.yarn, hit.seg = int(yarn[i]), int(ref[i])
+            hit.yarn, hit.seg = yarns[i], refs[i]
             hits.append(hit)
     if not hits:
         return None
@@ -191,8 +207,7 @@ def rest_point(hit: Hit, a1: Vec, a2: Vec, diameter: float) -> Vec:
 
 def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
     """Move warp w's free node to a2, inserting a node pair at every contact on the way."""
-    free = state.free_node[w]
-    a1 = state.xyz(free)
+    a1 = state.xyz(state.free_node[w])
     skip: tuple[int, ...] = ()
     skip_warp = -1
     for _ in range(MAX_CONTACTS_PER_SWEEP):
@@ -200,7 +215,7 @@ def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
         b = state.xyz(apex)
         hit = first_contact(state, w, b, a1, a2, skip, skip_warp)
         if hit is None:
-            state.move_node(free, a2)
+            state.move_free(w, a2)
             return
         y, skip, skip_warp = split_hit(state, hit)
         x = state.new_node(rest_point(hit, a1, a2, state.diameter))
