@@ -113,7 +113,8 @@ class Plane:
             return det, 0, True
         return det, exact_sign(self.b, self.a1, self.a2, x), False
 
-    def sides(self, x: FloatArray) -> tuple[FloatArray, IntArray, BoolArray]:
+    def sides(self, x: FloatArray) -> tuple[FloatArray, IntArray, BoolArray, FloatArray]:
+        """``side`` for many points x (n, 3); also returns the error bounds of the values."""
         rel = x - np.array(self.b)
         n0, n1, n2 = self.n
         p0, p1, p2 = self.p
@@ -132,4 +133,4 @@ class Plane:
             on_line[unsure] = hit
         for i in unsure[~on_line[unsure]].tolist():
             sign[i] = exact_sign(self.b, self.a1, self.a2, tuple(x[i].tolist()))  # type: ignore[arg-type]
-        return det, sign.astype(np.int64), on_line
+        return det, sign.astype(np.int64), on_line, bound

@@ -67,7 +67,7 @@ class State:
         self.seg_xyz = GrowArray(np.float64, 6)  # cx, cy, cz, dx, dy, dz
         self.seg_yarn = GrowArray(np.int64)
         self.seg_alive = GrowArray(np.bool_)
-        self.free_box = GrowArray(np.float64, 6)  # per warp: box of its free segment (lo, hi)
+        self.free_seg = GrowArray(np.float64, 6)  # per warp: its last fixed node, free node
         self.active = np.empty(0, dtype=np.int64)  # ids below active_from reaching the floor
         self.active_lo = np.empty((0, 3))
         self.active_hi = np.empty((0, 3))
@@ -107,9 +107,9 @@ class State:
         self.free_node.append(guide)
         self.warp_cell.append((row, col))
         self.occupancy[row][col] = yarn
-        self.free_box.append(np.zeros(6))
+        self.free_seg.append(np.zeros(6))
         self.n_warps += 1
-        self._box_free(yarn)
+        self._sync_free(yarn)
         return yarn
 
     def _append_node(self, xyz: Vec) -> int:
@@ -130,17 +130,15 @@ class State:
         i = 3 * self.free_node[warp]
         self.log.append(("free", warp, self.pos[i], self.pos[i + 1], self.pos[i + 2]))
         self.pos[i], self.pos[i + 1], self.pos[i + 2] = xyz
-        self._box_free(warp)
+        self._sync_free(warp)
 
     def set_last_fixed(self, warp: int, node: int) -> None:
         self.log.append(("last", warp, self.last_fixed[warp]))
         self.last_fixed[warp] = node
-        self._box_free(warp)
+        self._sync_free(warp)
 
-    def _box_free(self, warp: int) -> None:
-        b, a = self.xyz(self.last_fixed[warp]), self.xyz(self.free_node[warp])
-        self.free_box.data[warp] = (min(b[0], a[0]), min(b[1], a[1]), min(b[2], a[2]),
-                                    max(b[0], a[0]), max(b[1], a[1]), max(b[2], a[2]))
+    def _sync_free(self, warp: int) -> None:
+        self.free_seg.data[warp] = self.xyz(self.last_fixed[warp]) + self.xyz(self.free_node[warp])
 
     def add_length(self, yarn: int, delta: float) -> None:
         self.log.append(("len", yarn, self.yarn_len[yarn]))
@@ -217,10 +215,10 @@ class State:
         elif kind == "free":
             i = 3 * self.free_node[op[1]]
             self.pos[i], self.pos[i + 1], self.pos[i + 2] = op[2], op[3], op[4]
-            self._box_free(op[1])
+            self._sync_free(op[1])
         elif kind == "last":
             self.last_fixed[op[1]] = op[2]
-            self._box_free(op[1])
+            self._sync_free(op[1])
         elif kind == "len":
             self.yarn_len[op[1]] = op[2]
         elif kind == "place":
@@ -277,7 +275,7 @@ class State:
         else:
             self._refresh_active(floor, np.concatenate((self.active, np.arange(self.active_from, n))))
 
-    def fixed_near(self, lo: Vec, hi: Vec) -> list[int]:
+    def fixed_near(self, lo: Vec, hi: Vec) -> IntArray:
         """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
         if lo[2] < self.floor:
             self._refresh_active(lo[2] - self.margin)
@@ -286,15 +284,18 @@ class State:
         n = len(self.seg_c)
         if self.active_from < n:
             tail = self.seg_xyz.data[self.active_from : n]
-            c, d = tail[:, :3], tail[:, 3:]
-            near = (np.maximum(c, d) >= lo).all(axis=1) & (np.minimum(c, d) <= hi).all(axis=1)
-            found = np.concatenate((found, self.active_from + np.nonzero(near)[0]))
-        ids: list[int] = found[self.seg_alive.data[found]].tolist()
-        return ids
-
-    def free_near(self, lo: Vec, hi: Vec) -> list[int]:
-        """Warps whose free segment's box meets the closed box [lo, hi]."""
-        box = self.free_box.data[: self.n_warps]
-        keep = (box[:, 3:] >= lo).all(axis=1) & (box[:, :3] <= hi).all(axis=1)
-        result: list[int] = np.nonzero(keep)[0].tolist()
+            found = np.concatenate((found, self.active_from + _meeting(tail, lo, hi)))
+        result: IntArray = found[self.seg_alive.data[found]]
         return result
+
+    def free_near(self, lo: Vec, hi: Vec) -> IntArray:
+        """Warps whose free segment's box meets the closed box [lo, hi]."""
+        return _meeting(self.free_seg.data[: self.n_warps], lo, hi)
+
+
+def _meeting(segments: FloatArray, lo: Vec, hi: Vec) -> IntArray:
+    """Rows of an (n, 6) array of segments whose box meets the box [lo, hi]."""
+    c, d = segments[:, :3], segments[:, 3:]
+    near = (np.maximum(c, d) >= lo).all(axis=1) & (np.minimum(c, d) <= hi).all(axis=1)
+    result: IntArray = np.nonzero(near)[0]
+    return result

@@ -17,7 +17,15 @@ from typing import Any
 from bwsd.errors import TwinError
 import numpy as np
 
-from bwsd.twin.predicates import Plane, Vec, exact_orient, orient
+from bwsd.twin.predicates import (
+    BoolArray,
+    FloatArray,
+    IntArray,
+    Plane,
+    Vec,
+    exact_orient,
+    orient,
+)
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
@@ -38,13 +46,22 @@ class Hit:
     point: Vec
 
 
-def _crossing(c: Vec, d: Vec, oc: float, od: float, sc: int, sd: int) -> Vec:
-    """Where segment c-d meets the plane; exactly an endpoint when that endpoint lies on it."""
+def _crossing(plane: tuple[Vec, Vec, Vec], c: Vec, d: Vec, oc: float, od: float, sc: int,
+              sd: int) -> Vec:
+    """Where segment c-d meets the plane; exactly an endpoint when that endpoint lies on it.
+
+    s = oc / (oc - od) from the float plane values, clamped to [0, 1]; where those values
+    cannot tell the ends apart (oc == od in floats), s is the exact ratio, rounded.
+    """
     if sc == 0:
         return c
     if sd == 0:
         return d
-    s = oc / (oc - od)
+    if oc != od:
+        s = min(max(oc / (oc - od), 0.0), 1.0)
+    else:
+        ec, ed = exact_orient(*plane, c), exact_orient(*plane, d)
+        s = float(ec / (ec - ed))
     return c[0] + s * (d[0] - c[0]), c[1] + s * (d[1] - c[1]), c[2] + s * (d[2] - c[2])
 
 
@@ -60,48 +77,56 @@ def _edges(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, oc: float, od: float, sc: i
     v1, s1, e1 = orient(c, d, a2, b)
     if s1 != 0 and s1 != sb:
         return None
-    point = _crossing(c, d, oc, od, sc, sd)
+    point = _crossing((b, a1, a2), c, d, oc, od, sc, sd)
     if s1 == 0:
         return Hit(1.0, 0.0, True, -1, 0, c, d, point)
     room = abs(v2) + abs(v1) - e1 - e2
     slack = (e1 + e2) / room + 4e-16 if room > 0 else math.inf
-    return Hit(v2 / (v1 + v2), slack, False, -1, 0, c, d, point)
+    return Hit(_time(b, a1, a2, c, d, v1, v2), slack, False, -1, 0, c, d, point)
 
 
-SCALAR_LIMIT = 24  # up to this many candidates the scalar side test beats numpy's overhead
+def _time(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, v1: float, v2: float) -> float:
+    """Sweep time t = v2 / (v1 + v2) from the float values, clamped to [0, 1]; the exact
+    ratio, rounded, where the float values cancel."""
+    den = v1 + v2
+    if den != 0:
+        return min(max(v2 / den, 0.0), 1.0)
+    w1, w2 = exact_orient(c, d, a2, b), exact_orient(c, d, b, a1)
+    return float(w2 / (w1 + w2))
 
 
-def _gather(state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...],
-            skip_warp: int) -> tuple[list[Vec], list[Vec], list[int], list[int]]:
-    """Endpoints, yarn and reference of every segment whose box meets [lo, hi]."""
-    cs: list[Vec] = []
-    ds: list[Vec] = []
-    yarns: list[int] = []
-    refs: list[int] = []
-    seg_c, seg_d, seg_yarn, xyz = state.seg_c, state.seg_d, state.seg_yarn.data, state.xyz
-    for s in state.fixed_near(lo, hi):
-        yarn = int(seg_yarn[s])
-        if yarn != w and s not in skip:
-            cs.append(xyz(seg_c[s]))
-            ds.append(xyz(seg_d[s]))
-            yarns.append(yarn)
-            refs.append(s)
-    last, free = state.last_fixed, state.free_node
-    for warp in state.free_near(lo, hi):
-        if warp != w and warp != skip_warp:
-            cs.append(xyz(last[warp]))
-            ds.append(xyz(free[warp]))
-            yarns.append(warp)
-            refs.append(-warp - 1)
-    return cs, ds, yarns, refs
+def _candidates(state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...],
+                skip_warp: int) -> tuple[FloatArray, IntArray, IntArray]:
+    """Segments (n, 6), yarns and references of everything whose box meets [lo, hi]."""
+    fixed = state.fixed_near(lo, hi)
+    yarns = state.seg_yarn.data[fixed]
+    keep = yarns != w
+    if skip:
+        keep &= ~np.isin(fixed, skip)
+    fixed, yarns = fixed[keep], yarns[keep]
+    warps = state.free_near(lo, hi)
+    warps = warps[(warps != w) & (warps != skip_warp)]
+    segs = np.concatenate((state.seg_xyz.data[fixed], state.free_seg.data[warps]))
+    return segs, np.concatenate((yarns, warps)), np.concatenate((fixed, -warps - 1))
 
 
-def _sides(plane: Plane, cs: list[Vec], ds: list[Vec]) -> list[tuple[float, int, bool]]:
-    """Side of every endpoint, c's then d's: scalar for a few, vectorised for many."""
-    if len(cs) <= SCALAR_LIMIT:
-        return [plane.side(p) for p in cs + ds]
-    det, sign, on_line = plane.sides(np.array(cs + ds))
-    return list(zip(det.tolist(), sign.tolist(), on_line.tolist(), strict=True))
+def _plausible(segs: FloatArray, oc: FloatArray, od: FloatArray, err: FloatArray, lo: Vec,
+               hi: Vec) -> BoolArray:
+    """False where the crossing point lies provably outside the triangle's box.
+
+    Only a filter: where the plane values are too uncertain to place the point, keep it.
+    """
+    gap = np.abs(oc - od)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = err / gap
+        s = oc / (oc - od)
+    c, d = segs[:, :3], segs[:, 3:]
+    p = c + s[:, None] * (d - c)
+    size = np.abs(d - c).max(axis=1) + np.abs(p).max(axis=1)
+    tol = (4 * rel + 1e-12) * size
+    inside = ((p >= np.subtract(lo, tol[:, None])) & (p <= np.add(hi, tol[:, None]))).all(axis=1)
+    result: BoolArray = inside | ~(rel < 1e-6)
+    return result
 
 
 def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
@@ -109,22 +134,25 @@ def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[in
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
     lo = (min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2]))
     hi = (max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2]))
-    cs, ds, yarns, refs = _gather(state, w, lo, hi, skip, skip_warp)
-    n = len(cs)
-    if n == 0:
+    segs, yarns, refs = _candidates(state, w, lo, hi, skip, skip_warp)
+    if len(segs) == 0:
         return None
-    sides = _sides(Plane(b, a1, a2), cs, ds)
+    det, sign, on_line, err = Plane(b, a1, a2).sides(segs.reshape(-1, 3))
+    sc, sd = sign[0::2], sign[1::2]
+    cross = ((sc >= 0) != (sd >= 0)) & ~((sc == 0) & on_line[0::2]) & ~((sd == 0) & on_line[1::2])
+    idx = np.nonzero(cross)[0]  # a crossing exactly on the guide path is never strictly inside
+    if idx.size == 0:
+        return None
+    oc, od = det[0::2][idx], det[1::2][idx]
+    idx = idx[_plausible(segs[idx], oc, od, err[0::2][idx] + err[1::2][idx], lo, hi)]
     hits = []
-    for i in range(n):
-        oc, sc, c_on_line = sides[i]
-        od, sd, d_on_line = sides[n + i]
-        if (sc >= 0) == (sd >= 0):
-            continue
-        if (sc == 0 and c_on_line) or (sd == 0 and d_on_line):
-            continue  # crosses on the guide path itself: never strictly inside
-        hit = _edges(b, a1, a2, cs[i], ds[i], oc, od, sc, sd)
+    for i in idx.tolist():
+        row = segs[i].tolist()
+        c, d = (row[0], row[1], row[2]), (row[3], row[4], row[5])
+        hit = _edges(b, a1, a2, c, d, float(det[2 * i]), float(det[2 * i + 1]), int(sc[i]),
+                     int(sd[i]))
         if hit is not None:
-            hit.yarn, hit.seg = yarns[i], refs[i]
+            hit.yarn, hit.seg = int(yarns[i]), int(refs[i])
             hits.append(hit)
     if not hits:
         return None

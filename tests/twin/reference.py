@@ -182,7 +182,10 @@ class RefTwin:
                 a1 = a2
             else:
                 v1, v2 = edge_float(pc, pd, a2, b), edge_float(pc, pd, b, a1)
-                t = v2 / (v1 + v2)
+                if v1 + v2 != 0:
+                    t = min(max(v2 / (v1 + v2), 0.0), 1.0)
+                else:
+                    t = float(hit[0][0])
                 a1 = (a1[0] + t * (a2[0] - a1[0]), a1[1] + t * (a2[1] - a1[1]),
                       a1[2] + t * (a2[2] - a1[2]))
 
@@ -193,7 +196,11 @@ class RefTwin:
         if sd == 0:
             return pd
         oc, od = orient_float(b, a1, a2, pc), orient_float(b, a1, a2, pd)
-        s = oc / (oc - od)
+        if oc != od:
+            s = min(max(oc / (oc - od), 0.0), 1.0)
+        else:
+            ec, ed = orient_exact(b, a1, a2, pc), orient_exact(b, a1, a2, pd)
+            s = float(ec / (ec - ed))
         return (pc[0] + s * (pd[0] - pc[0]), pc[1] + s * (pd[1] - pc[1]),
                 pc[2] + s * (pd[2] - pc[2]))
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from bwsd.twin import Machine, Shift, TakeUp, Weft
@@ -145,7 +145,19 @@ def braids(draw):
     return machine, BRAID_FILL, diameter, instructions
 
 
+# Found by hypothesis: two segment ends on opposite exact sides whose float plane values are
+# equal, so the float ratio of the crossing point is undefined.
+FLAT_CROSSING = (
+    Machine(4, 4, 1.0, 8.48256361874948, 36.97948251107606, 0.875),
+    BRAID_FILL,
+    0.0,
+    (BRAID_CYCLE + [TakeUp(2.899204154337702)] + BRAID_CYCLE + [TakeUp(3.5)] + BRAID_CYCLE
+     + [TakeUp(1.0)]),
+)
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(braids())
+@example(FLAT_CROSSING)
 def test_braids_match_reference(case):
     _compare(case)
