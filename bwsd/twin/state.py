@@ -71,9 +71,11 @@ class State:
         self.active = np.empty(0, dtype=np.int64)  # ids below active_from reaching the floor
         self.active_lo = np.empty((0, 3))
         self.active_hi = np.empty((0, 3))
+        self.active_top = np.empty(0)
         self.active_from = 0
         self.floor = math.inf
-        self.margin = 4 * max(machine.pitch_x, machine.pitch_y, diameter)
+        # an apex may dip below the last one by one diameter per contact (X = P - d n)
+        self.margin = 4 * diameter + 0.1 * min(machine.pitch_x, machine.pitch_y)
         self.log: list[tuple[Any, ...]] = []
 
     # ----- reading -----
@@ -199,7 +201,7 @@ class State:
         if self.active_from > n:
             keep = self.active < n
             self.active, self.active_lo = self.active[keep], self.active_lo[keep]
-            self.active_hi = self.active_hi[keep]
+            self.active_hi, self.active_top = self.active_hi[keep], self.active_top[keep]
             self.active_from = n
 
     def forget_log(self) -> None:
@@ -244,16 +246,19 @@ class State:
     def _refresh_active(self, floor: float, ids: IntArray | None = None) -> None:
         """Rebuild the active set from ``ids`` (all segments when None) above ``floor``.
 
-        Dead segments stay in (a prediction may be rolled back and revive them); queries
-        check liveness.
+        The set is sorted by the segments' top z, so a query scans only those reaching
+        above its apex. Dead segments stay in (a prediction may be rolled back and revive
+        them); queries check liveness.
         """
         n = len(self.seg_c)
         if ids is None:
             ids = np.arange(n)
         xyz = self.seg_xyz.data[ids]
         lo, hi = np.minimum(xyz[:, :3], xyz[:, 3:]), np.maximum(xyz[:, :3], xyz[:, 3:])
-        keep = hi[:, 2] >= floor
-        self.active, self.active_lo, self.active_hi = ids[keep], lo[keep], hi[keep]
+        order = np.argsort(hi[:, 2], kind="stable")
+        order = order[hi[order, 2] >= floor]
+        self.active, self.active_lo, self.active_hi = ids[order], lo[order], hi[order]
+        self.active_top = self.active_hi[:, 2].copy()
         self.active_from = n
         self.floor = floor
 
@@ -273,14 +278,17 @@ class State:
         if floor < self.floor:
             self._refresh_active(floor)
         else:
-            self._refresh_active(floor, np.concatenate((self.active, np.arange(self.active_from, n))))
+            recent = np.arange(self.active_from, n)
+            self._refresh_active(floor, np.concatenate((self.active, recent)))
 
     def fixed_near(self, lo: Vec, hi: Vec) -> IntArray:
         """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
         if lo[2] < self.floor:
             self._refresh_active(lo[2] - self.margin)
-        keep = (self.active_hi >= lo).all(axis=1) & (self.active_lo <= hi).all(axis=1)
-        found = self.active[keep]
+        start = int(np.searchsorted(self.active_top, lo[2]))
+        above_lo, above_hi = self.active_lo[start:], self.active_hi[start:]
+        keep = (above_hi >= lo).all(axis=1) & (above_lo <= hi).all(axis=1)
+        found = self.active[start:][keep]
         n = len(self.seg_c)
         if self.active_from < n:
             tail = self.seg_xyz.data[self.active_from : n]

@@ -129,6 +129,36 @@ def _plausible(segs: FloatArray, oc: FloatArray, od: FloatArray, err: FloatArray
     return result
 
 
+SCALAR_LIMIT = 24  # up to this many candidates, scalar side tests beat numpy's call overhead
+
+
+Crossing = tuple[int, float, float, int, int]
+
+
+def _sides(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
+    """(index, oc, od, sc, sd) of the segments crossing the plane, not on the guide path.
+
+    Scalar for a few segments, vectorised (with a box filter on the crossing point) for many;
+    both take the same exact decisions on the same float values.
+    """
+    out = []
+    if len(segs) <= SCALAR_LIMIT:
+        for i, row in enumerate(segs.tolist()):
+            oc, sc, c_on = plane.side((row[0], row[1], row[2]))
+            od, sd, d_on = plane.side((row[3], row[4], row[5]))
+            if (sc >= 0) != (sd >= 0) and not (sc == 0 and c_on) and not (sd == 0 and d_on):
+                out.append((i, oc, od, sc, sd))
+        return out
+    det, sign, on_line, err = plane.sides(segs.reshape(-1, 3))
+    sc, sd = sign[0::2], sign[1::2]
+    cross = ((sc >= 0) != (sd >= 0)) & ~((sc == 0) & on_line[0::2]) & ~((sd == 0) & on_line[1::2])
+    idx = np.nonzero(cross)[0]
+    oc, od = det[0::2][idx], det[1::2][idx]
+    idx = idx[_plausible(segs[idx], oc, od, err[0::2][idx] + err[1::2][idx], lo, hi)]
+    return [(i, float(det[2 * i]), float(det[2 * i + 1]), int(sc[i]), int(sd[i]))
+            for i in idx.tolist()]
+
+
 def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
                   skip_warp: int) -> Hit | None:
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
@@ -137,20 +167,11 @@ def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[in
     segs, yarns, refs = _candidates(state, w, lo, hi, skip, skip_warp)
     if len(segs) == 0:
         return None
-    det, sign, on_line, err = Plane(b, a1, a2).sides(segs.reshape(-1, 3))
-    sc, sd = sign[0::2], sign[1::2]
-    cross = ((sc >= 0) != (sd >= 0)) & ~((sc == 0) & on_line[0::2]) & ~((sd == 0) & on_line[1::2])
-    idx = np.nonzero(cross)[0]  # a crossing exactly on the guide path is never strictly inside
-    if idx.size == 0:
-        return None
-    oc, od = det[0::2][idx], det[1::2][idx]
-    idx = idx[_plausible(segs[idx], oc, od, err[0::2][idx] + err[1::2][idx], lo, hi)]
     hits = []
-    for i in idx.tolist():
+    for i, oc, od, sc, sd in _sides(Plane(b, a1, a2), segs, lo, hi):
         row = segs[i].tolist()
         c, d = (row[0], row[1], row[2]), (row[3], row[4], row[5])
-        hit = _edges(b, a1, a2, c, d, float(det[2 * i]), float(det[2 * i + 1]), int(sc[i]),
-                     int(sd[i]))
+        hit = _edges(b, a1, a2, c, d, oc, od, sc, sd)
         if hit is not None:
             hit.yarn, hit.seg = int(yarns[i]), int(refs[i])
             hits.append(hit)
