@@ -41,12 +41,19 @@ def _number(table: str, key: str, value: Any, spec: tuple[type, float, float], p
     if kind is int and not isinstance(value, int):
         raise ConfigError(f"must be an integer, got {value!r}", path=path, table=table, key=key)
     if not low <= value <= high:
-        raise ConfigError(f"must lie in [{low:g}, {high:g}], got {value!r}", path=path, table=table, key=key)
+        raise ConfigError(
+            f"must lie in [{low:g}, {high:g}], got {value!r}", path=path, table=table, key=key
+        )
     return kind(value)
 
 
-def _table(data: Mapping[str, Any], name: str, spec: dict[str, tuple[type, float, float]],
-           path: str, required: bool) -> dict[str, Any]:
+def _table(
+    data: Mapping[str, Any],
+    name: str,
+    spec: dict[str, tuple[type, float, float]],
+    path: str,
+    required: bool,
+) -> dict[str, Any]:
     raw = data.get(name)
     if raw is None:
         if required:
@@ -56,7 +63,9 @@ def _table(data: Mapping[str, Any], name: str, spec: dict[str, tuple[type, float
         raise ConfigError("must be a table", path=path, table=name)
     for key in raw:
         if key not in spec:
-            raise ConfigError(f"unknown key (known: {', '.join(spec)})", path=path, table=name, key=key)
+            raise ConfigError(
+                f"unknown key (known: {', '.join(spec)})", path=path, table=name, key=key
+            )
     out = {}
     for key, key_spec in spec.items():
         if key not in raw:

@@ -27,16 +27,22 @@ def configure(sub: Any) -> None:
     p.add_argument("--config", required=True, help="machine config (TOML)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--skeleton", metavar="FILE", help="write the skeleton as JSON")
-    p.add_argument("--export", metavar="FILE", action="append", default=[],
-                   help="write FILE.tg3 (TexGen), FILE.vtp (ParaView) or FILE.json; repeatable")
+    p.add_argument(
+        "--export",
+        metavar="FILE",
+        action="append",
+        default=[],
+        help="write FILE.tg3 (TexGen), FILE.vtp (ParaView) or FILE.json; repeatable",
+    )
     p.set_defaults(handler=_simulate_cmd)
     d = sub.add_parser("demo", help="simulate a shipped example and write its exports")
     d.add_argument("--out", default="out", help="folder for the exports (default: out)")
     d.set_defaults(handler=_demo_cmd)
 
 
-def load_and_simulate(program_path: str, config_path: str,
-                      progress: ProgressFn | None = None) -> tuple[Machine, Program, Twin]:
+def load_and_simulate(
+    program_path: str, config_path: str, progress: ProgressFn | None = None
+) -> tuple[Machine, Program, Twin]:
     """Load config and program, run the program; a refused instruction names its line."""
     from bwsd.program.validate import load_program
 
@@ -45,9 +51,12 @@ def load_and_simulate(program_path: str, config_path: str,
     try:
         twin = simulate(machine, program, progress)
     except TwinError as exc:
-        line = program.lines[exc.instruction - 1] if 0 < exc.instruction <= len(program.lines) else 0
-        raise ProgramError(f"instruction {exc.instruction}: {exc.reason}", line=line, column=1,
-                           source=program_path) from None
+        line = (
+            program.lines[exc.instruction - 1] if 0 < exc.instruction <= len(program.lines) else 0
+        )
+        raise ProgramError(
+            f"instruction {exc.instruction}: {exc.reason}", line=line, column=1, source=program_path
+        ) from None
     return machine, program, twin
 
 

@@ -61,8 +61,9 @@ class Twin:
     only drops its log.
     """
 
-    def __init__(self, machine: Machine, fill: Iterable[tuple[int, int]],
-                 diameter: float | None = None) -> None:
+    def __init__(
+        self, machine: Machine, fill: Iterable[tuple[int, int]], diameter: float | None = None
+    ) -> None:
         self.machine = machine
         self.diameter = machine.yarn_diameter if diameter is None else diameter
         self._state = State(machine, self.diameter)
@@ -108,12 +109,14 @@ class Twin:
         if self._pending is not prediction:
             self._settle()
             if prediction.index != self.done + 1:
-                raise TwinError("prediction is stale: the twin has moved on",
-                                instruction=prediction.index)
+                raise TwinError(
+                    "prediction is stale: the twin has moved on", instruction=prediction.index
+                )
             again = self.predict(prediction.instruction)
             if again.contacts != prediction.contacts:
-                raise TwinError("prediction does not match the current state",
-                                instruction=prediction.index)
+                raise TwinError(
+                    "prediction does not match the current state", instruction=prediction.index
+                )
         self._pending = None
         self.done += 1
         if not self._snapshots:
@@ -199,8 +202,15 @@ class Twin:
             yarns.append(YarnData(i, kind, ids, pos[ids], st.yarn_cell[i], st.yarn_angle[i]))
         table = np.array(st.contacts, dtype=np.int64).reshape(-1, 5).tolist()
         contacts = tuple(ContactData(*row) for row in table)
-        return SkeletonData(self.machine, self.diameter, st.takeup, self.done, tuple(yarns),
-                            contacts, self.occupancy)
+        return SkeletonData(
+            self.machine,
+            self.diameter,
+            st.takeup,
+            self.done,
+            tuple(yarns),
+            contacts,
+            self.occupancy,
+        )
 
     def path_length(self, yarn: int) -> float:
         """Length of a yarn's polyline, free segment included."""
@@ -220,10 +230,17 @@ class Twin:
         result: FloatArray = fixed + np.sqrt(np.einsum("ij,ij->i", free, free))
         return result
 
-    def _describe(self, index: int, instruction: Instruction, moved: list[int],
-                  before: FloatArray, contacts0: int, yarns0: int) -> Prediction:
+    def _describe(
+        self,
+        index: int,
+        instruction: Instruction,
+        moved: list[int],
+        before: FloatArray,
+        contacts0: int,
+        yarns0: int,
+    ) -> Prediction:
         st = self._state
-        rows = np.array(st.contacts[5 * contacts0:], dtype=np.int64).reshape(-1, 5).tolist()
+        rows = np.array(st.contacts[5 * contacts0 :], dtype=np.int64).reshape(-1, 5).tolist()
         contacts = tuple(ContactData(*row) for row in rows)
         owner = {c.moving_node: c.moving_yarn for c in contacts}
         owner.update({c.hit_node: c.hit_yarn for c in contacts})
@@ -236,9 +253,19 @@ class Twin:
         cases = {w: st.warp_cell[w] for w in moved}
         after = self._path_lengths()
         change = {int(y): float(after[y] - before[y]) for y in np.nonzero(after != before)[0]}
-        return Prediction(index, instruction, contacts, tuple(inserted), free, cases,
-                          np.array(st.occupancy, dtype=np.int64), st.takeup,
-                          tuple(range(yarns0, len(st.yarns))), change, self._token)
+        return Prediction(
+            index,
+            instruction,
+            contacts,
+            tuple(inserted),
+            free,
+            cases,
+            np.array(st.occupancy, dtype=np.int64),
+            st.takeup,
+            tuple(range(yarns0, len(st.yarns))),
+            change,
+            self._token,
+        )
 
 
 ProgressFn = Callable[[int, int], None]

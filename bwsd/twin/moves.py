@@ -40,8 +40,9 @@ def _shift(state: State, instruction: Shift, index: int) -> list[int]:
     for line, k in instruction.moves:
         limit = m.rows if instruction.axis == "row" else m.cols
         if not 0 <= line < limit:
-            raise MoveError(f"{instruction.axis.upper()} {line} is outside the matrix",
-                            instruction=index)
+            raise MoveError(
+                f"{instruction.axis.upper()} {line} is outside the matrix", instruction=index
+            )
         for warp, at in line_cases(state, instruction.axis, line, k):
             row, col = (line, at + k) if instruction.axis == "row" else (at + k, line)
             _check_target(state, warp, row, col, index)
@@ -54,8 +55,9 @@ def _shift(state: State, instruction: Shift, index: int) -> list[int]:
 
 def _check_target(state: State, warp: int, row: int, col: int, index: int) -> None:
     if not state.machine.inside(row, col):
-        raise MoveError(f"case of yarn {warp} would leave the matrix at cell ({row}, {col})",
-                        instruction=index)
+        raise MoveError(
+            f"case of yarn {warp} would leave the matrix at cell ({row}, {col})", instruction=index
+        )
     other = state.occupancy[row][col]
     if other >= 0:
         raise MoveError(
@@ -101,10 +103,14 @@ def _weft(state: State, instruction: Weft, index: int) -> None:
     p1 = (instruction.x + half * ax, instruction.y + half * ay, cz)
     lo = (min(p0[0], p1[0]) - d, min(p0[1], p1[1]) - d, cz - d)
     hi = (max(p0[0], p1[0]) + d, max(p0[1], p1[1]) + d, cz + d)
-    segments = [(int(state.seg_yarn.data[s]), state.xyz(state.seg_c[s]), state.xyz(state.seg_d[s]))
-                for s in state.fixed_near(lo, hi)]
-    segments += [(w, state.xyz(state.last_fixed[w]), state.xyz(state.free_node[w]))
-                 for w in state.free_near(lo, hi)]
+    segments = [
+        (int(state.seg_yarn.data[s]), state.xyz(state.seg_c[s]), state.xyz(state.seg_d[s]))
+        for s in state.fixed_near(lo, hi)
+    ]
+    segments += [
+        (w, state.xyz(state.last_fixed[w]), state.xyz(state.free_node[w]))
+        for w in state.free_near(lo, hi)
+    ]
     closest: tuple[float, int] | None = None
     for yarn, c, e in segments:
         gap = segment_distance(p0, p1, c, e)

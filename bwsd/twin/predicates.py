@@ -132,5 +132,6 @@ class Plane:
                 hit &= x[unsure, k] == self.a1[k]
             on_line[unsure] = hit
         for i in unsure[~on_line[unsure]].tolist():
-            sign[i] = exact_sign(self.b, self.a1, self.a2, tuple(x[i].tolist()))  # type: ignore[arg-type]
+            px, py, pz = x[i].tolist()
+            sign[i] = exact_sign(self.b, self.a1, self.a2, (px, py, pz))
         return det, sign.astype(np.int64), on_line, bound

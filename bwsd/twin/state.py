@@ -37,7 +37,7 @@ class GrowArray:
 
     def append(self, value: Any) -> None:
         if self.size == len(self.data):
-            grown = np.zeros((2 * len(self.data),) + self.data.shape[1:], dtype=self.data.dtype)
+            grown = np.zeros((2 * len(self.data), *self.data.shape[1:]), dtype=self.data.dtype)
             grown[: self.size] = self.data[: self.size]
             self.data = grown
         self.data[self.size] = value

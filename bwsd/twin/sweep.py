@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
-from bwsd.errors import TwinError
 import numpy as np
 
+from bwsd.errors import TwinError
 from bwsd.twin.predicates import (
     BoolArray,
     FloatArray,
@@ -46,8 +46,9 @@ class Hit:
     point: Vec
 
 
-def _crossing(plane: tuple[Vec, Vec, Vec], c: Vec, d: Vec, oc: float, od: float, sc: int,
-              sd: int) -> Vec:
+def _crossing(
+    plane: tuple[Vec, Vec, Vec], c: Vec, d: Vec, oc: float, od: float, sc: int, sd: int
+) -> Vec:
     """Where segment c-d meets the plane; exactly an endpoint when that endpoint lies on it.
 
     s = oc / (oc - od) from the float plane values, clamped to [0, 1]; where those values
@@ -65,8 +66,9 @@ def _crossing(plane: tuple[Vec, Vec, Vec], c: Vec, d: Vec, oc: float, od: float,
     return c[0] + s * (d[0] - c[0]), c[1] + s * (d[1] - c[1]), c[2] + s * (d[2] - c[2])
 
 
-def _edges(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, oc: float, od: float, sc: int,
-           sd: int) -> Hit | None:
+def _edges(
+    b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, oc: float, od: float, sc: int, sd: int
+) -> Hit | None:
     """Exact barycentric test of a segment crossing the plane; None if no contact."""
     _, sb, _ = orient(c, d, a1, a2)
     if sb == 0:
@@ -95,8 +97,9 @@ def _time(b: Vec, a1: Vec, a2: Vec, c: Vec, d: Vec, v1: float, v2: float) -> flo
     return float(w2 / (w1 + w2))
 
 
-def _candidates(state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...],
-                skip_warp: int) -> tuple[FloatArray, IntArray, IntArray]:
+def _candidates(
+    state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...], skip_warp: int
+) -> tuple[FloatArray, IntArray, IntArray]:
     """Segments (n, 6), yarns and references of everything whose box meets [lo, hi]."""
     fixed = state.fixed_near(lo, hi)
     yarns = state.seg_yarn.data[fixed]
@@ -110,8 +113,9 @@ def _candidates(state: State, w: int, lo: Vec, hi: Vec, skip: tuple[int, ...],
     return segs, np.concatenate((yarns, warps)), np.concatenate((fixed, -warps - 1))
 
 
-def _plausible(segs: FloatArray, oc: FloatArray, od: FloatArray, err: FloatArray, lo: Vec,
-               hi: Vec) -> BoolArray:
+def _plausible(
+    segs: FloatArray, oc: FloatArray, od: FloatArray, err: FloatArray, lo: Vec, hi: Vec
+) -> BoolArray:
     """False where the crossing point lies provably outside the triangle's box.
 
     Only a filter: where the plane values are too uncertain to place the point, keep it.
@@ -150,17 +154,21 @@ def _sides(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
                 out.append((i, oc, od, sc, sd))
         return out
     det, sign, on_line, err = plane.sides(segs.reshape(-1, 3))
-    sc, sd = sign[0::2], sign[1::2]
-    cross = ((sc >= 0) != (sd >= 0)) & ~((sc == 0) & on_line[0::2]) & ~((sd == 0) & on_line[1::2])
+    s_c, s_d = sign[0::2], sign[1::2]
+    cross = (s_c >= 0) != (s_d >= 0)
+    cross &= ~((s_c == 0) & on_line[0::2]) & ~((s_d == 0) & on_line[1::2])
     idx = np.nonzero(cross)[0]
-    oc, od = det[0::2][idx], det[1::2][idx]
-    idx = idx[_plausible(segs[idx], oc, od, err[0::2][idx] + err[1::2][idx], lo, hi)]
-    return [(i, float(det[2 * i]), float(det[2 * i + 1]), int(sc[i]), int(sd[i]))
-            for i in idx.tolist()]
+    o_c, o_d = det[0::2][idx], det[1::2][idx]
+    idx = idx[_plausible(segs[idx], o_c, o_d, err[0::2][idx] + err[1::2][idx], lo, hi)]
+    return [
+        (i, float(det[2 * i]), float(det[2 * i + 1]), int(s_c[i]), int(s_d[i]))
+        for i in idx.tolist()
+    ]
 
 
-def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
-                  skip_warp: int) -> Hit | None:
+def first_contact(
+    state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...], skip_warp: int
+) -> Hit | None:
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
     lo = (min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2]))
     hi = (max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2]))
@@ -277,7 +285,12 @@ def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
             a1 = a2
         else:
             t = hit.t
-            a1 = (a1[0] + t * (a2[0] - a1[0]), a1[1] + t * (a2[1] - a1[1]),
-                  a1[2] + t * (a2[2] - a1[2]))
-    raise TwinError(f"yarn {w}: more than {MAX_CONTACTS_PER_SWEEP} contacts in one sweep",
-                    instruction=instruction)
+            a1 = (
+                a1[0] + t * (a2[0] - a1[0]),
+                a1[1] + t * (a2[1] - a1[1]),
+                a1[2] + t * (a2[2] - a1[2]),
+            )
+    raise TwinError(
+        f"yarn {w}: more than {MAX_CONTACTS_PER_SWEEP} contacts in one sweep",
+        instruction=instruction,
+    )

@@ -20,8 +20,15 @@ WORKED_CYCLE: list[Instruction] = [
 
 def run_both(machine: Machine, fill, diameter: float, instructions) -> tuple[Twin, RefTwin]:
     twin = Twin(machine, fill, diameter)
-    ref = RefTwin(machine.rows, machine.cols, machine.pitch_x, machine.pitch_y, machine.d_mat,
-                  machine.c_mat, diameter)
+    ref = RefTwin(
+        machine.rows,
+        machine.cols,
+        machine.pitch_x,
+        machine.pitch_y,
+        machine.d_mat,
+        machine.c_mat,
+        diameter,
+    )
     ref.fill(list(fill))
     for ins in instructions:
         twin.apply(ins)
@@ -37,8 +44,10 @@ def assert_same(twin: Twin, ref: RefTwin) -> None:
         assert yarn.node_ids.tolist() == ids
         expected = np.array([ref.nodes[i] for i in ids])
         assert np.array_equal(yarn.nodes, expected), f"yarn {yarn.id} coordinates differ"
-    got = [(c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node)
-           for c in sk.contacts]
-    want = [(c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node)
-            for c in ref.contacts]
+    got = [
+        (c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node) for c in sk.contacts
+    ]
+    want = [
+        (c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node) for c in ref.contacts
+    ]
     assert got == want

@@ -108,7 +108,9 @@ class RefTwin:
         z = self.d_mat + self.takeup
         for line, k in ins.moves:
             on_line = [
-                (w, rc) for w, rc in self.cell.items() if (rc[0] if ins.axis == "row" else rc[1]) == line
+                (w, rc)
+                for w, rc in self.cell.items()
+                if (rc[0] if ins.axis == "row" else rc[1]) == line
             ]
             key = (lambda e: e[1][1]) if ins.axis == "row" else (lambda e: e[1][0])
             on_line.sort(key=key, reverse=k > 0)
@@ -182,12 +184,13 @@ class RefTwin:
                 a1 = a2
             else:
                 v1, v2 = edge_float(pc, pd, a2, b), edge_float(pc, pd, b, a1)
-                if v1 + v2 != 0:
-                    t = min(max(v2 / (v1 + v2), 0.0), 1.0)
-                else:
-                    t = float(hit[0][0])
-                a1 = (a1[0] + t * (a2[0] - a1[0]), a1[1] + t * (a2[1] - a1[1]),
-                      a1[2] + t * (a2[2] - a1[2]))
+                exact = float(hit[0][0])
+                t = min(max(v2 / (v1 + v2), 0.0), 1.0) if v1 + v2 != 0 else exact
+                a1 = (
+                    a1[0] + t * (a2[0] - a1[0]),
+                    a1[1] + t * (a2[1] - a1[1]),
+                    a1[2] + t * (a2[2] - a1[2]),
+                )
 
     @staticmethod
     def _crossing(pc: Vec, pd: Vec, b: Vec, a1: Vec, a2: Vec, sc: int, sd: int) -> Vec:
@@ -201,8 +204,11 @@ class RefTwin:
         else:
             ec, ed = orient_exact(b, a1, a2, pc), orient_exact(b, a1, a2, pd)
             s = float(ec / (ec - ed))
-        return (pc[0] + s * (pd[0] - pc[0]), pc[1] + s * (pd[1] - pc[1]),
-                pc[2] + s * (pd[2] - pc[2]))
+        return (
+            pc[0] + s * (pd[0] - pc[0]),
+            pc[1] + s * (pd[1] - pc[1]),
+            pc[2] + s * (pd[2] - pc[2]),
+        )
 
     def _rest(self, p: Vec, pc: Vec, pd: Vec, a1: Vec, a2: Vec) -> Vec:
         if self.diameter == 0:

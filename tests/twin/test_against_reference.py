@@ -9,8 +9,11 @@ from hypothesis import strategies as st
 from bwsd.twin import Machine, Shift, TakeUp, Weft
 from tests.twin.conftest import assert_same, run_both
 
-SETTINGS = settings(max_examples=60, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+SETTINGS = settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 
 def _valid(occupied: set[tuple[int, int]], machine: Machine, ins: Shift) -> set | None:
@@ -36,17 +39,29 @@ def programs(draw, degenerate: bool):
     rows, cols = draw(st.integers(2, 4)), draw(st.integers(2, 4))
     if degenerate:
         pitch = draw(st.sampled_from([1.0, 2.0]))
-        machine = Machine(rows, cols, pitch, pitch, draw(st.sampled_from([2.0, 4.0, 8.0])),
-                          draw(st.sampled_from([0.0, 0.5, 1.0])))
+        machine = Machine(
+            rows,
+            cols,
+            pitch,
+            pitch,
+            draw(st.sampled_from([2.0, 4.0, 8.0])),
+            draw(st.sampled_from([0.0, 0.5, 1.0])),
+        )
         diameter = draw(st.sampled_from([0.0, 0.0, 0.5]))
     else:
         f = st.floats(0.5, 20.0, allow_nan=False)
-        machine = Machine(rows, cols, draw(f), draw(f), draw(st.floats(5.0, 200.0)),
-                          draw(st.floats(0.0, 1.0)))
+        machine = Machine(
+            rows, cols, draw(f), draw(f), draw(st.floats(5.0, 200.0)), draw(st.floats(0.0, 1.0))
+        )
         diameter = draw(st.floats(0.0, 2.0))
     cells = [(r, c) for r in range(rows) for c in range(cols)]
-    fill = sorted(draw(st.lists(st.sampled_from(cells), min_size=2,
-                                max_size=max(2, len(cells) // 2), unique=True)))
+    fill = sorted(
+        draw(
+            st.lists(
+                st.sampled_from(cells), min_size=2, max_size=max(2, len(cells) // 2), unique=True
+            )
+        )
+    )
     occupied = set(fill)
     instructions: list = []
     target = draw(st.integers(2, 12))
@@ -55,20 +70,29 @@ def programs(draw, degenerate: bool):
             break
         kind = draw(st.sampled_from(["row", "col"] * 4 + ["takeup", "weft"]))
         if kind == "takeup":
-            instructions.append(TakeUp(draw(st.sampled_from([1.0, 2.5])) if degenerate
-                                       else draw(st.floats(0.1, 10.0))))
+            instructions.append(
+                TakeUp(
+                    draw(st.sampled_from([1.0, 2.5])) if degenerate else draw(st.floats(0.1, 10.0))
+                )
+            )
             continue
         if kind == "weft":
-            instructions.append(Weft(draw(st.floats(-5, 40)), draw(st.floats(-5, 40)),
-                                     draw(st.floats(0.1, 0.9)) * machine.d_mat,
-                                     draw(st.sampled_from([0.0, 90.0, 37.0])),
-                                     draw(st.floats(1.0, 30.0))))
+            instructions.append(
+                Weft(
+                    draw(st.floats(-5, 40)),
+                    draw(st.floats(-5, 40)),
+                    draw(st.floats(0.1, 0.9)) * machine.d_mat,
+                    draw(st.sampled_from([0.0, 90.0, 37.0])),
+                    draw(st.floats(1.0, 30.0)),
+                )
+            )
             continue
         axis = 0 if kind == "row" else 1
         used = sorted({rc[axis] for rc in occupied})
         lines = draw(st.lists(st.sampled_from(used), min_size=1, max_size=len(used), unique=True))
-        ins = Shift(kind, tuple((line, draw(st.sampled_from([-1, 1, -1, 1, -2, 2])))
-                                for line in lines))
+        ins = Shift(
+            kind, tuple((line, draw(st.sampled_from([-1, 1, -1, 1, -2, 2]))) for line in lines)
+        )
         after = _valid(occupied, machine, ins)
         if after is not None:
             occupied = after
@@ -110,8 +134,13 @@ def test_degenerate_programs_match_reference(case):
 
 def test_kernel_and_reference_agree_on_a_dense_twist():
     machine = Machine(2, 2, 10.0, 10.0, 100.0, 0.5)
-    cycle = [Shift("row", ((0, 1), (1, -1))), Shift("col", ((1, 1), (0, -1))),
-             Shift("row", ((1, -1), (0, 1))), Shift("col", ((0, -1), (1, 1))), TakeUp(2.0)]
+    cycle = [
+        Shift("row", ((0, 1), (1, -1))),
+        Shift("col", ((1, 1), (0, -1))),
+        Shift("row", ((1, -1), (0, 1))),
+        Shift("col", ((0, -1), (1, 1))),
+        TakeUp(2.0),
+    ]
     twin, ref = run_both(machine, [(0, 0), (1, 1)], 1.0, cycle * 6)
     assert len(ref.contacts) > 10
     assert_same(twin, ref)
@@ -119,8 +148,12 @@ def test_kernel_and_reference_agree_on_a_dense_twist():
 
 
 BRAID_FILL = [(0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2), (2, 3), (3, 2)]
-BRAID_CYCLE = [Shift("row", ((1, 1), (2, -1))), Shift("col", ((1, 1), (2, -1))),
-               Shift("row", ((1, -1), (2, 1))), Shift("col", ((1, -1), (2, 1)))]
+BRAID_CYCLE = [
+    Shift("row", ((1, 1), (2, -1))),
+    Shift("col", ((1, 1), (2, -1))),
+    Shift("row", ((1, -1), (2, 1))),
+    Shift("col", ((1, -1), (2, 1))),
+]
 
 
 @st.composite
@@ -129,19 +162,26 @@ def braids(draw):
     integer = draw(st.booleans())
     if integer:
         pitch = draw(st.sampled_from([1.0, 2.0, 10.0]))
-        machine = Machine(4, 4, pitch, pitch, draw(st.sampled_from([4.0, 10.0, 100.0])),
-                          draw(st.sampled_from([0.0, 0.25, 0.5, 1.0])))
+        machine = Machine(
+            4,
+            4,
+            pitch,
+            pitch,
+            draw(st.sampled_from([4.0, 10.0, 100.0])),
+            draw(st.sampled_from([0.0, 0.25, 0.5, 1.0])),
+        )
         diameter = draw(st.sampled_from([0.0, 0.5, 1.0]))
         takeup = st.sampled_from([0.5, 1.0, 2.0])
     else:
         f = st.floats(1.0, 20.0)
-        machine = Machine(4, 4, draw(f), draw(f), draw(st.floats(20.0, 200.0)),
-                          draw(st.floats(0.05, 0.95)))
+        machine = Machine(
+            4, 4, draw(f), draw(f), draw(st.floats(20.0, 200.0)), draw(st.floats(0.05, 0.95))
+        )
         diameter = draw(st.floats(0.0, 1.5))
         takeup = st.floats(0.1, 5.0)
     instructions = []
     for _ in range(draw(st.integers(1, 3))):
-        instructions += BRAID_CYCLE + [TakeUp(draw(takeup))]
+        instructions += [*BRAID_CYCLE, TakeUp(draw(takeup))]
     return machine, BRAID_FILL, diameter, instructions
 
 
@@ -151,8 +191,7 @@ FLAT_CROSSING = (
     Machine(4, 4, 1.0, 8.48256361874948, 36.97948251107606, 0.875),
     BRAID_FILL,
     0.0,
-    (BRAID_CYCLE + [TakeUp(2.899204154337702)] + BRAID_CYCLE + [TakeUp(3.5)] + BRAID_CYCLE
-     + [TakeUp(1.0)]),
+    [*BRAID_CYCLE, TakeUp(2.899204154337702), *BRAID_CYCLE, TakeUp(3.5), *BRAID_CYCLE, TakeUp(1.0)],
 )
 
 
