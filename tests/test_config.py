@@ -1,0 +1,73 @@
+"""Machine configuration: every key range-checked, unknown keys refused, the place named."""
+
+from __future__ import annotations
+
+import pytest
+
+from bwsd.config import load_config, parse_config
+from bwsd.errors import ConfigError
+
+GOOD = {
+    "machine": {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10, "d_mat": 150, "c_mat": 0.4},
+    "yarn": {"diameter": 1.5},
+}
+
+
+def _with(table: str, key: str, value) -> dict:
+    data = {name: dict(values) for name, values in GOOD.items()}
+    data[table][key] = value
+    return data
+
+
+def test_a_good_config_gives_the_machine():
+    machine = parse_config(GOOD).machine
+    assert (machine.rows, machine.cols, machine.pitch_y, machine.yarn_diameter) == (4, 4, 10.0, 1.5)
+    assert isinstance(machine.pitch_y, float)
+
+
+def test_yarn_table_is_optional():
+    data = {"machine": GOOD["machine"]}
+    assert parse_config(data).machine.yarn_diameter == 0.0
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "value", "message"),
+    [
+        ("machine", "rows", 0, r"\[machine.rows\]: must lie in"),
+        ("machine", "rows", 2.5, r"\[machine.rows\]: must be an integer"),
+        ("machine", "cols", True, r"\[machine.cols\]: must be a number"),
+        ("machine", "c_mat", 1.5, r"\[machine.c_mat\]: must lie in \[0, 1\]"),
+        ("machine", "pitch_x", "10", r"\[machine.pitch_x\]: must be a number"),
+        ("machine", "speed", 3, r"\[machine.speed\]: unknown key"),
+        ("yarn", "diameter", -1, r"\[yarn.diameter\]: must lie in"),
+        ("yarn", "colour", "red", r"\[yarn.colour\]: unknown key"),
+    ],
+)
+def test_bad_values_name_table_and_key(table, key, value, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_config(_with(table, key, value), "m.toml")
+
+
+def test_missing_key_and_table_and_unknown_table():
+    data = {"machine": {k: v for k, v in GOOD["machine"].items() if k != "d_mat"}}
+    with pytest.raises(ConfigError, match=r"\[machine.d_mat\]: missing key"):
+        parse_config(data)
+    with pytest.raises(ConfigError, match=r"\[machine\]: missing table"):
+        parse_config({"yarn": {"diameter": 1.0}})
+    with pytest.raises(ConfigError, match=r"\[printer\]: unknown table"):
+        parse_config({**GOOD, "printer": {}})
+
+
+def test_load_config_reports_file_errors(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[machine\nrows = 2\n")
+    with pytest.raises(ConfigError, match=r"bad.toml: not valid TOML"):
+        load_config(bad)
+    good = tmp_path / "good.toml"
+    good.write_text(
+        "[machine]\nrows = 2\ncols = 2\npitch_x = 10\npitch_y = 10\nd_mat = 100\nc_mat = 0.5\n"
+        "[yarn]\ndiameter = 1\n"
+    )
+    assert load_config(good).machine.d_mat == 100.0
