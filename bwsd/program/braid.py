@@ -12,24 +12,34 @@ SHAPES = ("rect", "L", "T", "I")
 Block = tuple[int, int]  # (rows, cols) of a rectangular block of the section
 
 
-def twist(turns: int = 4, *, pitch: float = 10.0, d_mat: float = 100.0, c_mat: float = 0.5,
-          diameter: float = 1.0) -> Generated:
+def twist(
+    turns: int = 4,
+    *,
+    pitch: float = 10.0,
+    d_mat: float = 100.0,
+    c_mat: float = 0.5,
+    diameter: float = 1.0,
+) -> Generated:
     """Two yarns in a 2 x 2 matrix wound round each other, one turn per four moves."""
     if turns < 1:
         raise ValueError("turns must be at least 1")
     machine = Machine(2, 2, pitch, pitch, d_mat, c_mat, diameter)
-    command = " ".join(["bwsd program twist", render.option("turns", turns),
-                        *render.machine_options(machine)])
+    command = " ".join(
+        ["bwsd program twist", render.option("turns", turns), *render.machine_options(machine)]
+    )
     title = f"Two-yarn twist, {turns} turns"
     turn = ["ROW 0:+1 1:-1", "COL 1:+1 0:-1", "ROW 1:-1 0:+1", "COL 0:-1 1:+1"]
-    lines = [*render.header(title, command, machine),
-             *render.fill_block(2, 2, [(0, 0), (1, 1)]),
-             *render.repeat(turns, turn, "one turn: each yarn goes once round the square")]
+    lines = [
+        *render.header(title, command, machine),
+        *render.fill_block(2, 2, [(0, 0), (1, 1)]),
+        *render.repeat(turns, turn, "one turn: each yarn goes once round the square"),
+    ]
     return Generated("twist", title, command, machine, "\n".join(lines) + "\n")
 
 
-def section_cells(shape: str, rows: int = 2, cols: int = 2, flange: Block = (2, 6),
-                  web: Block = (4, 2)) -> tuple[frozenset[Cell], set[int], set[int]]:
+def section_cells(
+    shape: str, rows: int = 2, cols: int = 2, flange: Block = (2, 6), web: Block = (4, 2)
+) -> tuple[frozenset[Cell], set[int], set[int]]:
     """The body cells of a section (bounding box from (0, 0)) and its held rows and columns.
 
     rect: rows x cols. L: the web (a vertical leg) on top of the flange, both flush left.
@@ -45,15 +55,19 @@ def section_cells(shape: str, rows: int = 2, cols: int = 2, flange: Block = (2, 
     (fr, fc), (wr, wc) = flange, web
     if shape == "L":
         if fc - wc < 2 or wr < 2:
-            raise ValueError("an L section needs a flange at least 2 cells wider than its"
-                             " web and a web of at least 2 rows")
+            raise ValueError(
+                "an L section needs a flange at least 2 cells wider than its"
+                " web and a web of at least 2 rows"
+            )
         return _block(0, 0, wr, wc) | _block(wr, 0, fr, fc), {wr - 1}, {wc}
     if shape not in ("T", "I"):
         raise ValueError(f"unknown shape {shape!r} (known: {', '.join(SHAPES)})")
     min_web = 2 if shape == "T" else 3
     if fc - wc < 4 or wr < min_web:
-        raise ValueError(f"a {shape} section needs a flange at least 4 cells wider than its"
-                         f" web and a web of at least {min_web} rows")
+        raise ValueError(
+            f"a {shape} section needs a flange at least 4 cells wider than its"
+            f" web and a web of at least {min_web} rows"
+        )
     off = (fc - wc) // 2
     cells = _block(0, 0, fr, fc) | _block(fr, off, wr, wc)
     held_cols = {off - 1, off + wc}
@@ -95,16 +109,20 @@ def _ends(runs: list[tuple[int, int]]) -> list[int]:
     return [e for lo, hi in runs for e in (lo - 1, hi + 1)]
 
 
-def _conflicts(row_runs: dict[int, list[tuple[int, int]]],
-               col_runs: dict[int, list[tuple[int, int]]],
-               rows: set[int], cols: set[int]) -> set[Cell]:
+def _conflicts(
+    row_runs: dict[int, list[tuple[int, int]]],
+    col_runs: dict[int, list[tuple[int, int]]],
+    rows: set[int],
+    cols: set[int],
+) -> set[Cell]:
     """Cells where a shifted line's window ends on a shifted perpendicular line."""
     found = {(r, c) for r in rows for c in _ends(row_runs[r]) if c in cols}
     return found | {(r, c) for c in cols for r in _ends(col_runs[c]) if r in rows}
 
 
-def plan_braid(cells: frozenset[Cell], held_rows: set[int] | None = None,
-               held_cols: set[int] | None = None) -> BraidPlan:
+def plan_braid(
+    cells: frozenset[Cell], held_rows: set[int] | None = None, held_cols: set[int] | None = None
+) -> BraidPlan:
     """Place a section in a matrix with a one-cell margin and plan its 4-step braid.
 
     Every body line shifts except the held ones (given in the coordinates of ``cells``).
@@ -119,8 +137,10 @@ def plan_braid(cells: frozenset[Cell], held_rows: set[int] | None = None,
     cols = set(col_runs) - {c + 1 for c in held_cols or set()}
     clash = sorted(_conflicts(row_runs, col_runs, rows, cols))
     if clash:
-        raise ValueError(f"cannot plan: row {clash[0][0]} and column {clash[0][1]} both shift"
-                         " and one ends its run on the other")
+        raise ValueError(
+            f"cannot plan: row {clash[0][0]} and column {clash[0][1]} both shift"
+            " and one ends its run on the other"
+        )
     stuck = sorted(cell for cell in body if cell[0] not in rows and cell[1] not in cols)
     if stuck:
         raise ValueError(f"section too thin: the case in {stuck[0]} could never move")
@@ -149,10 +169,20 @@ def _cycle(plan: BraidPlan, takeup: float) -> list[str]:
     return [*body, f"TAKEUP {render.num(takeup)}"]
 
 
-def braid4(rows: int = 2, cols: int = 2, cycles: int = 10, *, shape: str = "rect",
-           flange: Block = (2, 6), web: Block = (4, 2), takeup: float = 3.0,
-           pitch: float = 10.0, d_mat: float = 150.0, c_mat: float = 0.4,
-           diameter: float = 1.5) -> Generated:
+def braid4(
+    rows: int = 2,
+    cols: int = 2,
+    cycles: int = 10,
+    *,
+    shape: str = "rect",
+    flange: Block = (2, 6),
+    web: Block = (4, 2),
+    takeup: float = 3.0,
+    pitch: float = 10.0,
+    d_mat: float = 150.0,
+    c_mat: float = 0.4,
+    diameter: float = 1.5,
+) -> Generated:
     """A 4-step braid of a rectangular (rows x cols) or L, T, I (flange, web) section."""
     if cycles < 1:
         raise ValueError("cycles must be at least 1")
@@ -164,17 +194,31 @@ def braid4(rows: int = 2, cols: int = 2, cycles: int = 10, *, shape: str = "rect
         what = [render.option("rows", rows), render.option("cols", cols)]
         title = f"4-step braid, {rows} x {cols} body"
     else:
-        what = [render.option("shape", shape), render.option("flange", _size(flange)),
-                render.option("web", _size(web))]
+        what = [
+            render.option("shape", shape),
+            render.option("flange", _size(flange)),
+            render.option("web", _size(web)),
+        ]
         title = f"4-step braid, {shape} section, flange {_size(flange)}, web {_size(web)}"
     title += f", {len(plan.carriers)} carriers, {cycles} cycles"
-    command = " ".join(["bwsd program braid4", *what, render.option("cycles", cycles),
-                        render.option("takeup", takeup), *render.machine_options(machine)])
+    command = " ".join(
+        [
+            "bwsd program braid4",
+            *what,
+            render.option("cycles", cycles),
+            render.option("takeup", takeup),
+            *render.machine_options(machine),
+        ]
+    )
     held = _held_note(plan)
-    lines = [*render.header(title, command, machine), *held,
-             *render.fill_block(plan.rows, plan.cols, plan.carriers),
-             *render.repeat(cycles, _cycle(plan, takeup), "rows, columns, rows back, "
-                            "columns back, take-up")]
+    lines = [
+        *render.header(title, command, machine),
+        *held,
+        *render.fill_block(plan.rows, plan.cols, plan.carriers),
+        *render.repeat(
+            cycles, _cycle(plan, takeup), "rows, columns, rows back, columns back, take-up"
+        ),
+    ]
     return Generated("braid4", title, command, machine, "\n".join(lines) + "\n")
 
 

@@ -34,8 +34,9 @@ def _common(parser: argparse.ArgumentParser, cycles: bool = True) -> None:
     parser.add_argument("--d-mat", type=float, help="matrix to fell distance, mm")
     parser.add_argument("--c-mat", type=float, help="convergence ratio, 0..1")
     parser.add_argument("--diameter", type=float, help="yarn diameter, mm")
-    parser.add_argument("--config-out", metavar="FILE",
-                        help="also write the matching machine config (TOML) to FILE")
+    parser.add_argument(
+        "--config-out", metavar="FILE", help="also write the matching machine config (TOML) to FILE"
+    )
 
 
 def _kinds(sub: Any) -> None:
@@ -56,10 +57,10 @@ def _kinds(sub: Any) -> None:
     _common(p)
     p = sub.add_parser("weave-3d", help="dual-direction 3D weave of a warp grid or U")
     p.add_argument("--layers", type=int, default=3, help="warp layers (3)")
-    p.add_argument("--warps", type=int, default=4, help="warps per layer (4)")
+    p.add_argument("--warps", type=int, default=5, help="warps per layer (5)")
     p.add_argument("--shape", choices=WEAVE_SHAPES, default="rect")
-    p.add_argument("--leg", type=int, default=1, help="U leg thickness, warps (1)")
-    p.add_argument("--base", type=int, default=1, help="U base thickness, layers (1)")
+    p.add_argument("--leg", type=int, default=2, help="U leg thickness, warps (2)")
+    p.add_argument("--base", type=int, default=2, help="U base thickness, layers (2)")
     p.add_argument("--takeup", type=float, default=5.0, help="take-up per pick, mm (5)")
     _common(p)
 
@@ -67,8 +68,10 @@ def _kinds(sub: Any) -> None:
 def configure(sub: Any) -> None:
     """Register `bwsd program` on the top-level subcommand action."""
     parser = sub.add_parser(
-        "program", help="print a generated .bws program",
-        description="Print a generated .bws program (twist, braids, weaves) on stdout.")
+        "program",
+        help="print a generated .bws program",
+        description="Print a generated .bws program (twist, braids, weaves) on stdout.",
+    )
     kinds = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
     _kinds(kinds)
     parser.set_defaults(handler=run)
@@ -85,12 +88,28 @@ def generate(args: argparse.Namespace) -> Generated:
     if args.kind == "twist":
         return twist(args.turns, **machine)
     if args.kind == "braid4":
-        return braid4(args.rows, args.cols, args.cycles, shape=args.shape, flange=args.flange,
-                      web=args.web, takeup=args.takeup, **machine)
+        return braid4(
+            args.rows,
+            args.cols,
+            args.cycles,
+            shape=args.shape,
+            flange=args.flange,
+            web=args.web,
+            takeup=args.takeup,
+            **machine,
+        )
     if args.kind == "weave-plain":
         return weave_plain(args.warps, args.cycles, takeup=args.takeup, **machine)
-    return weave_3d(args.layers, args.warps, args.cycles, shape=args.shape, leg=args.leg,
-                    base=args.base, takeup=args.takeup, **machine)
+    return weave_3d(
+        args.layers,
+        args.warps,
+        args.cycles,
+        shape=args.shape,
+        leg=args.leg,
+        base=args.base,
+        takeup=args.takeup,
+        **machine,
+    )
 
 
 def run(args: argparse.Namespace) -> int:

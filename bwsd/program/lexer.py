@@ -57,8 +57,9 @@ def integer(text: str, column: int, where: Where, what: str) -> int:
     return int(text)
 
 
-def key_values(tokens: list[Token], keys: tuple[str, ...], where: Where,
-               keyword: Token) -> dict[str, tuple[str, int]]:
+def key_values(
+    tokens: list[Token], keys: tuple[str, ...], where: Where, keyword: Token
+) -> dict[str, tuple[str, int]]:
     """Parse ``key=value`` tokens: every key of ``keys`` exactly once, nothing else.
 
     Returns key -> (value text, value column). Keys are case-insensitive.
@@ -79,8 +80,9 @@ def key_values(tokens: list[Token], keys: tuple[str, ...], where: Where,
         found[name] = (value, value_column)
     missing = [k for k in keys if k not in found]
     if missing:
-        raise where.error(f"{keyword.text} needs {', '.join(k + '=' for k in missing)}",
-                          keyword.column)
+        raise where.error(
+            f"{keyword.text} needs {', '.join(k + '=' for k in missing)}", keyword.column
+        )
     return found
 
 
@@ -90,8 +92,7 @@ def shift_entry(tok: Token, where: Where, axis: str) -> tuple[int, int, int]:
     if not sep:
         raise where.error(f"malformed entry {tok.text!r}: expected {axis}:shift", tok.column)
     if not _INDEX.fullmatch(index_text):
-        raise where.error(f"bad {axis} index {index_text!r}: expected an integer >= 0",
-                          tok.column)
+        raise where.error(f"bad {axis} index {index_text!r}: expected an integer >= 0", tok.column)
     shift_column = tok.column + len(index_text) + 1
     if not _SHIFT.fullmatch(shift_text):
         raise where.error(f"bad shift {shift_text!r}: expected a signed integer", shift_column)

@@ -80,12 +80,20 @@ class _Parser:
 
     def finish(self) -> _Repeat:
         if self.block is not None:
-            raise ProgramError("FILL block not closed (missing END)", line=self.block.line,
-                               column=self.block.column, source=self.source)
+            raise ProgramError(
+                "FILL block not closed (missing END)",
+                line=self.block.line,
+                column=self.block.column,
+                source=self.source,
+            )
         if len(self.stack) > 1:
             open_block = self.stack[-1]
-            raise ProgramError("REPEAT block not closed (missing END)", line=open_block.line,
-                               column=open_block.column, source=self.source)
+            raise ProgramError(
+                "REPEAT block not closed (missing END)",
+                line=open_block.line,
+                column=open_block.column,
+                source=self.source,
+            )
         return self.stack[0]
 
     # statements -------------------------------------------------------------------------
@@ -93,8 +101,9 @@ class _Parser:
     def _yarn(self, where: Where, keyword: Token, rest: list[Token]) -> None:
         self._before_instructions(where, keyword)
         if self.diameter_line:
-            raise where.error(f"YARN given twice (first at line {self.diameter_line})",
-                              keyword.column)
+            raise where.error(
+                f"YARN given twice (first at line {self.diameter_line})", keyword.column
+            )
         text, column = key_values(rest, ("diameter",), where, keyword)["diameter"]
         value = number(text, column, where, "diameter")
         if value < 0:
@@ -132,21 +141,22 @@ class _Parser:
             if char in FILL_CASE:
                 self._add_fill((row, block.col + offset), where, first + offset)
             elif char != FILL_EMPTY:
-                raise where.error(f"bad fill character {char!r} (expected '.' or 'X')",
-                                  first + offset)
+                raise where.error(
+                    f"bad fill character {char!r} (expected '.' or 'X')", first + offset
+                )
         block.rows += 1
 
     def _add_fill(self, cell: tuple[int, int], where: Where, column: int) -> None:
         if cell in self.fills:
-            raise where.error(f"cell {cell} already filled at line {self.fills[cell][0]}",
-                              column)
+            raise where.error(f"cell {cell} already filled at line {self.fills[cell][0]}", column)
         self.fills[cell] = (where.line, column)
 
     def _shift(self, where: Where, keyword: Token, rest: list[Token]) -> None:
         axis: Axis = "row" if keyword.text.upper() == "ROW" else "col"
         if not rest:
-            raise where.error(f"{keyword.text} needs at least one {axis}:shift entry",
-                              keyword.column)
+            raise where.error(
+                f"{keyword.text} needs at least one {axis}:shift entry", keyword.column
+            )
         moves: list[tuple[int, int]] = []
         columns: list[int] = []
         seen: set[int] = set()
@@ -194,8 +204,12 @@ class _Parser:
         _no_more(where, rest)
         block = self.stack.pop()
         if not block.body:
-            raise ProgramError("REPEAT block has no instructions", line=block.line,
-                               column=block.column, source=self.source)
+            raise ProgramError(
+                "REPEAT block has no instructions",
+                line=block.line,
+                column=block.column,
+                source=self.source,
+            )
 
     # helpers ----------------------------------------------------------------------------
 
@@ -206,8 +220,9 @@ class _Parser:
         if self.started:
             raise where.error(f"{name} must come before the first instruction", keyword.column)
 
-    def _add(self, instruction: Instruction, where: Where, keyword: Token,
-             entries: tuple[int, ...] = ()) -> None:
+    def _add(
+        self, instruction: Instruction, where: Where, keyword: Token, entries: tuple[int, ...] = ()
+    ) -> None:
         self.started = True
         self.stack[-1].body.append(_Statement(instruction, where.line, keyword.column, entries))
 
@@ -235,8 +250,12 @@ def _size(node: _Statement | _Repeat, source: str) -> int:
         return 1
     total = node.count * sum(_size(child, source) for child in node.body)
     if total > MAX_INSTRUCTIONS:
-        raise ProgramError(f"program expands to more than {MAX_INSTRUCTIONS} instructions",
-                           line=node.line, column=node.column, source=source)
+        raise ProgramError(
+            f"program expands to more than {MAX_INSTRUCTIONS} instructions",
+            line=node.line,
+            column=node.column,
+            source=source,
+        )
     return total
 
 
@@ -249,12 +268,18 @@ def _expand(body: list[_Statement | _Repeat], out: list[_Statement]) -> None:
                 _expand(node.body, out)
 
 
-def parse_program_with_positions(text: str, source: str = "<program>",
-                                 ) -> tuple[Program, SourceMap]:
+def parse_program_with_positions(
+    text: str,
+    source: str = "<program>",
+) -> tuple[Program, SourceMap]:
     """Parse a .bws program; also return where each instruction and filled cell was written."""
     parser = _Parser(source)
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        parser.feed(lineno, line)
+    # Only "\n" ends a line (with an optional "\r" before it), as in every editor.
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()  # the text's final newline does not start another line
+    for lineno, line in enumerate(lines, start=1):
+        parser.feed(lineno, line.removesuffix("\r"))
     root = parser.finish()
     _size(root, source)
     flat: list[_Statement] = []

@@ -25,7 +25,9 @@ class Generated:
 
     def config_toml(self) -> str:
         """The machine config (TOML) that goes with the program, every key commented."""
-        return config_toml(self.machine, f"{self.title}\nprogram: {self.command}")
+        return config_toml(
+            self.machine, f"{self.title}\nwritten by: {self.command} --config-out FILE"
+        )
 
 
 def num(value: float) -> str:
@@ -89,8 +91,7 @@ def shift(axis: str, moves: Iterable[tuple[int, int]]) -> str:
 
 def weft(x: float, y: float, z: float, angle: float, length: float) -> str:
     """A WEFT statement."""
-    return (f"WEFT x={num(x)} y={num(y)} z={num(z)} angle={num(angle)}"
-            f" length={num(length)}")
+    return f"WEFT x={num(x)} y={num(y)} z={num(z)} angle={num(angle)} length={num(length)}"
 
 
 def repeat(count: int, body: list[str], comment: str = "") -> list[str]:

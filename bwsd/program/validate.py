@@ -1,4 +1,4 @@
-"""Dry run of a program on the occupancy grid alone: refuses impossible moves before anything moves."""
+"""Dry run of a program on the occupancy grid alone: impossible moves are refused up front."""
 
 from __future__ import annotations
 
@@ -63,8 +63,14 @@ class Occupancy:
         return None
 
 
-def _fail(message: str, program: Program, positions: SourceMap | None, source: str,
-          index: int, entry: int | None) -> ProgramError:
+def _fail(
+    message: str,
+    program: Program,
+    positions: SourceMap | None,
+    source: str,
+    index: int,
+    entry: int | None,
+) -> ProgramError:
     """A ProgramError for instruction ``index`` (0-based), at its entry ``entry`` if known."""
     line = program.lines[index] if index < len(program.lines) else 0
     column = 0
@@ -72,12 +78,14 @@ def _fail(message: str, program: Program, positions: SourceMap | None, source: s
         column = positions.keywords[index]
         if entry is not None and entry < len(positions.entries[index]):
             column = positions.entries[index][entry]
-    return ProgramError(f"instruction {index + 1}: {message}", line=line, column=column,
-                        source=source)
+    return ProgramError(
+        f"instruction {index + 1}: {message}", line=line, column=column, source=source
+    )
 
 
-def _check_fill(program: Program, grid: Occupancy, positions: SourceMap | None,
-                source: str) -> None:
+def _check_fill(
+    program: Program, grid: Occupancy, positions: SourceMap | None, source: str
+) -> None:
     for i, cell in enumerate(program.fill):
         reason = grid.fill(cell)
         if reason is not None:
@@ -97,8 +105,12 @@ def _check_shift(shift: Shift, grid: Occupancy) -> tuple[int, str] | None:
     return None
 
 
-def validate(program: Program, machine: Machine, source: str = "<program>",
-             positions: SourceMap | None = None) -> None:
+def validate(
+    program: Program,
+    machine: Machine,
+    source: str = "<program>",
+    positions: SourceMap | None = None,
+) -> None:
     """Refuse a program whose fill or moves are impossible on ``machine``.
 
     Runs the fill and every ROW/COL on the occupancy grid only (no geometry). Errors name

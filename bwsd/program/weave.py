@@ -45,19 +45,31 @@ def _check_shed(machine: Machine, takeup: float, z: float, span: float) -> None:
     if clearance <= need:
         raise ValueError(
             f"the shed would not clear the weft (predicted {clearance:.2f} mm, need more"
-            f" than {need:.2f} mm): raise the take-up or the pitch")
+            f" than {need:.2f} mm): raise the take-up or the pitch"
+        )
 
 
 def _pick(axis: str, moves: list[tuple[int, int]], wefts: list[str], takeup: float) -> list[str]:
     """Open a shed, insert its wefts, close the shed, take up."""
     closing = [(i, -k) for i, k in moves]
-    return [render.shift(axis, moves), *wefts, render.shift(axis, closing),
-            f"TAKEUP {render.num(takeup)}"]
+    return [
+        render.shift(axis, moves),
+        *wefts,
+        render.shift(axis, closing),
+        f"TAKEUP {render.num(takeup)}",
+    ]
 
 
-def weave_plain(warps: int = 10, cycles: int = 10, *, takeup: float = 4.0,
-                pitch: float = 10.0, d_mat: float = 100.0, c_mat: float = 0.5,
-                diameter: float = 1.0) -> Generated:
+def weave_plain(
+    warps: int = 10,
+    cycles: int = 10,
+    *,
+    takeup: float = 4.0,
+    pitch: float = 10.0,
+    d_mat: float = 100.0,
+    c_mat: float = 0.5,
+    diameter: float = 1.0,
+) -> Generated:
     """Plain weave: one layer of warps in row 1 of a 3-row matrix, two picks per cycle."""
     if warps < 2 or cycles < 1:
         raise ValueError("a plain weave needs at least 2 warps and 1 cycle")
@@ -69,32 +81,47 @@ def weave_plain(warps: int = 10, cycles: int = 10, *, takeup: float = 4.0,
     for sign in (1, -1):
         moves = [(c, sign if c % 2 == 0 else -sign) for c in range(warps)]
         body += _pick("col", moves, [line], takeup)
-    command = " ".join(["bwsd program weave-plain", render.option("warps", warps),
-                        render.option("cycles", cycles), render.option("takeup", takeup),
-                        *render.machine_options(machine)])
+    command = " ".join(
+        [
+            "bwsd program weave-plain",
+            render.option("warps", warps),
+            render.option("cycles", cycles),
+            render.option("takeup", takeup),
+            *render.machine_options(machine),
+        ]
+    )
     title = f"Plain weave, {warps} warps, {cycles} cycles of two picks"
-    lines = [*render.header(title, command, machine),
-             *render.fill_block(3, warps, [(1, c) for c in range(warps)]),
-             *render.repeat(cycles, body, "even columns up, weft, close; then down")]
+    lines = [
+        *render.header(title, command, machine),
+        *render.fill_block(3, warps, [(1, c) for c in range(warps)]),
+        *render.repeat(cycles, body, "even columns up, weft, close; then down"),
+    ]
     return Generated("weave-plain", title, command, machine, "\n".join(lines) + "\n")
 
 
-def warp_cells(shape: str, layers: int, warps: int, leg: int = 1, base: int = 1,
-               ) -> frozenset[Cell]:
+def warp_cells(
+    shape: str,
+    layers: int,
+    warps: int,
+    leg: int = 2,
+    base: int = 2,
+) -> frozenset[Cell]:
     """The warp grid (layer, warp) of a 3D weave: a full rectangle or a U.
 
     The U's legs are the ``leg`` outermost warp columns on each side over every layer, its
     base the ``base`` last layers over every column; the opening is between the legs.
     """
-    if layers < 1 or warps < 1:
-        raise ValueError("layers and warps must be at least 1")
+    # Every weft must pass at least two warps, so that one of them crosses it whichever
+    # way the shed opened (a lone warp may close without touching its weft).
+    if layers < 2 or warps < 2:
+        raise ValueError("layers and warps must be at least 2")
     full = frozenset((i, j) for i in range(layers) for j in range(warps))
     if shape == "rect":
         return full
     if shape != "U":
         raise ValueError(f"unknown shape {shape!r} (known: {', '.join(SHAPES)})")
-    if leg < 1 or base < 1 or 2 * leg >= warps or base >= layers:
-        raise ValueError("a U needs 1 <= leg < warps / 2 and 1 <= base < layers")
+    if leg < 2 or base < 2 or 2 * leg >= warps or base >= layers:
+        raise ValueError("a U needs 2 <= leg < warps / 2 and 2 <= base < layers")
     return frozenset((i, j) for i, j in full if j < leg or j >= warps - leg or i >= layers - base)
 
 
@@ -127,9 +154,20 @@ def _cycle_3d(grid: frozenset[Cell], z: float, pitch: float, takeup: float) -> l
     return body
 
 
-def weave_3d(layers: int = 3, warps: int = 4, cycles: int = 10, *, shape: str = "rect",
-             leg: int = 1, base: int = 1, takeup: float = 5.0, pitch: float = 10.0,
-             d_mat: float = 100.0, c_mat: float = 0.6, diameter: float = 1.0) -> Generated:
+def weave_3d(
+    layers: int = 3,
+    warps: int = 5,
+    cycles: int = 10,
+    *,
+    shape: str = "rect",
+    leg: int = 2,
+    base: int = 2,
+    takeup: float = 5.0,
+    pitch: float = 10.0,
+    d_mat: float = 100.0,
+    c_mat: float = 0.6,
+    diameter: float = 1.0,
+) -> Generated:
     """Dual-direction shedding of a layers x warps grid (or U) of warps, four picks a cycle.
 
     Warp (i, j) sits in cell (2i + 1, 2j + 1), so that every grid line has an empty line
@@ -144,15 +182,32 @@ def weave_3d(layers: int = 3, warps: int = 4, cycles: int = 10, *, shape: str = 
     _check_shed(machine, takeup, z, (max(layers, warps) - 1) * pitch)
     what = [render.option("layers", layers), render.option("warps", warps)]
     if shape == "U":
-        what += [render.option("shape", "U"), render.option("leg", leg),
-                 render.option("base", base)]
-    command = " ".join(["bwsd program weave-3d", *what, render.option("cycles", cycles),
-                        render.option("takeup", takeup), *render.machine_options(machine)])
-    title = (f"Dual-direction 3D weave, {'U section of ' if shape == 'U' else ''}"
-             f"{layers} layers x {warps} warps ({len(grid)} warps), {cycles} cycles")
+        what += [
+            render.option("shape", "U"),
+            render.option("leg", leg),
+            render.option("base", base),
+        ]
+    command = " ".join(
+        [
+            "bwsd program weave-3d",
+            *what,
+            render.option("cycles", cycles),
+            render.option("takeup", takeup),
+            *render.machine_options(machine),
+        ]
+    )
+    title = (
+        f"Dual-direction 3D weave, {'U section of ' if shape == 'U' else ''}"
+        f"{layers} layers x {warps} warps ({len(grid)} warps), {cycles} cycles"
+    )
     cells = [(2 * i + 1, 2 * j + 1) for i, j in grid]
-    lines = [*render.header(title, command, machine),
-             *render.fill_block(machine.rows, machine.cols, cells),
-             *render.repeat(cycles, _cycle_3d(grid, z, pitch, takeup),
-                            "column shed + wefts along x, row shed + wefts along y, twice")]
+    lines = [
+        *render.header(title, command, machine),
+        *render.fill_block(machine.rows, machine.cols, cells),
+        *render.repeat(
+            cycles,
+            _cycle_3d(grid, z, pitch, takeup),
+            "column shed + wefts along x, row shed + wefts along y, twice",
+        ),
+    ]
     return Generated("weave-3d", title, command, machine, "\n".join(lines) + "\n")
