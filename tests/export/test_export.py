@@ -6,6 +6,7 @@ import json
 
 import meshio
 import pytest
+from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from bwsd.errors import BwsdError
 from bwsd.export import FORMATS, ExportError, export
@@ -27,8 +28,18 @@ def test_vtu(small, tmp_path):
     assert len(meshio.read(tmp_path / "s.vtu").points) == 13
 
 
+def test_vtp(small, tmp_path):
+    export(small, tmp_path / "s.VTP")
+    reader = vtkXMLPolyDataReader()
+    reader.SetFileName(str(tmp_path / "s.VTP"))
+    reader.Update()
+    poly = reader.GetOutput()
+    # one polyline per yarn and one line per contact, not one cell per segment
+    assert (poly.GetNumberOfPoints(), poly.GetNumberOfLines()) == (13, 4 + 2)
+
+
 def test_formats_listed():
-    assert set(FORMATS) == {".json", ".tg3", ".vtu"}
+    assert set(FORMATS) == {".json", ".tg3", ".vtp", ".vtu"}
 
 
 @pytest.mark.parametrize("name", ["s.obj", "s", "s.vtk"])
@@ -36,10 +47,5 @@ def test_unknown_suffix(small, tmp_path, name):
     with pytest.raises(ExportError, match="unknown export format") as info:
         export(small, tmp_path / name)
     assert isinstance(info.value, BwsdError)
-    assert ".json" in str(info.value) and ".vtu" in str(info.value)
+    assert all(suffix in str(info.value) for suffix in (".json", ".tg3", ".vtp", ".vtu"))
     assert list(tmp_path.iterdir()) == []
-
-
-def test_vtp_points_to_vtu(small, tmp_path):
-    with pytest.raises(ExportError, match=r"use \.vtu"):
-        export(small, tmp_path / "s.vtp")

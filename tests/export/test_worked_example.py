@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import meshio
 import pytest
+from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from bwsd.export import export
 from bwsd.export.metrics import metrics
@@ -36,7 +37,7 @@ def worked_example() -> SkeletonData:
 def test_all_exports_of_the_worked_example(tmp_path):
     sk = worked_example()
     assert (len(sk.yarns), len(sk.contacts), sk.node_count) == (2, 15, 34)
-    for suffix in (".json", ".tg3", ".vtu"):
+    for suffix in (".json", ".tg3", ".vtp", ".vtu"):
         export(sk, tmp_path / f"example{suffix}")
     back = read_skeleton_json(tmp_path / "example.json")
     assert back.contacts == sk.contacts
@@ -45,6 +46,11 @@ def test_all_exports_of_the_worked_example(tmp_path):
     assert all(abs(a - y.nodes).max() < 1e-9 for a, y in zip(tg3, sk.yarns, strict=True))
     mesh = meshio.read(tmp_path / "example.vtu")
     assert len(mesh.cells[0].data) == (34 - 2) + 15
+    reader = vtkXMLPolyDataReader()
+    reader.SetFileName(str(tmp_path / "example.vtp"))
+    reader.Update()
+    poly = reader.GetOutput()
+    assert (poly.GetNumberOfPoints(), poly.GetNumberOfLines()) == (34, 2 + 15)
 
 
 def test_metrics_and_slice_of_the_worked_example(tmp_path):
