@@ -6,6 +6,7 @@ import math
 
 from bwsd.errors import MoveError, ShedClosedError
 from bwsd.twin.instructions import Instruction, Shift, TakeUp, Weft
+from bwsd.twin.batch import Batch
 from bwsd.twin.predicates import Vec
 from bwsd.twin.state import State
 from bwsd.twin.sweep import sweep
@@ -21,44 +22,48 @@ def execute(state: State, instruction: Instruction, index: int) -> list[int]:
     return []
 
 
-def line_cases(state: State, axis: str, line: int, k: int) -> list[tuple[int, int]]:
-    """(warp, index along the line) of the cases of one line, leading case first."""
+def _plan_shift(state: State, instruction: Shift, index: int) -> list[tuple[int, tuple[int, int]]]:
+    """Every case's move (warp, target cell) in execution order; refused before anything moves."""
     m = state.machine
-    occ = state.occupancy
-    if axis == "row":
-        cases = [(occ[line][i], i) for i in range(m.cols) if occ[line][i] >= 0]
-    else:
-        cases = [(occ[i][line], i) for i in range(m.rows) if occ[i][line] >= 0]
-    cases.sort(key=lambda case: case[1], reverse=k > 0)
-    return cases
+    limit = m.rows if instruction.axis == "row" else m.cols
+    occ = [row[:] for row in state.occupancy]
+    plan = []
+    for line, k in instruction.moves:
+        if not 0 <= line < limit:
+            raise MoveError(f"{instruction.axis.upper()} {line} is outside the matrix",
+                            instruction=index)
+        if instruction.axis == "row":
+            cases = [(occ[line][i], (line, i)) for i in range(m.cols) if occ[line][i] >= 0]
+        else:
+            cases = [(occ[i][line], (i, line)) for i in range(m.rows) if occ[i][line] >= 0]
+        cases.sort(key=lambda case: case[1], reverse=k > 0)
+        for warp, (row, col) in cases:
+            target = (row, col + k) if instruction.axis == "row" else (row + k, col)
+            _check_target(state, occ, warp, target, index)
+            occ[row][col], occ[target[0]][target[1]] = -1, warp
+            plan.append((warp, target))
+    return plan
 
 
 def _shift(state: State, instruction: Shift, index: int) -> list[int]:
     m = state.machine
     z = m.d_mat + state.takeup
-    moved: list[int] = []
-    for line, k in instruction.moves:
-        limit = m.rows if instruction.axis == "row" else m.cols
-        if not 0 <= line < limit:
-            raise MoveError(
-                f"{instruction.axis.upper()} {line} is outside the matrix", instruction=index
-            )
-        for warp, at in line_cases(state, instruction.axis, line, k):
-            row, col = (line, at + k) if instruction.axis == "row" else (at + k, line)
-            _check_target(state, warp, row, col, index)
-            state.place(warp, (row, col))
-            gx, gy = m.guide_xy(row, col)
-            sweep(state, warp, (gx, gy, z), index)
-            moved.append(warp)
-    return moved
+    plan = _plan_shift(state, instruction, index)
+    targets = [(w, (*m.guide_xy(*cell), z)) for w, cell in plan]
+    batch = Batch.plan(state, targets)
+    for case, ((warp, cell), (_, a2)) in enumerate(zip(plan, targets, strict=True)):
+        state.place(warp, cell)
+        sweep(state, warp, a2, index, batch, case)
+    return [w for w, _ in plan]
 
 
-def _check_target(state: State, warp: int, row: int, col: int, index: int) -> None:
+def _check_target(state: State, occ: list[list[int]], warp: int, cell: tuple[int, int],
+                  index: int) -> None:
+    row, col = cell
     if not state.machine.inside(row, col):
-        raise MoveError(
-            f"case of yarn {warp} would leave the matrix at cell ({row}, {col})", instruction=index
-        )
-    other = state.occupancy[row][col]
+        raise MoveError(f"case of yarn {warp} would leave the matrix at cell ({row}, {col})",
+                        instruction=index)
+    other = occ[row][col]
     if other >= 0:
         raise MoveError(
             f"case of yarn {warp} would land on cell ({row}, {col}), occupied by yarn {other}",
@@ -69,9 +74,13 @@ def _check_target(state: State, warp: int, row: int, col: int, index: int) -> No
 def _takeup(state: State, instruction: TakeUp, index: int) -> list[int]:
     p = instruction.length
     state.set_takeup(state.takeup + p)
+    targets = []
     for warp in range(state.n_warps):
         x, y, z = state.xyz(state.free_node[warp])
-        sweep(state, warp, (x + 0.0, y + 0.0, z + p), index)
+        targets.append((warp, (x + 0.0, y + 0.0, z + p)))
+    batch = Batch.plan(state, targets)
+    for case, (warp, a2) in enumerate(targets):
+        sweep(state, warp, a2, index, batch, case)
     return list(range(state.n_warps))
 
 

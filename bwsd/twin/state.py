@@ -243,7 +243,7 @@ class State:
             self.seg_alive.data[op[1]] = True
 
     # ----- broad phase -----
-    def _refresh_active(self, floor: float, ids: IntArray | None = None) -> None:
+    def refresh_active(self, floor: float, ids: IntArray | None = None) -> None:
         """Rebuild the active set from ``ids`` (all segments when None) above ``floor``.
 
         The set is sorted by the segments' top z, so a query scans only those reaching
@@ -276,15 +276,15 @@ class State:
         del pos  # release the buffer: the array may grow again
         floor = apex - self.margin
         if floor < self.floor:
-            self._refresh_active(floor)
+            self.refresh_active(floor)
         else:
             recent = np.arange(self.active_from, n)
-            self._refresh_active(floor, np.concatenate((self.active, recent)))
+            self.refresh_active(floor, np.concatenate((self.active, recent)))
 
     def fixed_near(self, lo: Vec, hi: Vec) -> IntArray:
         """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
         if lo[2] < self.floor:
-            self._refresh_active(lo[2] - self.margin)
+            self.refresh_active(lo[2] - self.margin)
         start = int(np.searchsorted(self.active_top, lo[2]))
         above_lo, above_hi = self.active_lo[start:], self.active_hi[start:]
         keep = (above_hi >= lo).all(axis=1) & (above_lo <= hi).all(axis=1)

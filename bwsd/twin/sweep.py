@@ -26,6 +26,7 @@ from bwsd.twin.predicates import (
     exact_orient,
     orient,
 )
+from bwsd.twin.batch import Batch
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
@@ -134,25 +135,20 @@ def _plausible(
 
 
 SCALAR_LIMIT = 24  # up to this many candidates, scalar side tests beat numpy's call overhead
+Crossing = tuple[int, float, float, int, int]  # index, oc, od, sc, sd
 
 
-Crossing = tuple[int, float, float, int, int]
-
-
-def _sides(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
-    """(index, oc, od, sc, sd) of the segments crossing the plane, not on the guide path.
-
-    Scalar for a few segments, vectorised (with a box filter on the crossing point) for many;
-    both take the same exact decisions on the same float values.
-    """
+def _sides_scalar(plane: Plane, rows: list[tuple[Vec, Vec]]) -> list[Crossing]:
     out = []
-    if len(segs) <= SCALAR_LIMIT:
-        for i, row in enumerate(segs.tolist()):
-            oc, sc, c_on = plane.side((row[0], row[1], row[2]))
-            od, sd, d_on = plane.side((row[3], row[4], row[5]))
-            if (sc >= 0) != (sd >= 0) and not (sc == 0 and c_on) and not (sd == 0 and d_on):
-                out.append((i, oc, od, sc, sd))
-        return out
+    for i, (c, d) in enumerate(rows):
+        oc, sc, c_on = plane.side(c)
+        od, sd, d_on = plane.side(d)
+        if (sc >= 0) != (sd >= 0) and not (sc == 0 and c_on) and not (sd == 0 and d_on):
+            out.append((i, oc, od, sc, sd))
+    return out
+
+
+def _sides_vector(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
     det, sign, on_line, err = plane.sides(segs.reshape(-1, 3))
     s_c, s_d = sign[0::2], sign[1::2]
     cross = (s_c >= 0) != (s_d >= 0)
@@ -166,22 +162,44 @@ def _sides(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
     ]
 
 
-def first_contact(
-    state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...], skip_warp: int
-) -> Hit | None:
-    """The contact with the smallest sweep time of triangle (b, a1, a2), or None."""
+def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
+                  skip_warp: int, batch: Batch | None = None, case: int = -1) -> Hit | None:
+    """The contact with the smallest sweep time of triangle (b, a1, a2), or None.
+
+    Candidates come from ``batch`` when the instruction has one, else from the state's
+    broad phase. Scalar side tests for a few, vectorised for many: both take the same
+    exact decisions on the same float values.
+    """
     lo = (min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2]))
     hi = (max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2]))
-    segs, yarns, refs = _candidates(state, w, lo, hi, skip, skip_warp)
-    if len(segs) == 0:
+    if batch is not None:
+        lx, ly, lz = lo
+        hx, hy, hz = hi
+        found = [
+            c for c in batch.candidates(case, w, skip, skip_warp)
+            if c[4][0] <= hx and c[4][3] >= lx and c[4][1] <= hy and c[4][4] >= ly
+            and c[4][2] <= hz and c[4][5] >= lz
+        ]
+        yarns = [c[0] for c in found]
+        refs = [c[1] for c in found]
+        rows = [(c[2], c[3]) for c in found]
+    else:
+        segs, yarn_ids, ref_ids = _candidates(state, w, lo, hi, skip, skip_warp)
+        yarns, refs = yarn_ids.tolist(), ref_ids.tolist()
+        rows = [((r[0], r[1], r[2]), (r[3], r[4], r[5])) for r in segs.tolist()]
+    if not rows:
         return None
+    plane = Plane(b, a1, a2)
+    if len(rows) <= SCALAR_LIMIT:
+        crossings = _sides_scalar(plane, rows)
+    else:
+        crossings = _sides_vector(plane, np.array([c + d for c, d in rows]), lo, hi)
     hits = []
-    for i, oc, od, sc, sd in _sides(Plane(b, a1, a2), segs, lo, hi):
-        row = segs[i].tolist()
-        c, d = (row[0], row[1], row[2]), (row[3], row[4], row[5])
+    for i, oc, od, sc, sd in crossings:
+        c, d = rows[i]
         hit = _edges(b, a1, a2, c, d, oc, od, sc, sd)
         if hit is not None:
-            hit.yarn, hit.seg = int(yarns[i]), int(refs[i])
+            hit.yarn, hit.seg = yarns[i], refs[i]
             hits.append(hit)
     if not hits:
         return None
@@ -222,7 +240,7 @@ def index_from_end(nodes: Any, node: int) -> int:
     raise ValueError(node)
 
 
-def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
+def split_hit(state: State, hit: Hit, batch: Batch | None) -> tuple[int, tuple[int, ...], int]:
     """Insert Y into the hit yarn; returns Y and what this sweep skips next (segments, warp)."""
     y = state.new_node(hit.point)
     nodes = state.yarns[hit.yarn]
@@ -232,6 +250,8 @@ def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
         b = state.last_fixed[warp]
         state.insert_node(hit.yarn, len(nodes) - 1, y)
         seg = state.add_segment(hit.yarn, b, y)
+        if batch is not None:
+            batch.gain(hit.yarn, seg)
         state.set_last_fixed(warp, y)
         state.add_length(hit.yarn, grow)
         return y, (seg,), warp
@@ -240,6 +260,8 @@ def split_hit(state: State, hit: Hit) -> tuple[int, tuple[int, ...], int]:
     state.kill_segment(hit.seg)
     first = state.add_segment(hit.yarn, c, y)
     second = state.add_segment(hit.yarn, y, d)
+    if batch is not None:
+        batch.split(hit.seg, (first, second))
     state.add_length(hit.yarn, grow + math.dist(hit.point, hit.d) - math.dist(hit.c, hit.d))
     return y, (first, second), -1
 
@@ -262,7 +284,8 @@ def rest_point(hit: Hit, a1: Vec, a2: Vec, diameter: float) -> Vec:
     return px - k * nx, py - k * ny, pz - k * nz
 
 
-def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
+def sweep(state: State, w: int, a2: Vec, instruction: int, batch: Batch | None = None,
+          case: int = -1) -> None:
     """Move warp w's free node to a2, inserting a node pair at every contact on the way."""
     a1 = state.xyz(state.free_node[w])
     skip: tuple[int, ...] = ()
@@ -270,14 +293,16 @@ def sweep(state: State, w: int, a2: Vec, instruction: int) -> None:
     for _ in range(MAX_CONTACTS_PER_SWEEP):
         apex = state.last_fixed[w]
         b = state.xyz(apex)
-        hit = first_contact(state, w, b, a1, a2, skip, skip_warp)
+        hit = first_contact(state, w, b, a1, a2, skip, skip_warp, batch, case)
         if hit is None:
             state.move_free(w, a2)
             return
-        y, skip, skip_warp = split_hit(state, hit)
+        y, skip, skip_warp = split_hit(state, hit, batch)
         x = state.new_node(rest_point(hit, a1, a2, state.diameter))
         state.insert_node(w, len(state.yarns[w]) - 1, x)
-        state.add_segment(w, apex, x)
+        seg = state.add_segment(w, apex, x)
+        if batch is not None:
+            batch.gain(w, seg)
         state.set_last_fixed(w, x)
         state.add_length(w, math.dist(b, state.xyz(x)))
         state.add_contact((instruction, w, x, hit.yarn, y))
