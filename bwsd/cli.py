@@ -13,15 +13,15 @@ from bwsd.errors import BwsdError
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
     from bwsd import run
-    from bwsd.export import cli as export_cli
-    from bwsd.program import cli as program_cli
+    from bwsd.export.cli import configure as configure_export
+    from bwsd.program.cli import configure as configure_program
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
     parser.add_argument("--version", action="version", version=f"bwsd {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run.configure(sub)
-    program_cli.configure(sub)
-    export_cli.configure(sub)
+    configure_program(sub)
+    configure_export(sub)
     return parser
 
 

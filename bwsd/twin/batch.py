@@ -17,7 +17,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from bwsd.twin.predicates import Vec
+from bwsd.twin.predicates import FloatArray, IntArray, Vec
 from bwsd.twin.state import State
 
 DENSE_LIMIT = 400_000  # case x segment pairs tested at once; above it, per-sweep queries
@@ -64,7 +64,8 @@ class Batch:
         lo, hi = np.minimum(xyz[:, :3], xyz[:, 3:]), np.maximum(xyz[:, :3], xyz[:, 3:])
         table = np.concatenate((xyz, lo, hi), axis=1).tolist()
         for s, yarn, r in zip(order.tolist(), st.seg_yarn.data[order].tolist(), table, strict=True):
-            self.rows[s] = (yarn, (r[0], r[1], r[2]), (r[3], r[4], r[5]), tuple(r[6:]))  # type: ignore[assignment]
+            box = (r[6], r[7], r[8], r[9], r[10], r[11])
+            self.rows[s] = (yarn, (r[0], r[1], r[2]), (r[3], r[4], r[5]), box)
 
     def _row(self, s: int) -> Row:
         row = self.rows.get(s)
@@ -83,7 +84,9 @@ class Batch:
         self.gained[yarn].append(seg)
 
     # ----- asked by the sweep -----
-    def candidates(self, case: int, w: int, skip: tuple[int, ...], skip_warp: int) -> list[Candidate]:
+    def candidates(
+        self, case: int, w: int, skip: tuple[int, ...], skip_warp: int
+    ) -> list[Candidate]:
         """Every segment case ``case`` (warp ``w``) may hit now, but its own and skipped ones."""
         st = self.state
         out: list[Candidate] = []
@@ -93,8 +96,14 @@ class Batch:
             if j != w:
                 if j != skip_warp:
                     c, d = st.xyz(st.last_fixed[j]), st.xyz(st.free_node[j])
-                    box = (min(c[0], d[0]), min(c[1], d[1]), min(c[2], d[2]),
-                           max(c[0], d[0]), max(c[1], d[1]), max(c[2], d[2]))
+                    box = (
+                        min(c[0], d[0]),
+                        min(c[1], d[1]),
+                        min(c[2], d[2]),
+                        max(c[0], d[0]),
+                        max(c[1], d[1]),
+                        max(c[2], d[2]),
+                    )
                     out.append((j, -j - 1, c, d, box))
                 for s in self.gained.get(j, ()):
                     self._add_fixed(s, w, skip, out)
@@ -111,7 +120,7 @@ class Batch:
             out.append((yarn, s, c, d, box))
 
 
-def _fixed_lists(state: State, lo: np.ndarray, hi: np.ndarray) -> list[list[int]]:  # type: ignore[type-arg]
+def _fixed_lists(state: State, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
     """Per case, the live fixed segments whose box meets the case's box."""
     floor = float(lo[:, 2].min())
     if floor < state.floor:
@@ -131,8 +140,7 @@ def _fixed_lists(state: State, lo: np.ndarray, hi: np.ndarray) -> list[list[int]
     return [ids[row].tolist() for row in meet]
 
 
-def _warp_lists(state: State, movers: np.ndarray, lo: np.ndarray,  # type: ignore[type-arg]
-                hi: np.ndarray) -> list[list[int]]:  # type: ignore[type-arg]
+def _warp_lists(state: State, movers: IntArray, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
     """Per case, the warps whose free segment (or, for a mover, swept region) meets its box."""
     seg = state.free_seg.data[: state.n_warps]
     w_lo, w_hi = np.minimum(seg[:, :3], seg[:, 3:]), np.maximum(seg[:, :3], seg[:, 3:])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 
 from bwsd.errors import MoveError, ShedClosedError
-from bwsd.twin.instructions import Instruction, Shift, TakeUp, Weft
 from bwsd.twin.batch import Batch
+from bwsd.twin.instructions import Instruction, Shift, TakeUp, Weft
 from bwsd.twin.predicates import Vec
 from bwsd.twin.state import State
 from bwsd.twin.sweep import sweep
@@ -30,8 +30,9 @@ def _plan_shift(state: State, instruction: Shift, index: int) -> list[tuple[int,
     plan = []
     for line, k in instruction.moves:
         if not 0 <= line < limit:
-            raise MoveError(f"{instruction.axis.upper()} {line} is outside the matrix",
-                            instruction=index)
+            raise MoveError(
+                f"{instruction.axis.upper()} {line} is outside the matrix", instruction=index
+            )
         if instruction.axis == "row":
             cases = [(occ[line][i], (line, i)) for i in range(m.cols) if occ[line][i] >= 0]
         else:
@@ -57,12 +58,14 @@ def _shift(state: State, instruction: Shift, index: int) -> list[int]:
     return [w for w, _ in plan]
 
 
-def _check_target(state: State, occ: list[list[int]], warp: int, cell: tuple[int, int],
-                  index: int) -> None:
+def _check_target(
+    state: State, occ: list[list[int]], warp: int, cell: tuple[int, int], index: int
+) -> None:
     row, col = cell
     if not state.machine.inside(row, col):
-        raise MoveError(f"case of yarn {warp} would leave the matrix at cell ({row}, {col})",
-                        instruction=index)
+        raise MoveError(
+            f"case of yarn {warp} would leave the matrix at cell ({row}, {col})", instruction=index
+        )
     other = occ[row][col]
     if other >= 0:
         raise MoveError(

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from bwsd.errors import TwinError
+from bwsd.twin.batch import Batch
 from bwsd.twin.predicates import (
     BoolArray,
     FloatArray,
@@ -26,7 +27,6 @@ from bwsd.twin.predicates import (
     exact_orient,
     orient,
 )
-from bwsd.twin.batch import Batch
 from bwsd.twin.state import State
 
 MAX_CONTACTS_PER_SWEEP = 100_000
@@ -162,8 +162,17 @@ def _sides_vector(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Cros
     ]
 
 
-def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[int, ...],
-                  skip_warp: int, batch: Batch | None = None, case: int = -1) -> Hit | None:
+def first_contact(
+    state: State,
+    w: int,
+    b: Vec,
+    a1: Vec,
+    a2: Vec,
+    skip: tuple[int, ...],
+    skip_warp: int,
+    batch: Batch | None = None,
+    case: int = -1,
+) -> Hit | None:
     """The contact with the smallest sweep time of triangle (b, a1, a2), or None.
 
     Candidates come from ``batch`` when the instruction has one, else from the state's
@@ -176,9 +185,14 @@ def first_contact(state: State, w: int, b: Vec, a1: Vec, a2: Vec, skip: tuple[in
         lx, ly, lz = lo
         hx, hy, hz = hi
         found = [
-            c for c in batch.candidates(case, w, skip, skip_warp)
-            if c[4][0] <= hx and c[4][3] >= lx and c[4][1] <= hy and c[4][4] >= ly
-            and c[4][2] <= hz and c[4][5] >= lz
+            c
+            for c in batch.candidates(case, w, skip, skip_warp)
+            if c[4][0] <= hx
+            and c[4][3] >= lx
+            and c[4][1] <= hy
+            and c[4][4] >= ly
+            and c[4][2] <= hz
+            and c[4][5] >= lz
         ]
         yarns = [c[0] for c in found]
         refs = [c[1] for c in found]
@@ -284,8 +298,9 @@ def rest_point(hit: Hit, a1: Vec, a2: Vec, diameter: float) -> Vec:
     return px - k * nx, py - k * ny, pz - k * nz
 
 
-def sweep(state: State, w: int, a2: Vec, instruction: int, batch: Batch | None = None,
-          case: int = -1) -> None:
+def sweep(
+    state: State, w: int, a2: Vec, instruction: int, batch: Batch | None = None, case: int = -1
+) -> None:
     """Move warp w's free node to a2, inserting a node pair at every contact on the way."""
     a1 = state.xyz(state.free_node[w])
     skip: tuple[int, ...] = ()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -138,7 +140,7 @@ def test_a_twist_gains_contacts_further_up_as_it_winds():
     quarter_turns = 12 * 4
     assert len(heights) >= quarter_turns - 8
     wound = heights[4:]
-    assert all(b > a for a, b in zip(wound, wound[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(wound))
     assert wound[-1] < WORKED_MACHINE.d_mat
 
 
