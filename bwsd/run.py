@@ -16,8 +16,8 @@ from bwsd.errors import ProgramError, TwinError
 from bwsd.twin import Machine, Program, Twin, simulate
 from bwsd.twin.model import ProgressFn
 
-DEMO_PROGRAM = "examples/braid-2x2.bws"
-DEMO_CONFIG = "config/braid-2x2.toml"
+ROOT = Path(__file__).resolve().parent.parent  # the source tree: examples/ and config/
+DEMO = "braid-2x2"
 
 
 def configure(sub: Any) -> None:
@@ -115,12 +115,13 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
 def _demo_cmd(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    _, _, twin = load_and_simulate(DEMO_PROGRAM, DEMO_CONFIG)
-    files = [str(out / name) for name in ("braid-2x2.tg3", "braid-2x2.vtp")]
-    _write_exports(twin, str(out / "braid-2x2.json"), files)
+    program = ROOT / "examples" / f"{DEMO}.bws"
+    _, _, twin = load_and_simulate(str(program), str(ROOT / "config" / f"{DEMO}.toml"))
+    files = [out / f"{DEMO}.json", out / f"{DEMO}.tg3", out / f"{DEMO}.vtp"]
+    _write_exports(twin, str(files[0]), [str(f) for f in files[1:]])
     summary = _summary(twin, 0.0)
     del summary["seconds"]
-    print(f"simulated {DEMO_PROGRAM}: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
-    for name in ("braid-2x2.json", *(Path(f).name for f in files)):
-        print(f"wrote {out / name}")
+    print(f"simulated examples/{DEMO}.bws: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
+    for path in files:
+        print(f"wrote {path}")
     return 0

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -90,15 +89,3 @@ def small() -> SkeletonData:
 @pytest.fixture
 def centreline() -> SkeletonData:
     return small_skeleton(diameter=0.0)
-
-
-def missing(*names: str) -> str | None:
-    """Why one of the dotted ``module.attribute`` names cannot be imported yet, or None."""
-    for dotted in names:
-        module, _, name = dotted.rpartition(".")
-        try:
-            if not hasattr(importlib.import_module(module), name):
-                return f"{dotted} is not there yet"
-        except ImportError as exc:
-            return f"{module} is not importable yet: {exc}"
-    return None

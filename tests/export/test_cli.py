@@ -11,7 +11,7 @@ from rich.console import Console
 from bwsd.export import cli
 from bwsd.export.metrics import metrics
 
-from .conftest import build, missing, warp
+from .conftest import build, warp
 
 CONFIG = """\
 [machine]
@@ -40,10 +40,6 @@ ROW 1:-1 0:+1
 COL 0:-1 1:+1
 END
 """
-
-
-PIPELINE = ("bwsd.twin.simulate", "bwsd.program.validate.load_program")
-needs_pipeline = pytest.mark.skipif(bool(missing(*PIPELINE)), reason=str(missing(*PIPELINE)))
 
 
 def parser() -> argparse.ArgumentParser:
@@ -107,7 +103,6 @@ def files(tmp_path):
     return tmp_path
 
 
-@needs_pipeline
 def test_metrics_json_of_the_worked_example(files, capsys):
     status = run(
         ["metrics", str(files / "example.bws"), "--config", str(files / "machine.toml"), "--json"]
@@ -124,7 +119,6 @@ def test_metrics_json_of_the_worked_example(files, capsys):
     assert sum(result["cycles"]["counts"]) == 15
 
 
-@needs_pipeline
 def test_slice_of_the_worked_example(files, capsys):
     out = files / "cut.png"
     status = run(

@@ -8,13 +8,12 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+import pytexgen.Core as tg
 
 from bwsd.export.errors import ExportError
 from bwsd.export.texgen import ZERO_DIAMETER_SECTION, read_tg3, up_vectors, write_tg3
 
 from .conftest import build, warp, weft
-
-tg = pytest.importorskip("pytexgen.Core")
 
 
 def test_round_trip_nodes(small, tmp_path):

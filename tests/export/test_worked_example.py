@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import meshio
-import pytest
 from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from bwsd.export import export
@@ -13,11 +12,7 @@ from bwsd.export.slice import draw_slice
 from bwsd.export.texgen import read_tg3
 from bwsd.twin.skeleton import SkeletonData
 
-from .conftest import MACHINE, missing
-
-pytestmark = pytest.mark.skipif(
-    bool(missing("bwsd.twin.simulate")), reason=str(missing("bwsd.twin.simulate"))
-)
+from .conftest import MACHINE
 
 
 def worked_example() -> SkeletonData:

@@ -1,0 +1,110 @@
+"""`bwsd simulate` and `bwsd demo` through the installed console script."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bwsd.config import load_config
+from bwsd.export.skeleton_json import read_skeleton_json
+from bwsd.export.texgen import read_tg3
+from bwsd.program import load_program
+from bwsd.twin import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
+
+
+def bwsd(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    assert BWSD, "the bwsd console script is not installed beside this Python"
+    return subprocess.run(
+        [BWSD, *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False
+    )
+
+
+def example(stem: str) -> tuple[str, str]:
+    return str(ROOT / "examples" / f"{stem}.bws"), str(ROOT / "config" / f"{stem}.toml")
+
+
+@pytest.mark.parametrize("stem", ["twist", "braid-2x2", "weave-plain", "braid-L", "weave-U"])
+def test_simulate_json_matches_the_twin(stem):
+    program, config = example(stem)
+    done = bwsd("simulate", program, "--config", config, "--json")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)  # stdout holds exactly one JSON object
+    machine = load_config(config).machine
+    twin = simulate(machine, load_program(program, machine))
+    assert summary["yarns"] == twin.yarn_count
+    assert summary["nodes"] == twin.node_count
+    assert summary["contacts"] == twin.contact_count
+    assert summary["instructions"] == twin.done
+    assert summary["seconds"] > 0
+
+
+def test_simulate_writes_skeleton_and_exports_that_read_back(tmp_path):
+    program, config = example("braid-L")
+    skeleton, tg3, vtp = tmp_path / "s.json", tmp_path / "s.tg3", tmp_path / "s.vtp"
+    done = bwsd(
+        "simulate",
+        program,
+        "--config",
+        config,
+        "--json",
+        "--skeleton",
+        str(skeleton),
+        "--export",
+        str(tg3),
+        "--export",
+        str(vtp),
+    )
+    assert done.returncode == 0, done.stderr
+    json.loads(done.stdout)  # TexGen's chatter must not reach stdout
+    raw = json.loads(skeleton.read_text())
+    assert {"yarns", "contacts"} <= set(raw)
+    assert set(raw["yarns"][0]) >= {"id", "kind", "nodes"}
+    assert set(raw["contacts"][0]) >= {"yarns", "instruction"}
+    sk = read_skeleton_json(skeleton)
+    yarns = read_tg3(tg3)  # read back with pytexgen itself
+    assert len(yarns) == len(sk.yarns)
+    for nodes, yarn in zip(yarns, sk.yarns, strict=True):
+        assert nodes.shape == yarn.nodes.shape
+        assert abs(nodes - yarn.nodes).max() < 1e-9
+    assert vtp.stat().st_size > 0
+
+
+def test_a_weft_into_a_closed_shed_names_its_line_and_writes_nothing(tmp_path):
+    program = tmp_path / "bad.bws"
+    program.write_text(
+        "YARN diameter=1\nFILL row=0 col=0\nX.\n.X\nEND\n"
+        "ROW 0:+1 1:-1\n"
+        "# yarn 0 now runs from the fell (2.5, 2.5) to its guide (10, 0)\n"
+        "WEFT x=6.25 y=1.25 z=50 angle=0 length=30\n"
+    )
+    out = tmp_path / "out.json"
+    done = bwsd("simulate", str(program), "--config", example("twist")[1], "--skeleton", str(out))
+    assert done.returncode == 2
+    assert f"{program}:8:" in done.stderr
+    assert "shed closed" in done.stderr
+    assert not out.exists()
+
+
+def test_a_case_leaving_the_matrix_is_refused_with_line_and_column(tmp_path):
+    program = tmp_path / "bad.bws"
+    program.write_text("FILL row=0 col=0\nX.\n.X\nEND\nROW 0:+1\nROW 0:+1\n")
+    done = bwsd("simulate", str(program), "--config", example("twist")[1])
+    assert done.returncode == 2
+    assert f"{program}:6:" in done.stderr
+    assert done.stdout == ""
+
+
+def test_demo_writes_its_exports(tmp_path):
+    done = bwsd("demo", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    for suffix in ("json", "tg3", "vtp"):
+        assert (tmp_path / "out" / f"braid-2x2.{suffix}").stat().st_size > 0
+    assert "contacts" in done.stdout
