@@ -34,6 +34,7 @@ class Batch:
         self.fixed = fixed
         self.warps = warps
         self.rows: dict[int, Row] = {}
+        self.free_rows: dict[int, Row] = {}
         self._remember({s for ids in fixed for s in ids})
         self.children: dict[int, tuple[int, ...]] = {}
         self.gained: defaultdict[int, list[int]] = defaultdict(list)
@@ -82,42 +83,62 @@ class Batch:
     def gain(self, yarn: int, seg: int) -> None:
         """``yarn`` gained the fixed segment ``seg`` during this instruction."""
         self.gained[yarn].append(seg)
+        self.free_rows.pop(yarn, None)
+
+    def moved(self, warp: int) -> None:
+        """``warp``'s free segment changed."""
+        self.free_rows.pop(warp, None)
 
     # ----- asked by the sweep -----
     def candidates(
-        self, case: int, w: int, skip: tuple[int, ...], skip_warp: int
+        self, case: int, w: int, skip: tuple[int, ...], skip_warp: int, lo: Vec, hi: Vec
     ) -> list[Candidate]:
-        """Every segment case ``case`` (warp ``w``) may hit now, but its own and skipped ones."""
-        st = self.state
+        """Segments case ``case`` (warp ``w``) may hit whose box meets [lo, hi].
+
+        Its own yarn's and the skipped segments are left out.
+        """
         out: list[Candidate] = []
+        bounds = (*lo, *hi)
         for s in self.fixed[case]:
-            self._add_fixed(s, w, skip, out)
+            self._add_fixed(s, w, skip, bounds, out)
         for j in self.warps[case]:
-            if j != w:
-                if j != skip_warp:
-                    c, d = st.xyz(st.last_fixed[j]), st.xyz(st.free_node[j])
-                    box = (
-                        min(c[0], d[0]),
-                        min(c[1], d[1]),
-                        min(c[2], d[2]),
-                        max(c[0], d[0]),
-                        max(c[1], d[1]),
-                        max(c[2], d[2]),
-                    )
-                    out.append((j, -j - 1, c, d, box))
-                for s in self.gained.get(j, ()):
-                    self._add_fixed(s, w, skip, out)
+            if j == w:
+                continue
+            if j != skip_warp:
+                row = self.free_rows.get(j)
+                if row is None:
+                    row = self.free_rows[j] = self._free_row(j)
+                if _meets(row[3], bounds):
+                    out.append((j, -j - 1, row[1], row[2], row[3]))
+            for s in self.gained.get(j, ()):
+                self._add_fixed(s, w, skip, bounds, out)
         return out
 
-    def _add_fixed(self, s: int, w: int, skip: tuple[int, ...], out: list[Candidate]) -> None:
+    def _free_row(self, warp: int) -> Row:
+        st = self.state
+        c, d = st.xyz(st.last_fixed[warp]), st.xyz(st.free_node[warp])
+        box = (min(c[0], d[0]), min(c[1], d[1]), min(c[2], d[2]),
+               max(c[0], d[0]), max(c[1], d[1]), max(c[2], d[2]))  # fmt: skip
+        return warp, c, d, box
+
+    def _add_fixed(self, s: int, w: int, skip: tuple[int, ...], bounds: Box,
+                   out: list[Candidate]) -> None:  # fmt: skip
         pieces = self.children.get(s)
         if pieces is not None:
             for piece in pieces:
-                self._add_fixed(piece, w, skip, out)
+                self._add_fixed(piece, w, skip, bounds, out)
             return
-        yarn, c, d, box = self._row(s)
-        if yarn != w and s not in skip:
-            out.append((yarn, s, c, d, box))
+        row = self.rows.get(s) or self._row(s)
+        if row[0] != w and _meets(row[3], bounds) and s not in skip:
+            out.append((row[0], s, row[1], row[2], row[3]))
+
+
+def _meets(box: Box, bounds: Box) -> bool:
+    """Closed boxes (lo x, y, z, hi x, y, z) meet."""
+    return (
+        box[0] <= bounds[3] and box[3] >= bounds[0] and box[1] <= bounds[4]
+        and box[4] >= bounds[1] and box[2] <= bounds[5] and box[5] >= bounds[2]
+    )  # fmt: skip
 
 
 def _fixed_lists(state: State, lo: FloatArray, hi: FloatArray) -> list[list[int]]:

@@ -182,18 +182,7 @@ def first_contact(
     lo = (min(b[0], a1[0], a2[0]), min(b[1], a1[1], a2[1]), min(b[2], a1[2], a2[2]))
     hi = (max(b[0], a1[0], a2[0]), max(b[1], a1[1], a2[1]), max(b[2], a1[2], a2[2]))
     if batch is not None:
-        lx, ly, lz = lo
-        hx, hy, hz = hi
-        found = [
-            c
-            for c in batch.candidates(case, w, skip, skip_warp)
-            if c[4][0] <= hx
-            and c[4][3] >= lx
-            and c[4][1] <= hy
-            and c[4][4] >= ly
-            and c[4][2] <= hz
-            and c[4][5] >= lz
-        ]
+        found = batch.candidates(case, w, skip, skip_warp, lo, hi)
         yarns = [c[0] for c in found]
         refs = [c[1] for c in found]
         rows = [(c[2], c[3]) for c in found]
@@ -311,6 +300,8 @@ def sweep(
         hit = first_contact(state, w, b, a1, a2, skip, skip_warp, batch, case)
         if hit is None:
             state.move_free(w, a2)
+            if batch is not None:
+                batch.moved(w)
             return
         y, skip, skip_warp = split_hit(state, hit, batch)
         x = state.new_node(rest_point(hit, a1, a2, state.diameter))
