@@ -69,10 +69,11 @@ class Batch:
             self.rows[s] = (yarn, (r[0], r[1], r[2]), (r[3], r[4], r[5]), box)
 
     def _row(self, s: int) -> Row:
-        row = self.rows.get(s)
-        if row is None:
-            self._remember({s})
-            row = self.rows[s]
+        st = self.state
+        c, d = st.xyz(st.seg_c[s]), st.xyz(st.seg_d[s])
+        box = (min(c[0], d[0]), min(c[1], d[1]), min(c[2], d[2]),
+               max(c[0], d[0]), max(c[1], d[1]), max(c[2], d[2]))  # fmt: skip
+        row = self.rows[s] = (int(st.seg_yarn.data[s]), c, d, box)
         return row
 
     # ----- told by the sweep -----

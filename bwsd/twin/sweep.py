@@ -19,6 +19,8 @@ import numpy as np
 from bwsd.errors import TwinError
 from bwsd.twin.batch import Batch
 from bwsd.twin.predicates import (
+    ERRBOUND,
+    TINY,
     BoolArray,
     FloatArray,
     IntArray,
@@ -139,8 +141,22 @@ Crossing = tuple[int, float, float, int, int]  # index, oc, od, sc, sd
 
 
 def _sides_scalar(plane: Plane, rows: list[tuple[Vec, Vec]]) -> list[Crossing]:
+    """The float filter of ``Plane.side`` written out for speed; doubtful points go to it."""
+    bx, by, bz = plane.b
+    n0, n1, n2 = plane.n
+    p0, p1, p2 = plane.p
     out = []
     for i, (c, d) in enumerate(rows):
+        cx, cy, cz = c[0] - bx, c[1] - by, c[2] - bz
+        oc = cx * n0 + cy * n1 + cz * n2
+        perm_c = abs(cx) * p0 + abs(cy) * p1 + abs(cz) * p2
+        dx, dy, dz = d[0] - bx, d[1] - by, d[2] - bz
+        od = dx * n0 + dy * n1 + dz * n2
+        perm_d = abs(dx) * p0 + abs(dy) * p1 + abs(dz) * p2
+        if perm_c >= TINY and perm_d >= TINY:
+            bc, bd = ERRBOUND * perm_c, ERRBOUND * perm_d
+            if (oc > bc and od > bd) or (oc < -bc and od < -bd):
+                continue  # both ends strictly on one side, by the filter alone
         oc, sc, c_on = plane.side(c)
         od, sd, d_on = plane.side(d)
         if (sc >= 0) != (sd >= 0) and not (sc == 0 and c_on) and not (sd == 0 and d_on):
