@@ -10,8 +10,8 @@ import numpy as np
 from bwsd.errors import TwinError
 from bwsd.twin.instructions import Instruction, Program
 from bwsd.twin.machine import Machine
-from bwsd.twin.moves import execute
-from bwsd.twin.skeleton import ContactData, FloatArray, IntArray, SkeletonData, YarnData, YarnKind
+from bwsd.twin.moves import execute, path_length
+from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData, YarnKind
 from bwsd.twin.state import State
 from bwsd.twin.sweep import index_from_end
 
@@ -39,7 +39,7 @@ class Prediction:
     occupancy: IntArray
     takeup: float
     new_yarns: tuple[int, ...]
-    length_change: dict[int, float]  # yarn -> change of its path length (mm)
+    length_change: dict[int, float]  # moved warp -> change of its path length (mm)
     token: int = field(repr=False, default=0)
 
 
@@ -91,16 +91,15 @@ class Twin:
         self._settle()
         st = self._state
         mark = len(st.log)
-        before = self._path_lengths()
         contacts0, yarns0 = st.contact_count, len(st.yarns)
         index = self.done + 1
         try:
-            moved = execute(st, instruction, index)
+            before = execute(st, instruction, index)
         except BaseException:
             st.undo_to(mark)
             raise
         self._token += 1
-        pred = self._describe(index, instruction, moved, before, contacts0, yarns0)
+        pred = self._describe(index, instruction, before, contacts0, yarns0)
         self._pending, self._pending_mark = pred, mark
         return pred
 
@@ -216,29 +215,10 @@ class Twin:
         """Length of a yarn's polyline, free segment included."""
         self._settle()
         st = self._state
-        if yarn >= st.n_warps:
-            return float(st.yarn_len[yarn])
-        return float(self._path_lengths()[yarn])
+        return path_length(st, yarn) if yarn < st.n_warps else st.yarn_len[yarn]
 
-    def _path_lengths(self) -> FloatArray:
-        """Path length of every warp: its fixed part plus its free segment."""
-        st = self._state
-        n = st.n_warps
-        pos = np.array(st.pos, dtype=np.float64).reshape(-1, 3)
-        free = pos[np.array(st.free_node, dtype=np.int64)] - pos[np.array(st.last_fixed)]
-        fixed = np.array(st.yarn_len, dtype=np.float64)[:n]
-        result: FloatArray = fixed + np.sqrt(np.einsum("ij,ij->i", free, free))
-        return result
-
-    def _describe(
-        self,
-        index: int,
-        instruction: Instruction,
-        moved: list[int],
-        before: FloatArray,
-        contacts0: int,
-        yarns0: int,
-    ) -> Prediction:
+    def _describe(self, index: int, instruction: Instruction, before: dict[int, float],
+                  contacts0: int, yarns0: int) -> Prediction:  # fmt: skip
         st = self._state
         rows = np.array(st.contacts[5 * contacts0 :], dtype=np.int64).reshape(-1, 5).tolist()
         contacts = tuple(ContactData(*row) for row in rows)
@@ -249,10 +229,9 @@ class Twin:
             nodes = st.yarns[yarn]
             at = index_from_end(nodes, node)
             inserted.append(NodeInsert(yarn, node, nodes[at - 1], st.xyz(node)))
-        free = {w: st.xyz(st.free_node[w]) for w in moved}
-        cases = {w: st.warp_cell[w] for w in moved}
-        after = self._path_lengths()
-        change = {int(y): float(after[y] - before[y]) for y in np.nonzero(after != before)[0]}
+        free = {w: st.xyz(st.free_node[w]) for w in before}
+        cases = {w: st.warp_cell[w] for w in before}
+        change = {w: path_length(st, w) - length for w, length in before.items()}
         return Prediction(
             index,
             instruction,

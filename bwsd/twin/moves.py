@@ -12,14 +12,24 @@ from bwsd.twin.state import State
 from bwsd.twin.sweep import sweep
 
 
-def execute(state: State, instruction: Instruction, index: int) -> list[int]:
-    """Run one instruction in place (logged); returns the warps whose free node moved."""
+def execute(state: State, instruction: Instruction, index: int) -> dict[int, float]:
+    """Run one instruction in place (logged).
+
+    Returns the warps whose free node moved, each with its path length before the move.
+    """
     if isinstance(instruction, Shift):
         return _shift(state, instruction, index)
     if isinstance(instruction, TakeUp):
         return _takeup(state, instruction, index)
     _weft(state, instruction, index)
-    return []
+    return {}
+
+
+def path_length(state: State, warp: int) -> float:
+    """A warp's path: its fixed polyline plus its free segment to the guide."""
+    return state.yarn_len[warp] + math.dist(
+        state.xyz(state.last_fixed[warp]), state.xyz(state.free_node[warp])
+    )
 
 
 def _plan_shift(state: State, instruction: Shift, index: int) -> list[tuple[int, tuple[int, int]]]:
@@ -46,16 +56,18 @@ def _plan_shift(state: State, instruction: Shift, index: int) -> list[tuple[int,
     return plan
 
 
-def _shift(state: State, instruction: Shift, index: int) -> list[int]:
+def _shift(state: State, instruction: Shift, index: int) -> dict[int, float]:
     m = state.machine
     z = m.d_mat + state.takeup
     plan = _plan_shift(state, instruction, index)
     targets = [(w, (*m.guide_xy(*cell), z)) for w, cell in plan]
     batch = Batch.plan(state, targets)
+    before: dict[int, float] = {}
     for case, ((warp, cell), (_, a2)) in enumerate(zip(plan, targets, strict=True)):
+        before.setdefault(warp, path_length(state, warp))
         state.place(warp, cell)
         sweep(state, warp, a2, index, batch, case)
-    return [w for w, _ in plan]
+    return before
 
 
 def _check_target(
@@ -74,7 +86,7 @@ def _check_target(
         )
 
 
-def _takeup(state: State, instruction: TakeUp, index: int) -> list[int]:
+def _takeup(state: State, instruction: TakeUp, index: int) -> dict[int, float]:
     p = instruction.length
     state.set_takeup(state.takeup + p)
     targets = []
@@ -82,9 +94,11 @@ def _takeup(state: State, instruction: TakeUp, index: int) -> list[int]:
         x, y, z = state.xyz(state.free_node[warp])
         targets.append((warp, (x + 0.0, y + 0.0, z + p)))
     batch = Batch.plan(state, targets)
+    before: dict[int, float] = {}
     for case, (warp, a2) in enumerate(targets):
+        before[warp] = path_length(state, warp)
         sweep(state, warp, a2, index, batch, case)
-    return list(range(state.n_warps))
+    return before
 
 
 def segment_distance(p0: Vec, p1: Vec, q0: Vec, q1: Vec) -> float:

@@ -269,8 +269,8 @@ class State:
         rebuilds the set from every segment.
         """
         n = len(self.seg_c)
-        if self.active_from == n or not self.n_warps:
-            return
+        if n - self.active_from < max(256, len(self.active) // 4) or not self.n_warps:
+            return  # the tail is still cheap to scan as it is
         pos = np.frombuffer(self.pos, dtype=np.float64)
         apex = float(pos[3 * np.frombuffer(self.last_fixed, dtype=np.int64) + 2].min())
         del pos  # release the buffer: the array may grow again

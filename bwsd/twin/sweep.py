@@ -140,8 +140,12 @@ SCALAR_LIMIT = 24  # up to this many candidates, scalar side tests beat numpy's 
 Crossing = tuple[int, float, float, int, int]  # index, oc, od, sc, sd
 
 
-def _sides_scalar(plane: Plane, rows: list[tuple[Vec, Vec]]) -> list[Crossing]:
-    """The float filter of ``Plane.side`` written out for speed; doubtful points go to it."""
+def _sides_scalar(plane: Plane, rows: list[tuple[Vec, Vec]], lo: Vec, hi: Vec) -> list[Crossing]:
+    """The float filter of ``Plane.side`` written out for speed; doubtful points go to it.
+
+    A segment whose ends are surely on opposite sides but whose crossing point surely lies
+    outside the triangle's box is dropped too (the scalar twin of ``_plausible``).
+    """
     bx, by, bz = plane.b
     n0, n1, n2 = plane.n
     p0, p1, p2 = plane.p
@@ -157,11 +161,25 @@ def _sides_scalar(plane: Plane, rows: list[tuple[Vec, Vec]]) -> list[Crossing]:
             bc, bd = ERRBOUND * perm_c, ERRBOUND * perm_d
             if (oc > bc and od > bd) or (oc < -bc and od < -bd):
                 continue  # both ends strictly on one side, by the filter alone
+            gap = abs(oc - od)
+            if gap > 1e6 * (bc + bd) and _outside(c, d, oc / (oc - od), (bc + bd) / gap, lo, hi):
+                continue
         oc, sc, c_on = plane.side(c)
         od, sd, d_on = plane.side(d)
         if (sc >= 0) != (sd >= 0) and not (sc == 0 and c_on) and not (sd == 0 and d_on):
             out.append((i, oc, od, sc, sd))
     return out
+
+
+def _outside(c: Vec, d: Vec, s: float, rel: float, lo: Vec, hi: Vec) -> bool:
+    """The point c + s (d - c), known to relative error ``rel``, surely lies outside [lo, hi]."""
+    size = max(abs(d[0] - c[0]), abs(d[1] - c[1]), abs(d[2] - c[2]))
+    for k in range(3):
+        p = c[k] + s * (d[k] - c[k])
+        tol = (4 * rel + 1e-12) * (size + abs(p))
+        if p < lo[k] - tol or p > hi[k] + tol:
+            return True
+    return False
 
 
 def _sides_vector(plane: Plane, segs: FloatArray, lo: Vec, hi: Vec) -> list[Crossing]:
@@ -210,7 +228,7 @@ def first_contact(
         return None
     plane = Plane(b, a1, a2)
     if len(rows) <= SCALAR_LIMIT:
-        crossings = _sides_scalar(plane, rows)
+        crossings = _sides_scalar(plane, rows, lo, hi)
     else:
         crossings = _sides_vector(plane, np.array([c + d for c, d in rows]), lo, hi)
     hits = []
