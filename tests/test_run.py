@@ -108,3 +108,32 @@ def test_demo_writes_its_exports(tmp_path):
     for suffix in ("json", "tg3", "vtp"):
         assert (tmp_path / "out" / f"braid-2x2.{suffix}").stat().st_size > 0
     assert "contacts" in done.stdout
+
+
+def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
+    import os
+    import pty
+
+    program, config = example("braid-L")
+    leader, follower = pty.openpty()
+    try:
+        done = subprocess.run(
+            [BWSD, "simulate", program, "--config", config],
+            stdout=subprocess.PIPE, stderr=follower, text=True, timeout=300, check=False,
+        )  # fmt: skip
+        os.close(follower)
+        chunks = []
+        while True:
+            try:
+                chunk = os.read(leader, 65536)
+            except OSError:
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+    finally:
+        os.close(leader)
+    assert done.returncode == 0
+    assert b"simulating" in b"".join(chunks)  # rich drew its bar on the terminal
+    piped = bwsd("simulate", program, "--config", config)
+    assert piped.stderr == ""
