@@ -48,7 +48,7 @@ class Occupancy:
         return self.rows if axis == "row" else self.cols
 
     def shift(self, axis: str, index: int, k: int) -> str | None:
-        """Shift every case of one line by k cells, the leading case first (TWIN.md, Moves)."""
+        """Shift every case of one line by k cells, the leading case first (docs/twin.md)."""
         if axis == "row":
             line = [(index, c) for c in range(self.cols)]
             step = (0, k)

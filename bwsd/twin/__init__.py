@@ -1,4 +1,4 @@
-"""The digital twin: the collision model of TWIN.md. Pure: numpy in, numpy out, no I/O."""
+"""The digital twin: the collision model of docs/twin.md. Pure: numpy in, numpy out, no I/O."""
 
 from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp, Weft
 from bwsd.twin.machine import Machine

@@ -1,4 +1,4 @@
-"""The instructions the twin executes: the machine's own moves (TWIN.md, "Moves")."""
+"""The instructions the twin executes: the machine's own moves (docs/twin.md)."""
 
 from __future__ import annotations
 

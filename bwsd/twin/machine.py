@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Machine:
-    """Geometry of a braiding-weaving machine (TWIN.md, "Machine, frame, yarns").
+    """Geometry of a braiding-weaving machine (docs/twin.md, "Model in one page").
 
     Lengths in millimetres. Cell (r, c) has its guide at x = c * pitch_x, y = r * pitch_y.
     """
@@ -41,7 +41,7 @@ class Machine:
         return col * self.pitch_x, row * self.pitch_y
 
     def convergence_xy(self) -> tuple[float, float]:
-        """The convergence point O of TWIN.md."""
+        """The convergence point O: the centre of the matrix."""
         return (self.cols - 1) / 2 * self.pitch_x, (self.rows - 1) / 2 * self.pitch_y
 
     def fell_xy(self, row: int, col: int) -> tuple[float, float]:

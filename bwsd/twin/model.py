@@ -53,7 +53,7 @@ class Snapshot:
 
 
 class Twin:
-    """The geometric model of the machine after TWIN.md.
+    """The geometric model of the machine (docs/twin.md).
 
     ``predict`` runs an instruction in place with an undo log and leaves it pending; any
     read of the state, or another ``predict``, rolls a pending prediction back first, so

@@ -1,4 +1,4 @@
-"""The sweep of one free node (TWIN.md, "The sweep").
+"""The sweep of one free node (docs/twin.md, "The sweep, exactly").
 
 Candidates come from the grids of ``State``; each is tested by exact predicates
 (``bwsd.twin.predicates``). Constructions (new nodes, the restart point) are float64 formulas

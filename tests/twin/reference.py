@@ -1,4 +1,4 @@
-"""Exact reference of the whole twin (TWIN.md), written independently of bwsd.twin.
+"""Exact reference of the whole twin (docs/twin.md), written independently of bwsd.twin.
 
 Brute force, no broad phase, no filter: every decision (sides, barycentric signs, the order
 of contacts) is taken in exact rational arithmetic on the float64 coordinates. Constructions

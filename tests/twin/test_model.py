@@ -132,7 +132,7 @@ def test_fill_errors():
 
 
 def test_a_twist_gains_contacts_further_up_as_it_winds():
-    """TWIN.md: once wound, about one contact a quarter turn, each further up."""
+    """docs/twin.md: once wound, about one contact a quarter turn, each further up."""
     twin = simulate(WORKED_MACHINE, _worked_program(12))
     sk = twin.skeleton()
     nodes = sk.node_positions()

@@ -1,4 +1,4 @@
-"""The rules of the sweep on hand-built geometry (TWIN.md, "The sweep")."""
+"""The rules of the sweep on hand-built geometry (docs/twin.md, "The sweep, exactly")."""
 
 from __future__ import annotations
 

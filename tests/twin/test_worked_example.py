@@ -1,4 +1,4 @@
-"""The worked example of TWIN.md, against the kernel and the exact reference."""
+"""The worked example of docs/twin.md, against the kernel and the exact reference."""
 
 from __future__ import annotations
 
