@@ -1,0 +1,237 @@
+"""The one small async interface to the actuators; a backend per bus fills its hooks.
+
+A backend implements the ``_``-prefixed hooks (open, close, write a set-point, read the
+machine's state, quick stop, reset, home). The base class does what every bus shares:
+reconnecting with exponential backoff, waiting for completion with a timeout, checking the
+read-back, and raising errors by phase (connection, timeout, drive fault, e-stop).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from bwsd.errors import BwsdError
+from bwsd.fieldbus.axes import Axis, machine_axes
+from bwsd.twin.machine import Machine
+
+BoolGrid = npt.NDArray[np.bool_]
+
+# Fault codes, the same on every bus (docs/fieldbus-modbus.md, docs/fieldbus-canopen.md).
+FAULT_NONE = 0
+FAULT_JAM = 1  # a case was blocked by the matrix bound or an occupied cell
+FAULT_STALL = 2  # the actuator stopped mid-stroke (following error)
+FAULT_DRIVE = 3  # the drive reports an internal fault
+FAULT_POSITION = 4  # the drive reached a position other than commanded
+FAULT_ESTOP = 5  # the move was cut by the emergency stop
+FAULT_NAMES = {
+    FAULT_NONE: "none",
+    FAULT_JAM: "jam",
+    FAULT_STALL: "stall",
+    FAULT_DRIVE: "drive fault",
+    FAULT_POSITION: "wrong position",
+    FAULT_ESTOP: "emergency stop",
+}
+
+
+class FieldbusError(BwsdError):
+    """Base of the errors of the actuator bus."""
+
+
+class FieldbusConnectionError(FieldbusError):
+    """The bus cannot be reached, or the connection was lost (after the retries)."""
+
+
+class FieldbusTimeout(FieldbusError):
+    """An axis did not complete within the timeout, or the bus stopped answering."""
+
+
+class DriveFault(FieldbusError):
+    """An axis reports a fault (jam, stall, drive fault, wrong position)."""
+
+    def __init__(self, axis: Axis, code: int, detail: str = "") -> None:
+        name = FAULT_NAMES.get(code, f"fault {code}")
+        super().__init__(f"axis {axis.name}: {name}" + (f" ({detail})" if detail else ""))
+        self.axis = axis
+        self.code = code
+
+
+class EStopError(FieldbusError):
+    """The emergency stop is pressed."""
+
+
+@dataclass(frozen=True)
+class AxisMove:
+    """A set-point for one axis, in wire units.
+
+    Shift and insert axes: a relative stroke in micrometres (the axis ends back home).
+    Weft angle: absolute millidegrees. Take-up: absolute micrometres.
+    """
+
+    axis: int
+    target: int
+
+
+@dataclass(frozen=True)
+class AxisState:
+    """What one axis reports."""
+
+    position: int  # micrometres (millidegrees for the weft angle)
+    busy: bool
+    done_seq: int  # sequence number of the last completed set-point
+    fault: int  # FAULT_* code
+    last_stroke: int  # micrometres of the last completed stroke (relative axes)
+
+
+@dataclass(frozen=True)
+class MachineState:
+    """The whole machine as the bus reports it."""
+
+    axes: tuple[AxisState, ...]
+    occupancy: BoolGrid  # (rows, cols)
+    estop: bool
+    at: float = field(default_factory=time.monotonic)
+
+
+@dataclass(frozen=True)
+class BusSettings:
+    """Settings every backend shares (table [fieldbus] of the config)."""
+
+    timeout: float = 5.0  # s: completion of a move
+    io_timeout: float = 1.0  # s: one request on the bus
+    reconnect_delay: float = 0.1  # s: first backoff
+    reconnect_delay_max: float = 2.0  # s: backoff ceiling
+    reconnect_attempts: int = 5  # before FieldbusConnectionError
+    position_tolerance: int = 10  # micrometres (millidegrees) accepted on read-back
+
+
+class Fieldbus(ABC):
+    """Async access to the machine's actuators over one bus."""
+
+    def __init__(self, machine: Machine, settings: BusSettings) -> None:
+        self.machine = machine
+        self.settings = settings
+        self.axes = machine_axes(machine)
+        self._seq = [0] * len(self.axes)
+        self._expected: dict[int, int] = {}
+        self._connected = False
+
+    # ----- hooks for a backend -----
+    @abstractmethod
+    async def _open(self) -> None:
+        """Open the connection (raise FieldbusConnectionError when it cannot)."""
+
+    @abstractmethod
+    async def _close(self) -> None:
+        """Close the connection; never raises."""
+
+    @abstractmethod
+    async def _write_setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        """Send one set-point with its sequence number and start it."""
+
+    @abstractmethod
+    async def _read_state(self) -> MachineState:
+        """Read every axis, the occupancy sensors and the e-stop."""
+
+    @abstractmethod
+    async def _quick_stop(self) -> None:
+        """Stop every axis at once."""
+
+    @abstractmethod
+    async def _reset_faults(self) -> None:
+        """Clear latched faults on every axis."""
+
+    @abstractmethod
+    async def _home(self) -> None:
+        """Start homing every axis."""
+
+    # ----- shared behaviour -----
+    async def connect(self) -> None:
+        """Connect, retrying with exponential backoff."""
+        delay = self.settings.reconnect_delay
+        last: Exception | None = None
+        for _ in range(max(1, self.settings.reconnect_attempts)):
+            try:
+                await self._open()
+                self._connected = True
+                return
+            except FieldbusConnectionError as exc:
+                last = exc
+                await asyncio.sleep(delay)
+                delay = min(2 * delay, self.settings.reconnect_delay_max)
+        raise FieldbusConnectionError(f"cannot reach the bus: {last}")
+
+    async def close(self) -> None:
+        self._connected = False
+        await self._close()
+
+    async def move(self, moves: Sequence[AxisMove]) -> None:
+        """Start every move at once (refused while the e-stop is pressed)."""
+        state = await self._read_state()
+        if state.estop:
+            raise EStopError("emergency stop is pressed: no move started")
+        for move in moves:
+            axis = self.axes[move.axis]
+            self._seq[move.axis] = (self._seq[move.axis] + 1) % 0x8000 or 1
+            self._expected[move.axis] = 0 if axis.relative else move.target
+            await self._write_setpoint(axis, move.target, self._seq[move.axis])
+
+    async def wait(self, axes: Sequence[int], timeout: float | None = None) -> MachineState:
+        """Wait until every axis in ``axes`` completed its last set-point; check the read-back."""
+        limit = time.monotonic() + (self.settings.timeout if timeout is None else timeout)
+        while True:
+            state = await self._read_state()
+            self._check(state, axes)
+            if all(state.axes[i].done_seq == self._seq[i] and not state.axes[i].busy
+                   for i in axes):  # fmt: skip
+                self._check_positions(state, axes)
+                return state
+            if time.monotonic() > limit:
+                late = [self.axes[i].name for i in axes if state.axes[i].done_seq != self._seq[i]]
+                raise FieldbusTimeout(f"axes {', '.join(late)} did not complete in time")
+            await asyncio.sleep(0.002)
+
+    async def execute(self, moves: Sequence[AxisMove], timeout: float | None = None) -> MachineState:
+        """Start the moves and wait for all of them."""
+        await self.move(moves)
+        return await self.wait([m.axis for m in moves], timeout)
+
+    async def state(self) -> MachineState:
+        """The machine as the bus reports it now."""
+        return await self._read_state()
+
+    async def quick_stop(self) -> None:
+        await self._quick_stop()
+
+    async def reset_faults(self) -> None:
+        await self._reset_faults()
+
+    async def home(self, timeout: float | None = None) -> MachineState:
+        """Home the shift and weft axes and wait for them (the take-up keeps its position)."""
+        await self._home()
+        homed = [axis.index for axis in self.axes if axis.kind != "takeup"]
+        for i in homed:
+            self._seq[i] = 0
+            self._expected[i] = 0
+        return await self.wait(homed, timeout)
+
+    def _check(self, state: MachineState, axes: Sequence[int]) -> None:
+        if state.estop:
+            raise EStopError("emergency stop is pressed")
+        for i in axes:
+            if state.axes[i].fault:
+                raise DriveFault(self.axes[i], state.axes[i].fault)
+
+    def _check_positions(self, state: MachineState, axes: Sequence[int]) -> None:
+        tol = self.settings.position_tolerance
+        for i in axes:
+            want = self._expected.get(i)
+            got = state.axes[i].position
+            if want is not None and abs(got - want) > tol:
+                raise DriveFault(self.axes[i], FAULT_POSITION, f"at {got}, commanded {want}")
