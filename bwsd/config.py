@@ -1,91 +1,176 @@
-"""Machine configuration (TOML): loaded once, every key range-checked, unknown keys refused."""
+"""Configuration (TOML): loaded once, every key range-checked, unknown keys refused.
+
+Tables: ``[machine]`` (required) and ``[yarn]`` describe the geometry; ``[fieldbus]`` with
+``[fieldbus.modbus]`` or ``[fieldbus.canopen]`` the actuator bus; ``[simulator]`` the mock
+loom. Every key of every table is documented in docs/config.md.
+"""
 
 from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bwsd.errors import ConfigError
 from bwsd.twin.machine import Machine
 
-# Tables the daemon's later parts own; validated by them, accepted here.
-DAEMON_TABLES: frozenset[str] = frozenset()
 
-_MACHINE_KEYS: dict[str, tuple[type, float, float]] = {
-    "rows": (int, 1, 1000),
-    "cols": (int, 1, 1000),
-    "pitch_x": (float, 1e-3, 1e4),
-    "pitch_y": (float, 1e-3, 1e4),
-    "d_mat": (float, 1e-3, 1e5),
-    "c_mat": (float, 0.0, 1.0),
+@dataclass(frozen=True)
+class Num:
+    """A number key: its type, range and default (None: required)."""
+
+    kind: type
+    low: float
+    high: float
+    default: float | None = None
+
+
+@dataclass(frozen=True)
+class Text:
+    """A string key, optionally one of ``choices``."""
+
+    default: str | None = None
+    choices: tuple[str, ...] = ()
+
+
+Spec = Num | Text
+
+SCHEMA: dict[str, dict[str, Spec]] = {
+    "machine": {
+        "rows": Num(int, 1, 1000),
+        "cols": Num(int, 1, 1000),
+        "pitch_x": Num(float, 1e-3, 1e4),
+        "pitch_y": Num(float, 1e-3, 1e4),
+        "d_mat": Num(float, 1e-3, 1e5),
+        "c_mat": Num(float, 0.0, 1.0),
+    },
+    "yarn": {"diameter": Num(float, 0.0, 1e3, 0.0)},
+    "fieldbus": {
+        "backend": Text("modbus", ("modbus", "canopen")),
+        "timeout": Num(float, 1e-3, 3600.0, 5.0),
+        "io_timeout": Num(float, 1e-3, 60.0, 1.0),
+        "reconnect_delay": Num(float, 1e-3, 60.0, 0.1),
+        "reconnect_delay_max": Num(float, 1e-3, 600.0, 2.0),
+        "reconnect_attempts": Num(int, 1, 1000, 5),
+        "position_tolerance": Num(int, 0, 1_000_000, 10),
+    },
+    "fieldbus.modbus": {
+        "host": Text("127.0.0.1"),
+        "port": Num(int, 1, 65535, 15020),
+        "device_id": Num(int, 0, 247, 1),
+    },
+    "fieldbus.canopen": {
+        "interface": Text("socketcand", ("socketcan", "socketcand", "virtual")),
+        "channel": Text("can0"),
+        "host": Text("127.0.0.1"),
+        "port": Num(int, 1, 65535, 29536),
+        "node_base": Num(int, 1, 127, 1),
+        "io_node": Num(int, 1, 127, 127),
+        "heartbeat_ms": Num(int, 0, 65535, 100),
+    },
+    "simulator": {
+        "host": Text("127.0.0.1"),
+        "modbus_port": Num(int, 1, 65535, 15020),
+        "socketcand_port": Num(int, 1, 65535, 29536),
+        "control_port": Num(int, 1, 65535, 15021),
+        "stroke_speed": Num(float, 0.0, 1e6, 0.0),
+        "takeup_speed": Num(float, 0.0, 1e6, 0.0),
+        "weft_speed": Num(float, 0.0, 1e6, 0.0),
+        "heartbeat_ms": Num(int, 0, 65535, 100),
+    },
 }
-_YARN_KEYS: dict[str, tuple[type, float, float]] = {"diameter": (float, 0.0, 1e3)}
+REQUIRED = ("machine",)
 
 
 @dataclass(frozen=True)
 class Config:
-    """A loaded configuration: the machine geometry plus the raw daemon tables."""
+    """A loaded configuration: the machine geometry and every table with defaults filled."""
 
     machine: Machine
     path: str
-    tables: Mapping[str, Mapping[str, Any]]
+    tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def table(self, name: str) -> Mapping[str, Any]:
+        """A table by dotted name (``fieldbus.modbus``), defaults filled in."""
+        return self.tables[name]
 
 
-def _number(table: str, key: str, value: Any, spec: tuple[type, float, float], path: str) -> Any:
-    kind, low, high = spec
+def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
+    path, table, key = where
+    if isinstance(spec, Text):
+        if not isinstance(value, str):
+            raise ConfigError(f"must be a string, got {value!r}", path=path, table=table, key=key)
+        if spec.choices and value not in spec.choices:
+            raise ConfigError(f"must be one of {', '.join(spec.choices)}, got {value!r}",
+                              path=path, table=table, key=key)  # fmt: skip
+        return value
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(f"must be a number, got {value!r}", path=path, table=table, key=key)
-    if kind is int and not isinstance(value, int):
+    if spec.kind is int and not isinstance(value, int):
         raise ConfigError(f"must be an integer, got {value!r}", path=path, table=table, key=key)
-    if not low <= value <= high:
-        raise ConfigError(
-            f"must lie in [{low:g}, {high:g}], got {value!r}", path=path, table=table, key=key
-        )
-    return kind(value)
+    if not spec.low <= value <= spec.high:
+        raise ConfigError(f"must lie in [{spec.low:g}, {spec.high:g}], got {value!r}",
+                          path=path, table=table, key=key)  # fmt: skip
+    return spec.kind(value)
 
 
-def _table(
-    data: Mapping[str, Any],
-    name: str,
-    spec: dict[str, tuple[type, float, float]],
-    path: str,
-    required: bool,
-) -> dict[str, Any]:
-    raw = data.get(name)
+def _table(raw: Any, name: str, path: str) -> dict[str, Any]:
+    spec = SCHEMA[name]
     if raw is None:
-        if required:
-            raise ConfigError("missing table", path=path, table=name)
-        return {}
+        raw = {}
     if not isinstance(raw, dict):
         raise ConfigError("must be a table", path=path, table=name)
-    for key in raw:
+    out: dict[str, Any] = {}
+    for key, value in raw.items():
+        if f"{name}.{key}" in SCHEMA:
+            continue  # a sub-table, validated on its own
         if key not in spec:
-            raise ConfigError(
-                f"unknown key (known: {', '.join(spec)})", path=path, table=name, key=key
-            )
-    out = {}
+            raise ConfigError(f"unknown key (known: {', '.join(spec)})", path=path, table=name,
+                              key=key)  # fmt: skip
+        out[key] = _value((path, name, key), value, spec[key])
     for key, key_spec in spec.items():
-        if key not in raw:
-            if required:
+        if key not in out:
+            if key_spec.default is None:
                 raise ConfigError("missing key", path=path, table=name, key=key)
-            continue
-        out[key] = _number(name, key, raw[key], key_spec, path)
+            out[key] = key_spec.default
     return out
+
+
+def _lookup(data: Mapping[str, Any], dotted: str) -> Any:
+    node: Any = data
+    for part in dotted.split("."):
+        if not isinstance(node, Mapping):
+            return None
+        node = node.get(part)
+    return node
 
 
 def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
     """Validate an already-parsed TOML mapping."""
     for name in data:
-        if name not in ("machine", "yarn") and name not in DAEMON_TABLES:
+        if name not in SCHEMA:
             raise ConfigError("unknown table", path=path, table=name)
-    machine = _table(data, "machine", _MACHINE_KEYS, path, required=True)
-    yarn = _table(data, "yarn", _YARN_KEYS, path, required=False)
-    geometry = Machine(yarn_diameter=yarn.get("diameter", 0.0), **machine)
-    tables = {k: v for k, v in data.items() if k in DAEMON_TABLES}
-    return Config(machine=geometry, path=path, tables=tables)
+    for name in REQUIRED:
+        if name not in data:
+            raise ConfigError("missing table", path=path, table=name)
+    tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
+    machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+    if tables["fieldbus"]["backend"] == "canopen":
+        _check_canopen_ids(tables["fieldbus.canopen"], machine, path)
+    return Config(machine=machine, path=path, tables=tables)
+
+
+def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:
+    last = table["node_base"] + machine.rows + machine.cols + 3 - 1
+    if last > 127:
+        raise ConfigError(f"{machine.rows + machine.cols + 3} axes from node {table['node_base']} "
+                          "pass node id 127", path=path, table="fieldbus.canopen",
+                          key="node_base")  # fmt: skip
+    if table["node_base"] <= table["io_node"] <= last:
+        raise ConfigError(f"collides with the drives' node ids {table['node_base']}..{last}",
+                          path=path, table="fieldbus.canopen", key="io_node")  # fmt: skip
 
 
 def load_config(path: str | Path) -> Config:

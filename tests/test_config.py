@@ -71,3 +71,28 @@ def test_load_config_reports_file_errors(tmp_path):
         "[yarn]\ndiameter = 1\n"
     )
     assert load_config(good).machine.d_mat == 100.0
+
+
+def test_bus_and_simulator_tables_have_defaults_and_are_checked():
+    cfg = parse_config(GOOD)
+    assert cfg.table("fieldbus")["backend"] == "modbus"
+    assert cfg.table("fieldbus.modbus")["port"] == 15020
+    assert cfg.table("simulator")["stroke_speed"] == 0.0
+    bus = {**GOOD, "fieldbus": {"backend": "canopen", "canopen": {"interface": "virtual"}}}
+    assert parse_config(bus).table("fieldbus.canopen")["interface"] == "virtual"
+    with pytest.raises(ConfigError, match=r"\[fieldbus.backend\]: must be one of modbus, canopen"):
+        parse_config({**GOOD, "fieldbus": {"backend": "profibus"}})
+    with pytest.raises(ConfigError, match=r"\[fieldbus.modbus.port\]: must lie in"):
+        parse_config({**GOOD, "fieldbus": {"modbus": {"port": 70000}}})
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.bitrate\]: unknown key"):
+        parse_config({**GOOD, "fieldbus": {"canopen": {"bitrate": 500000}}})
+
+
+def test_canopen_node_ids_must_fit_and_not_collide():
+    big = {**GOOD, "machine": {**GOOD["machine"], "rows": 70, "cols": 70}}
+    parse_config(big)  # fine on Modbus
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 143 axes"):
+        parse_config({**big, "fieldbus": {"backend": "canopen"}})
+    clash = {"backend": "canopen", "canopen": {"io_node": 5}}
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.io_node\]: collides"):
+        parse_config({**GOOD, "fieldbus": clash})

@@ -197,7 +197,9 @@ class Fieldbus(ABC):
                 raise FieldbusTimeout(f"axes {', '.join(late)} did not complete in time")
             await asyncio.sleep(0.002)
 
-    async def execute(self, moves: Sequence[AxisMove], timeout: float | None = None) -> MachineState:
+    async def execute(
+        self, moves: Sequence[AxisMove], timeout: float | None = None
+    ) -> MachineState:
         """Start the moves and wait for all of them."""
         await self.move(moves)
         return await self.wait([m.axis for m in moves], timeout)
