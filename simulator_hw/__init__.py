@@ -1,0 +1,1 @@
+"""The mock loom: the machine's actuators, sensors and faults behind real bus servers."""

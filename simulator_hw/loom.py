@@ -1,0 +1,207 @@
+"""The mock loom's mechanics: axes with travel time, the matrix of cases, faults (pure).
+
+No I/O and no clock of its own: the bus servers call ``command`` and friends with the
+current time and ``tick(now)`` before every read, so the same loom answers both buses.
+Units as on the wire: micrometres, millidegrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from bwsd.fieldbus.axes import MDEG_PER_DEG, UM_PER_MM, Axis, machine_axes
+from bwsd.fieldbus.base import (
+    FAULT_DRIVE,
+    FAULT_ESTOP,
+    FAULT_JAM,
+    FAULT_NONE,
+    FAULT_STALL,
+)
+from bwsd.twin.machine import Machine
+
+WRONG_POSITION_OFFSET = 500  # µm a drive with an injected position fault is off by
+
+
+@dataclass(frozen=True)
+class Speeds:
+    """Travel speeds; 0 means instant."""
+
+    stroke: float = 0.0  # mm/s, shift and insert actuators
+    takeup: float = 0.0  # mm/s
+    weft: float = 0.0  # deg/s, weft angle
+
+
+@dataclass
+class AxisSim:
+    """One simulated actuator."""
+
+    axis: Axis
+    position: int = 0
+    busy: bool = False
+    homed: bool = True
+    seq: int = 0  # sequence of the running set-point
+    done_seq: int = 0
+    fault: int = FAULT_NONE
+    last_stroke: int = 0
+    # a running motion: legs of (start time, from, to); a stroke goes out then back home
+    legs: list[tuple[float, int, int]] = field(default_factory=list)
+    stroke: int = 0
+    latched: bool = True
+
+
+@dataclass
+class Faults:
+    """Faults injected through the control channel."""
+
+    mute: bool = False  # the buses stop answering
+    drops: int = 0  # incremented to ask the servers to drop their connections
+    stall: set[str] = field(default_factory=set)  # axes that stop mid-stroke
+    wrong_position: set[str] = field(default_factory=set)  # axes that end off target
+    drive: set[str] = field(default_factory=set)  # axes whose drive faults on the next command
+
+
+class Loom:
+    """The whole mock machine."""
+
+    def __init__(self, machine: Machine, fill: Iterable[tuple[int, int]], speeds: Speeds) -> None:
+        self.machine = machine
+        self.speeds = speeds
+        self.axes = [AxisSim(a) for a in machine_axes(machine)]
+        self.occupied = [[False] * machine.cols for _ in range(machine.rows)]
+        for r, c in fill:
+            self.occupied[r][c] = True
+        self.estop = False
+        self.faults = Faults()
+
+    # ----- commands -----
+    def command(self, index: int, target: int, seq: int, now: float) -> None:
+        """Start a set-point; ignored while the axis is busy or faulted or the e-stop is on."""
+        sim = self.axes[index]
+        self.tick(now)
+        if sim.busy or sim.fault or self.estop:
+            return
+        sim.seq = seq
+        if sim.axis.name in self.faults.drive:
+            sim.fault = FAULT_DRIVE
+            return
+        if sim.axis.kind in ("row", "col") and not self._can_shift(sim.axis, target):
+            sim.fault = FAULT_JAM
+            return
+        sim.busy, sim.stroke, sim.latched = True, target, False
+        if sim.axis.relative:
+            sim.legs = [(now, 0, target), (now + self._duration(sim, target), target, 0)]
+        else:
+            sim.legs = [(now, sim.position, target)]
+        self.tick(now)
+
+    def quick_stop(self, now: float) -> None:
+        """Stop every axis where it is; moving axes are left faulted (stall)."""
+        self.tick(now)
+        for sim in self.axes:
+            if sim.busy:
+                self._stop(sim, FAULT_STALL)
+
+    def press_estop(self, pressed: bool, now: float) -> None:
+        self.tick(now)
+        self.estop = pressed
+        if pressed:
+            for sim in self.axes:
+                if sim.busy:
+                    self._stop(sim, FAULT_ESTOP)
+
+    def reset_faults(self) -> None:
+        for sim in self.axes:
+            sim.fault = FAULT_NONE
+
+    def home(self, now: float) -> None:
+        """Home the shift and weft axes (instantly: they are at rest between strokes)."""
+        self.tick(now)
+        for sim in self.axes:
+            if sim.axis.kind != "takeup" and not sim.busy and not sim.fault:
+                sim.position, sim.done_seq, sim.homed = 0, 0, True
+
+    # ----- time -----
+    def tick(self, now: float) -> None:
+        """Advance every moving axis to time ``now``."""
+        for sim in self.axes:
+            if sim.busy:
+                self._advance(sim, now)
+
+    def _advance(self, sim: AxisSim, now: float) -> None:
+        while sim.legs:
+            start, src, dst = sim.legs[0]
+            span = self._duration(sim, dst - src)
+            if sim.axis.name in self.faults.stall and src == 0 and dst != 0:
+                sim.position = src + (dst - src) // 2  # stuck half way out
+                self._stop(sim, FAULT_STALL)
+                return
+            if now < start + span:
+                frac = (now - start) / span if span > 0 else 1.0
+                sim.position = round(src + frac * (dst - src))
+                return
+            sim.position = dst
+            sim.legs.pop(0)
+            if sim.legs:
+                self._latch(sim)
+                start2, src2, dst2 = sim.legs[0]
+                sim.legs[0] = (start + span, src2, dst2)
+        self._finish(sim)
+
+    def _finish(self, sim: AxisSim) -> None:
+        if not sim.latched:
+            self._latch(sim)
+        if sim.axis.name in self.faults.wrong_position:
+            sim.position += WRONG_POSITION_OFFSET
+        sim.busy = False
+        sim.done_seq = sim.seq
+        sim.last_stroke = sim.stroke if sim.axis.relative else 0
+
+    def _stop(self, sim: AxisSim, code: int) -> None:
+        sim.legs.clear()
+        sim.busy = False
+        sim.fault = code
+
+    def _duration(self, sim: AxisSim, distance: int) -> float:
+        kind = sim.axis.kind
+        speed = {"takeup": self.speeds.takeup, "weft_angle": self.speeds.weft}.get(
+            kind, self.speeds.stroke
+        )
+        scale = MDEG_PER_DEG if kind == "weft_angle" else UM_PER_MM
+        return abs(distance) / (speed * scale) if speed > 0 else 0.0
+
+    # ----- the matrix -----
+    def _cells(self, axis: Axis, target: int) -> tuple[int, list[int]]:
+        m = self.machine
+        pitch = m.pitch_x if axis.kind == "row" else m.pitch_y
+        k = round(target / (pitch * UM_PER_MM))
+        line = axis.line if axis.line is not None else 0
+        if axis.kind == "row":
+            at = [c for c in range(m.cols) if self.occupied[line][c]]
+        else:
+            at = [r for r in range(m.rows) if self.occupied[r][line]]
+        return k, at
+
+    def _can_shift(self, axis: Axis, target: int) -> bool:
+        k, at = self._cells(axis, target)
+        size = self.machine.cols if axis.kind == "row" else self.machine.rows
+        return all(0 <= i + k < size for i in at)  # a rigid line shift only fails at a bound
+
+    def _latch(self, sim: AxisSim) -> None:
+        """The stroke reached its far end: the cases of the line sit in their new cells."""
+        sim.latched = True
+        axis = sim.axis
+        if axis.kind not in ("row", "col"):
+            return
+        k, at = self._cells(axis, sim.stroke)
+        line = axis.line if axis.line is not None else 0
+        for i in at:
+            self._set(axis.kind, line, i, False)
+        for i in at:
+            self._set(axis.kind, line, i + k, True)
+
+    def _set(self, kind: str, line: int, i: int, value: bool) -> None:
+        if kind == "row":
+            self.occupied[line][i] = value
+        else:
+            self.occupied[i][line] = value
