@@ -144,7 +144,7 @@ class Loom:
             sim.legs.pop(0)
             if sim.legs:
                 self._latch(sim)
-                start2, src2, dst2 = sim.legs[0]
+                _, src2, dst2 = sim.legs[0]
                 sim.legs[0] = (start + span, src2, dst2)
         self._finish(sim)
 
