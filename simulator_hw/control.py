@@ -1,0 +1,128 @@
+"""The mock loom's control channel: inject faults while it runs (JSON lines over TCP).
+
+One JSON object a line in, one a line out. Requests (``axis`` is an axis name such as
+``row2``, ``col0``, ``takeup``; see docs/simulator.md):
+
+- ``{"cmd": "fault", "kind": "stall" | "wrong_position" | "drive", "axis": NAME}``
+- ``{"cmd": "fault", "kind": "mute"}``: the buses stop answering
+- ``{"cmd": "fault", "kind": "drop"}``: the buses drop every connection (once)
+- ``{"cmd": "estop", "pressed": true | false}``
+- ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
+- ``{"cmd": "state"}``: occupancy, e-stop, and each axis's position, busy flag and fault
+
+Answers are ``{"ok": true, ...}`` or ``{"ok": false, "error": "..."}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from typing import Any
+
+from simulator_hw.loom import Loom
+
+AXIS_FAULTS = ("stall", "wrong_position", "drive")
+
+
+def handle(loom: Loom, request: Any) -> dict[str, Any]:
+    """Apply one request to the loom; the answer as a JSON-ready dict."""
+    if not isinstance(request, dict) or not isinstance(request.get("cmd"), str):
+        return {"ok": False, "error": 'a request is an object with a string "cmd"'}
+    cmd = request["cmd"]
+    if cmd == "fault":
+        return _fault(loom, request)
+    if cmd == "estop":
+        pressed = request.get("pressed")
+        if not isinstance(pressed, bool):
+            return {"ok": False, "error": '"pressed" must be true or false'}
+        loom.press_estop(pressed, time.monotonic())
+        return {"ok": True}
+    if cmd == "clear":
+        faults = loom.faults
+        faults.mute = False
+        faults.stall.clear()
+        faults.wrong_position.clear()
+        faults.drive.clear()
+        return {"ok": True}
+    if cmd == "state":
+        return {"ok": True, **state(loom)}
+    return {"ok": False, "error": f"unknown cmd {cmd!r} (fault, estop, clear, state)"}
+
+
+def _fault(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:
+    kind = request.get("kind")
+    if kind == "mute":
+        loom.faults.mute = True
+        return {"ok": True}
+    if kind == "drop":
+        loom.faults.drops += 1
+        return {"ok": True}
+    if kind not in AXIS_FAULTS:
+        return {"ok": False, "error": f"unknown fault kind {kind!r} ({', '.join(AXIS_FAULTS)}, "
+                "mute, drop)"}  # fmt: skip
+    names = {sim.axis.name for sim in loom.axes}
+    axis = request.get("axis")
+    if axis not in names:
+        return {"ok": False, "error": f"unknown axis {axis!r}"}
+    getattr(loom.faults, kind).add(axis)
+    return {"ok": True}
+
+
+def state(loom: Loom) -> dict[str, Any]:
+    """A snapshot of the loom for the control channel and the tests."""
+    loom.tick(time.monotonic())
+    return {
+        "estop": loom.estop,
+        "occupancy": [[int(v) for v in row] for row in loom.occupied],
+        "axes": {
+            sim.axis.name: {"position": sim.position, "busy": sim.busy, "fault": sim.fault}
+            for sim in loom.axes
+        },
+    }
+
+
+class ControlServer:
+    """The control channel on (host, port)."""
+
+    def __init__(self, loom: Loom, host: str, port: int) -> None:
+        self.loom = loom
+        self.host = host
+        self.port = port
+        self._server: asyncio.Server | None = None
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._client, self.host, self.port)
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    async def stop(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+            self._server = None
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            while line := await reader.readline():
+                try:
+                    answer = handle(self.loom, json.loads(line))
+                except json.JSONDecodeError as exc:
+                    answer = {"ok": False, "error": f"not JSON: {exc.msg}"}
+                writer.write(json.dumps(answer).encode() + b"\n")
+                await writer.drain()
+        except ConnectionError:
+            pass
+        finally:
+            writer.close()
+
+
+async def request(host: str, port: int, message: dict[str, Any]) -> dict[str, Any]:
+    """Send one request to a running mock loom and return its answer."""
+    reader, writer = await asyncio.open_connection(host, port)
+    try:
+        writer.write(json.dumps(message).encode() + b"\n")
+        await writer.drain()
+        answer: dict[str, Any] = json.loads(await reader.readline())
+        return answer
+    finally:
+        writer.close()

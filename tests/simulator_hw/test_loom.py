@@ -1,0 +1,97 @@
+"""The mock loom's mechanics: strokes with travel time, latching, jams and faults."""
+
+from __future__ import annotations
+
+import pytest
+
+from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_ESTOP, FAULT_JAM, FAULT_NONE, FAULT_STALL
+from bwsd.twin import Machine
+from simulator_hw.loom import WRONG_POSITION_OFFSET, Loom, Speeds
+
+MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5)
+ROW0, ROW1, COL0, COL2 = 0, 1, 2, 4
+WEFT_ANGLE, WEFT_INSERT, TAKEUP = 5, 6, 7
+
+
+def occupied(loom: Loom) -> set[tuple[int, int]]:
+    return {(r, c) for r in range(2) for c in range(3) if loom.occupied[r][c]}
+
+
+def test_a_stroke_goes_out_latches_and_comes_home():
+    loom = Loom(MACHINE, [(0, 0), (1, 2)], Speeds(stroke=100))  # 10 mm at 100 mm/s: 0.1 s
+    loom.command(ROW0, 10_000, 7, now=0.0)
+    loom.tick(0.05)
+    assert (loom.axes[ROW0].position, loom.axes[ROW0].busy) == (5000, True)
+    assert occupied(loom) == {(0, 0), (1, 2)}  # not latched before the far end
+    loom.tick(0.15)
+    assert occupied(loom) == {(0, 1), (1, 2)}
+    assert loom.axes[ROW0].done_seq == 0
+    loom.tick(0.25)
+    sim = loom.axes[ROW0]
+    assert (sim.position, sim.busy, sim.done_seq, sim.last_stroke) == (0, False, 7, 10_000)
+
+
+def test_instant_moves_complete_at_once_and_columns_move_along_y():
+    loom = Loom(MACHINE, [(0, 0), (0, 2)], Speeds())
+    loom.command(COL0, 20_000, 1, now=0.0)  # one cell of pitch_y = 20 mm
+    assert occupied(loom) == {(1, 0), (0, 2)}
+    assert loom.axes[COL0].done_seq == 1
+    loom.command(TAKEUP, 4_000, 2, now=0.0)
+    loom.command(WEFT_ANGLE, 90_000, 3, now=0.0)
+    assert (loom.axes[TAKEUP].position, loom.axes[WEFT_ANGLE].position) == (4_000, 90_000)
+
+
+def test_a_case_pushed_past_the_bound_jams_and_nothing_moves():
+    loom = Loom(MACHINE, [(1, 2)], Speeds())
+    loom.command(ROW1, 10_000, 1, now=0.0)
+    assert loom.axes[ROW1].fault == FAULT_JAM
+    assert loom.axes[ROW1].done_seq == 0
+    assert occupied(loom) == {(1, 2)}
+    loom.command(ROW1, -10_000, 2, now=0.0)  # ignored while faulted
+    assert occupied(loom) == {(1, 2)}
+    loom.reset_faults()
+    loom.command(ROW1, -10_000, 3, now=0.0)
+    assert occupied(loom) == {(1, 1)}
+
+
+def test_injected_faults():
+    loom = Loom(MACHINE, [(0, 0)], Speeds(stroke=100))
+    loom.faults.stall.add("row0")
+    loom.command(ROW0, 10_000, 1, now=0.0)
+    loom.tick(1.0)
+    assert loom.axes[ROW0].fault == FAULT_STALL
+    assert loom.axes[ROW0].position == 5000 and occupied(loom) == {(0, 0)}
+    loom.faults.drive.add("col0")
+    loom.command(COL0, 20_000, 1, now=1.0)
+    assert loom.axes[COL0].fault == FAULT_DRIVE
+    loom.faults.wrong_position.add("takeup")
+    loom.command(TAKEUP, 3000, 1, now=1.0)
+    loom.tick(2.0)
+    assert loom.axes[TAKEUP].position == 3000 + WRONG_POSITION_OFFSET
+    assert loom.axes[TAKEUP].fault == FAULT_NONE
+
+
+def test_estop_cuts_moving_axes_and_refuses_new_ones():
+    loom = Loom(MACHINE, [(0, 0)], Speeds(stroke=10))
+    loom.command(ROW0, 10_000, 1, now=0.0)
+    loom.press_estop(True, now=0.5)
+    assert loom.axes[ROW0].fault == FAULT_ESTOP
+    loom.command(WEFT_INSERT, 5_000, 1, now=0.6)
+    assert not loom.axes[WEFT_INSERT].busy and loom.axes[WEFT_INSERT].done_seq == 0
+    loom.press_estop(False, now=0.7)
+    loom.reset_faults()
+    loom.command(WEFT_INSERT, 5_000, 2, now=0.8)
+    assert loom.axes[WEFT_INSERT].busy
+
+
+@pytest.mark.parametrize("kind", ["quick_stop", "home"])
+def test_quick_stop_and_home(kind):
+    loom = Loom(MACHINE, [(0, 0)], Speeds(stroke=10))
+    loom.command(ROW0, 10_000, 1, now=0.0)
+    if kind == "quick_stop":
+        loom.quick_stop(now=0.2)
+        assert loom.axes[ROW0].fault == FAULT_STALL and not loom.axes[ROW0].busy
+    else:
+        loom.tick(10.0)
+        loom.home(now=10.0)
+        assert (loom.axes[ROW0].done_seq, loom.axes[ROW0].position) == (0, 0)
