@@ -17,10 +17,10 @@ from collections import defaultdict
 
 import numpy as np
 
-from bwsd.twin.predicates import FloatArray, IntArray, Vec
+from bwsd.twin.predicates import BoolArray, FloatArray, IntArray, Vec
 from bwsd.twin.state import State
 
-DENSE_LIMIT = 400_000  # case x segment pairs tested at once; above it, per-sweep queries
+DENSE_LIMIT = 200_000  # case x segment pairs tested densely; above it, a grid join
 Box = tuple[float, float, float, float, float, float]  # lo x, y, z, hi x, y, z
 Candidate = tuple[int, int, Vec, Vec, Box]  # yarn, reference (segment or -(warp + 1)), c, d, box
 Row = tuple[int, Vec, Vec, Box]  # a fixed segment's yarn, ends and box (they never change)
@@ -41,21 +41,18 @@ class Batch:
 
     @classmethod
     def plan(cls, state: State, cases: list[tuple[int, Vec]]) -> Batch | None:
-        """The batch for ``cases`` (warp, target of its free node), or None when too large."""
-        n = len(state.seg_c)
-        if not cases or (len(state.active) + n - state.active_from) * len(cases) > DENSE_LIMIT:
-            return None
+        """The batch for ``cases`` (warp, target of its free node); None if a warp moves twice."""
         movers = np.array([w for w, _ in cases], dtype=np.int64)
-        if len(np.unique(movers)) < len(movers):
+        if not cases or len(np.unique(movers)) < len(movers):
             return None  # a line listed twice: its cases move twice
         seg = state.free_seg.data[movers]
-        a2 = np.array([t for _, t in cases])
-        pts = np.stack((seg[:, :3], seg[:, 3:], a2))
-        scale = 1.0 + float(np.abs(pts).max())
-        grow = state.diameter + 1e-9 * scale
-        lo, hi = pts.min(axis=0) - grow, pts.max(axis=0) + grow
-        fixed = _fixed_lists(state, lo, hi)
-        return cls(state, fixed, _warp_lists(state, movers, lo, hi))
+        tri = np.stack((seg[:, :3], seg[:, 3:], np.array([t for _, t in cases])))  # B, A1, A2
+        scale = 1.0 + float(np.abs(tri).max())
+        reach = state.diameter + 1e-9 * scale
+        planes = _Planes(tri, reach, scale)
+        lo, hi = tri.min(axis=0) - reach, tri.max(axis=0) + reach
+        fixed = _fixed_lists(state, planes, lo, hi)
+        return cls(state, fixed, _warp_lists(state, planes, movers, lo, hi))
 
     def _remember(self, ids: set[int]) -> None:
         """Cache yarn, ends and box of fixed segments (read in one vectorised pass)."""
@@ -142,31 +139,111 @@ def _meets(box: Box, bounds: Box) -> bool:
     )  # fmt: skip
 
 
-def _fixed_lists(state: State, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
-    """Per case, the live fixed segments whose box meets the case's box."""
+class _Planes:
+    """The cases' sweep planes, to drop segments lying wholly beyond reach on one side.
+
+    Every sub-sweep of a case stays within one diameter of its first triangle's plane (a
+    contact node X rests d from a point of it), so a segment whose ends both lie farther than
+    that, on one side, can never be hit by the case.
+    """
+
+    def __init__(self, tri: FloatArray, reach: float, scale: float) -> None:
+        b, a1, a2 = tri
+        normal = np.cross(a1 - b, a2 - b)
+        size = np.linalg.norm(normal, axis=1)
+        usable = size > 1e-9 * scale * scale
+        self.b = b
+        self.normal = normal / np.where(usable, size, 1.0)[:, None]
+        self.usable = usable
+        self.reach = reach + 1e-7 * scale  # generous: this is a filter, exactness comes later
+
+    def keep(self, case: IntArray, c: FloatArray, d: FloatArray) -> BoolArray:
+        """False where both ends of a segment lie beyond reach on one side of the case's plane."""
+        n, b = self.normal[case], self.b[case]
+        sc = np.einsum("ij,ij->i", c - b, n)
+        sd = np.einsum("ij,ij->i", d - b, n)
+        beyond = ((sc > self.reach) & (sd > self.reach)) | ((sc < -self.reach) & (sd < -self.reach))
+        result: BoolArray = ~beyond | ~self.usable[case]
+        return result
+
+
+def _pairs(lo: FloatArray, hi: FloatArray, item_lo: FloatArray, item_hi: FloatArray,
+           cell: tuple[float, float]) -> tuple[IntArray, IntArray]:  # fmt: skip
+    """(case, item) index pairs whose boxes meet, sorted by case.
+
+    Dense when small; otherwise a join on a uniform (x, y) grid, in numpy throughout.
+    """
+    m, k = len(lo), len(item_lo)
+    if m * k <= DENSE_LIMIT:
+        meet = (item_hi[None] >= lo[:, None]).all(axis=2)
+        meet &= (item_lo[None] <= hi[:, None]).all(axis=2)
+        case, item = np.nonzero(meet)
+        return case.astype(np.int64), item.astype(np.int64)
+    case_idx, case_key = _cells(lo, hi, cell)
+    item_idx, item_key = _cells(item_lo, item_hi, cell)
+    order = np.argsort(item_key, kind="stable")
+    keys = item_key[order]
+    left = np.searchsorted(keys, case_key, "left")
+    count = np.searchsorted(keys, case_key, "right") - left
+    pair_case = np.repeat(case_idx, count)
+    offset = np.arange(len(pair_case)) - np.repeat(np.cumsum(count) - count, count)
+    pair_item = item_idx[order[np.repeat(left, count) + offset]]
+    code = np.unique(pair_case * k + pair_item)
+    case, item = code // k, code % k
+    meet = (item_hi[item] >= lo[case]).all(axis=1) & (item_lo[item] <= hi[case]).all(axis=1)
+    return case[meet], item[meet]
+
+
+def _cells(lo: FloatArray, hi: FloatArray, cell: tuple[float, float]) -> tuple[IntArray, IntArray]:
+    """Every (box index, cell key) of the (x, y) grid cells each box covers."""
+    x0, x1 = np.floor(lo[:, 0] / cell[0]), np.floor(hi[:, 0] / cell[0])
+    y0, y1 = np.floor(lo[:, 1] / cell[1]), np.floor(hi[:, 1] / cell[1])
+    nx = (x1 - x0 + 1).astype(np.int64)
+    per = nx * (y1 - y0 + 1).astype(np.int64)
+    idx = np.repeat(np.arange(len(lo)), per)
+    offset = np.arange(len(idx)) - np.repeat(np.cumsum(per) - per, per)
+    cx = x0.astype(np.int64)[idx] + offset % nx[idx]
+    cy = y0.astype(np.int64)[idx] + offset // nx[idx]
+    return idx, (cx + (1 << 30)) * (1 << 31) + (cy + (1 << 30))
+
+
+def _lists(case: IntArray, values: IntArray, m: int) -> list[list[int]]:
+    """Group ``values`` by ``case`` (sorted) into one list per case."""
+    bounds = np.searchsorted(case, np.arange(m + 1))
+    flat = values.tolist()
+    edges = bounds.tolist()
+    return [flat[edges[i] : edges[i + 1]] for i in range(m)]
+
+
+def _fixed_lists(state: State, planes: _Planes, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
+    """Per case, the live fixed segments that meet its box and reach near its plane."""
     floor = float(lo[:, 2].min())
     if floor < state.floor:
         state.refresh_active(floor - state.margin)
     start = int(np.searchsorted(state.active_top, floor))
     ids = state.active[start:]
-    seg_lo, seg_hi = state.active_lo[start:], state.active_hi[start:]
     n = len(state.seg_c)
     if state.active_from < n:
-        tail = state.seg_xyz.data[state.active_from : n]
         ids = np.concatenate((ids, np.arange(state.active_from, n)))
-        seg_lo = np.concatenate((seg_lo, np.minimum(tail[:, :3], tail[:, 3:])))
-        seg_hi = np.concatenate((seg_hi, np.maximum(tail[:, :3], tail[:, 3:])))
-    live = state.seg_alive.data[ids]
-    ids, seg_lo, seg_hi = ids[live], seg_lo[live], seg_hi[live]
-    meet = (seg_hi[None] >= lo[:, None]).all(axis=2) & (seg_lo[None] <= hi[:, None]).all(axis=2)
-    return [ids[row].tolist() for row in meet]
+    ids = ids[state.seg_alive.data[ids]]
+    xyz = state.seg_xyz.data[ids]
+    c, d = xyz[:, :3], xyz[:, 3:]
+    m = state.machine
+    case, item = _pairs(lo, hi, np.minimum(c, d), np.maximum(c, d), (m.pitch_x, m.pitch_y))
+    near = planes.keep(case, c[item], d[item])
+    return _lists(case[near], ids[item[near]], len(lo))
 
 
-def _warp_lists(state: State, movers: IntArray, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
-    """Per case, the warps whose free segment (or, for a mover, swept region) meets its box."""
+def _warp_lists(state: State, planes: _Planes, movers: IntArray, lo: FloatArray,
+                hi: FloatArray) -> list[list[int]]:  # fmt: skip
+    """Per case, the warps whose free segment (or, for a mover, swept region) may be hit."""
     seg = state.free_seg.data[: state.n_warps]
-    w_lo, w_hi = np.minimum(seg[:, :3], seg[:, 3:]), np.maximum(seg[:, :3], seg[:, 3:])
+    c, d = seg[:, :3], seg[:, 3:]
+    w_lo, w_hi = np.minimum(c, d), np.maximum(c, d)
     w_lo[movers], w_hi[movers] = lo, hi
-    meet = (w_hi[None] >= lo[:, None]).all(axis=2) & (w_lo[None] <= hi[:, None]).all(axis=2)
-    meet[np.arange(len(movers)), movers] = False
-    return [np.nonzero(row)[0].tolist() for row in meet]
+    m = state.machine
+    case, warp = _pairs(lo, hi, w_lo, w_hi, (m.pitch_x, m.pitch_y))
+    moving = np.zeros(state.n_warps, dtype=np.bool_)
+    moving[movers] = True
+    keep = (warp != movers[case]) & (moving[warp] | planes.keep(case, c[warp], d[warp]))
+    return _lists(case[keep], warp[keep], len(lo))
