@@ -14,6 +14,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
     from bwsd import run
     from bwsd.export.cli import configure as configure_export
+    from bwsd.fieldbus.cli import configure as configure_hw
     from bwsd.program.cli import configure as configure_program
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
@@ -22,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.configure(sub)
     configure_program(sub)
     configure_export(sub)
+    configure_hw(sub)
     return parser
 
 

@@ -1,0 +1,64 @@
+"""Actuator buses: one async interface (``Fieldbus``), a backend per bus, chosen by config.
+
+The config's ``[fieldbus] backend = "..."`` names the backend; its module is imported only
+when it is used, so a missing bus library only matters to the bus that needs it.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from bwsd.config import Config
+from bwsd.errors import ConfigError
+from bwsd.fieldbus.base import (
+    AxisMove,
+    BusSettings,
+    DriveFault,
+    EStopError,
+    Fieldbus,
+    FieldbusConnectionError,
+    FieldbusError,
+    FieldbusTimeout,
+    MachineState,
+)
+
+BACKENDS = {"modbus": ("bwsd.fieldbus.modbus", "ModbusBus"),
+            "canopen": ("bwsd.fieldbus.canopen", "CanopenBus")}  # fmt: skip
+
+__all__ = [
+    "BACKENDS",
+    "AxisMove",
+    "BusSettings",
+    "DriveFault",
+    "EStopError",
+    "Fieldbus",
+    "FieldbusConnectionError",
+    "FieldbusError",
+    "FieldbusTimeout",
+    "MachineState",
+    "open_bus",
+    "settings_from_config",
+]
+
+
+def settings_from_config(config: Config) -> BusSettings:
+    """The shared bus settings of the ``[fieldbus]`` table."""
+    table = config.table("fieldbus")
+    return BusSettings(**{k: table[k] for k in BusSettings.__dataclass_fields__})
+
+
+def open_bus(config: Config) -> Fieldbus:
+    """The backend the config names, built from its tables (not yet connected)."""
+    name = config.table("fieldbus")["backend"]
+    try:
+        module_name, class_name = BACKENDS[name]
+    except KeyError:
+        raise ConfigError(f"unknown backend {name!r}", path=config.path, table="fieldbus",
+                          key="backend") from None  # fmt: skip
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError(f"backend {name!r} cannot be loaded: {exc}", path=config.path,
+                          table="fieldbus", key="backend") from exc  # fmt: skip
+    bus: Fieldbus = getattr(module, class_name).from_config(config)
+    return bus
