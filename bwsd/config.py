@@ -82,6 +82,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
     },
 }
 REQUIRED = ("machine",)
+MODBUS_MAX_CELLS = 65535  # occupancy sensors are discrete inputs 0 .. R*C-1, e-stop R*C
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,10 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
     machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)
+    elif machine.rows * machine.cols > MODBUS_MAX_CELLS:
+        raise ConfigError(f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
+                          f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
+                          key="backend")  # fmt: skip
     return Config(machine=machine, path=path, tables=tables)
 
 

@@ -96,3 +96,9 @@ def test_canopen_node_ids_must_fit_and_not_collide():
     clash = {"backend": "canopen", "canopen": {"io_node": 5}}
     with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.io_node\]: collides"):
         parse_config({**GOOD, "fieldbus": clash})
+
+
+def test_modbus_map_limits_the_matrix():
+    huge = {**GOOD, "machine": {**GOOD["machine"], "rows": 300, "cols": 300}}
+    with pytest.raises(ConfigError, match=r"\[fieldbus.backend\]: 90000 cells"):
+        parse_config(huge)

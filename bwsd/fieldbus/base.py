@@ -121,6 +121,7 @@ class Fieldbus(ABC):
         self._seq = [0] * len(self.axes)
         self._expected: dict[int, int] = {}
         self._connected = False
+        self._seeded = False
 
     # ----- hooks for a backend -----
     @abstractmethod
@@ -153,19 +154,27 @@ class Fieldbus(ABC):
 
     # ----- shared behaviour -----
     async def connect(self) -> None:
-        """Connect, retrying with exponential backoff."""
+        """Connect, retrying with exponential backoff.
+
+        On the first connection the sequence numbers go on from what the axes report as
+        done, so a restarted daemon never reuses a number an axis has already completed.
+        """
         delay = self.settings.reconnect_delay
-        last: Exception | None = None
-        for _ in range(max(1, self.settings.reconnect_attempts)):
+        attempts = max(1, self.settings.reconnect_attempts)
+        for attempt in range(attempts):
             try:
                 await self._open()
-                self._connected = True
-                return
+                break
             except FieldbusConnectionError as exc:
-                last = exc
+                if attempt == attempts - 1:
+                    raise FieldbusConnectionError(f"cannot reach the bus: {exc}") from exc
                 await asyncio.sleep(delay)
                 delay = min(2 * delay, self.settings.reconnect_delay_max)
-        raise FieldbusConnectionError(f"cannot reach the bus: {last}")
+        self._connected = True
+        if not self._seeded:
+            state = await self._read_state()
+            self._seq = [axis.done_seq for axis in state.axes]
+            self._seeded = True
 
     async def close(self) -> None:
         self._connected = False

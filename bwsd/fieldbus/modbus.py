@@ -1,0 +1,269 @@
+"""Modbus TCP backend: the register map of docs/fieldbus-modbus.md over pymodbus.
+
+The map's constants and codecs at the top are pure and shared with the mock loom's server;
+``ModbusBus`` is the client. A lost connection is reported once, as FieldbusConnectionError,
+and the next call reconnects with the base class's backoff (pymodbus's own reconnect is off).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import fields
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.pdu import ModbusPDU
+
+from bwsd.fieldbus.axes import Axis
+from bwsd.fieldbus.base import (
+    AxisState,
+    BusSettings,
+    Fieldbus,
+    FieldbusConnectionError,
+    FieldbusError,
+    FieldbusTimeout,
+    MachineState,
+)
+from bwsd.twin.machine import Machine
+
+if TYPE_CHECKING:
+    from bwsd.config import Config
+
+# ----- the register map (docs/fieldbus-modbus.md) -----
+MAP_VERSION = 1
+REG_VERSION, REG_AXES, REG_ROWS, REG_COLS, REG_STATUS, REG_COMMAND = range(6)
+MACHINE_ESTOP, MACHINE_FAULTED, MACHINE_BUSY = 1, 2, 4  # bits of REG_STATUS
+CMD_NONE, CMD_RESET, CMD_QUICK_STOP, CMD_HOME = 0, 1, 2, 3
+AXIS_BASE, AXIS_STRIDE = 100, 16
+OFF_TARGET, OFF_SEQ, OFF_STATUS, OFF_POSITION, OFF_DONE, OFF_FAULT, OFF_LAST = 0, 2, 3, 4, 6, 7, 8
+AXIS_BUSY, AXIS_FAULTED, AXIS_HOMED = 1, 2, 4  # bits of OFF_STATUS
+SEQ_MAX = 0x7FFF
+MAX_READ_REGISTERS = 125  # per request, by the Modbus specification
+MAX_READ_BITS = 2000
+MAX_CELLS = 0xFFFF  # discrete inputs 0 .. 65535 hold the cells and the e-stop
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+
+
+def axis_address(index: int) -> int:
+    """First holding register of axis ``index``'s block."""
+    return AXIS_BASE + AXIS_STRIDE * index
+
+
+def estop_input(machine: Machine) -> int:
+    """Discrete input of the emergency stop (after the occupancy sensors)."""
+    return machine.rows * machine.cols
+
+
+def int32_words(value: int) -> tuple[int, int]:
+    """A signed 32-bit value as two registers, high word first."""
+    if not INT32_MIN <= value <= INT32_MAX:
+        raise ValueError(f"{value} does not fit in 32 bits")
+    raw = value & 0xFFFFFFFF
+    return raw >> 16, raw & 0xFFFF
+
+
+def words_int32(high: int, low: int) -> int:
+    """Two registers, high word first, as a signed 32-bit value."""
+    raw = (high << 16) | low
+    return raw - (1 << 32) if raw & 0x80000000 else raw
+
+
+def decode_axis(words: Sequence[int]) -> AxisState:
+    """One axis block (at least 10 registers) as an AxisState."""
+    return AxisState(
+        position=words_int32(words[OFF_POSITION], words[OFF_POSITION + 1]),
+        busy=bool(words[OFF_STATUS] & AXIS_BUSY),
+        done_seq=words[OFF_DONE],
+        fault=words[OFF_FAULT],
+        last_stroke=words_int32(words[OFF_LAST], words[OFF_LAST + 1]),
+    )
+
+
+def read_spans(start: int, count: int, limit: int) -> list[tuple[int, int]]:
+    """(address, count) requests covering ``count`` items from ``start``, ``limit`` each."""
+    return [(a, min(limit, start + count - a)) for a in range(start, start + count, limit)]
+
+
+# ----- the client -----
+Send = Callable[[AsyncModbusTcpClient], Awaitable[ModbusPDU]]
+
+
+class ModbusBus(Fieldbus):
+    """The machine's actuators behind one Modbus TCP server (unit ``device_id``)."""
+
+    def __init__(
+        self, machine: Machine, settings: BusSettings, host: str, port: int, device_id: int
+    ) -> None:
+        if machine.rows * machine.cols > MAX_CELLS:
+            raise FieldbusError(
+                f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
+                f"{machine.rows} x {machine.cols}"
+            )
+        super().__init__(machine, settings)
+        self.host = host
+        self.port = port
+        self.device_id = device_id
+        self._client: AsyncModbusTcpClient | None = None
+        self._lost = False  # the server closed the connection; not yet reported
+
+    @classmethod
+    def from_config(cls, config: Config) -> ModbusBus:
+        """Build the bus from the tables [fieldbus] and [fieldbus.modbus]."""
+        bus, modbus = config.table("fieldbus"), config.table("fieldbus.modbus")
+        settings = BusSettings(**{f.name: bus[f.name] for f in fields(BusSettings)})
+        return cls(config.machine, settings, modbus["host"], modbus["port"], modbus["device_id"])
+
+    @property
+    def where(self) -> str:
+        """The server, as error messages name it."""
+        return f"Modbus TCP {self.host}:{self.port} unit {self.device_id}"
+
+    # ----- hooks -----
+    async def _open(self) -> None:
+        self._drop()
+        client = AsyncModbusTcpClient(
+            self.host,
+            port=self.port,
+            timeout=self.settings.io_timeout,
+            retries=0,
+            reconnect_delay=0,  # no background reconnect: the next call reconnects
+            trace_connect=lambda up: self._on_connect(client, up),
+        )
+        self._client = client
+        if not await client.connect():
+            self._client = None
+            raise FieldbusConnectionError(f"{self.where}: connection refused or no answer")
+        await self._check_map()
+
+    async def _close(self) -> None:
+        self._drop()
+
+    async def _write_setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        try:
+            high, low = int32_words(target)
+        except ValueError as exc:
+            raise FieldbusError(f"{self.where}: axis {axis.name}: target {exc}") from None
+        address = axis_address(axis.index)
+        await self._request(
+            address,
+            lambda c: c.write_registers(address, [high, low, seq], device_id=self.device_id),
+        )
+
+    async def _read_state(self) -> MachineState:
+        words = await self._read_registers(AXIS_BASE, AXIS_STRIDE * len(self.axes))
+        bits = await self._read_inputs(0, estop_input(self.machine) + 1)
+        axes = tuple(
+            decode_axis(words[i * AXIS_STRIDE : (i + 1) * AXIS_STRIDE])
+            for i in range(len(self.axes))
+        )
+        cells = self.machine.rows * self.machine.cols
+        grid = np.array(bits[:cells], dtype=np.bool_).reshape(self.machine.rows, self.machine.cols)
+        return MachineState(axes=axes, occupancy=grid, estop=bits[cells])
+
+    async def _quick_stop(self) -> None:
+        await self._machine_command(CMD_QUICK_STOP)
+
+    async def _reset_faults(self) -> None:
+        await self._machine_command(CMD_RESET)
+
+    async def _home(self) -> None:
+        await self._machine_command(CMD_HOME)
+
+    # ----- requests -----
+    async def _machine_command(self, code: int) -> None:
+        """Write the machine command and wait until the server has acted (reads back 0)."""
+        await self._request(
+            REG_COMMAND, lambda c: c.write_register(REG_COMMAND, code, device_id=self.device_id)
+        )
+        loop = asyncio.get_running_loop()
+        limit = loop.time() + self.settings.timeout
+        while (await self._read_registers(REG_COMMAND, 1))[0] != CMD_NONE:
+            if loop.time() > limit:
+                raise FieldbusTimeout(f"{self.where}: machine command {code} was not taken")
+            await asyncio.sleep(0.002)
+
+    async def _read_registers(self, start: int, count: int) -> list[int]:
+        """Holding registers, in as few requests as the protocol allows."""
+        words: list[int] = []
+        for address, n in read_spans(start, count, MAX_READ_REGISTERS):
+            response = await self._request(address, self._holding(address, n))
+            words += response.registers[:n]
+        return words
+
+    async def _read_inputs(self, start: int, count: int) -> list[bool]:
+        bits: list[bool] = []
+        for address, n in read_spans(start, count, MAX_READ_BITS):
+            response = await self._request(address, self._inputs(address, n))
+            bits += response.bits[:n]
+        return bits
+
+    def _holding(self, address: int, count: int) -> Send:
+        return lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id)
+
+    def _inputs(self, address: int, count: int) -> Send:
+        return lambda c: c.read_discrete_inputs(address, count=count, device_id=self.device_id)
+
+    async def _request(self, address: int, send: Send) -> ModbusPDU:
+        """One request, its failures mapped to our errors by phase."""
+        client = await self._ready()
+        try:
+            response = await send(client)
+        except ConnectionException as exc:
+            self._drop()
+            raise FieldbusConnectionError(f"{self.where}: not connected ({exc})") from None
+        except ModbusIOException:
+            lost = self._lost or not client.connected
+            self._drop()  # a late answer must never be taken for the next request's
+            if lost:
+                raise FieldbusConnectionError(f"{self.where}: connection lost") from None
+            raise FieldbusTimeout(
+                f"{self.where}: no answer at address {address} within "
+                f"{self.settings.io_timeout:g} s"
+            ) from None
+        except ModbusException as exc:
+            raise FieldbusError(f"{self.where}: address {address}: {exc}") from None
+        except asyncio.CancelledError:
+            self._drop()
+            raise
+        if response.isError():
+            raise FieldbusError(
+                f"{self.where}: address {address} refused "
+                f"(exception code {response.exception_code})"
+            )
+        return response
+
+    async def _ready(self) -> AsyncModbusTcpClient:
+        """The connected client: report a lost connection once, else (re)connect."""
+        if self._lost:
+            self._drop()
+            raise FieldbusConnectionError(f"{self.where}: connection lost")
+        if self._client is None or not self._client.connected:
+            await self.connect()
+        client = self._client
+        if client is None:
+            raise FieldbusConnectionError(f"{self.where}: not connected")
+        return client
+
+    def _drop(self) -> None:
+        """Forget the client (and any loss it reported); never raises."""
+        client, self._client = self._client, None
+        self._lost = False
+        if client is not None:
+            client.close()
+
+    async def _check_map(self) -> None:
+        """Refuse a server whose map or machine differs from ours."""
+        words = await self._read_registers(REG_VERSION, REG_COLS + 1)
+        want = [MAP_VERSION, len(self.axes), self.machine.rows, self.machine.cols]
+        if words != want:
+            self._drop()
+            raise FieldbusError(
+                f"{self.where}: map version, axes, rows, cols are {words}, expected {want}"
+            )
+
+    def _on_connect(self, client: AsyncModbusTcpClient, up: bool) -> None:
+        if not up and client is self._client:
+            self._lost = True
