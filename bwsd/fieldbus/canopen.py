@@ -1,0 +1,431 @@
+"""CANopen backend: CiA 402 drives in profile position mode and an I/O node, by SDO.
+
+The object map is docs/fieldbus-canopen.md; the dictionaries built here are the only copy
+of it in code (the mock loom's drives use them too). canopen is synchronous: every SDO
+exchange runs in a worker thread, the nodes of one request in parallel, so the event loop
+never blocks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from enum import IntEnum
+from functools import partial
+from typing import Any
+
+import can
+import numpy as np
+from can.interfaces.socketcand import SocketCanDaemonBus
+from canopen import Network, ObjectDictionary, RemoteNode, SdoAbortedError, SdoCommunicationError
+from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary.datatypes import DOMAIN, INTEGER8, INTEGER32, UNSIGNED8, UNSIGNED16
+
+from bwsd.config import Config
+from bwsd.fieldbus import settings_from_config
+from bwsd.fieldbus.axes import Axis
+from bwsd.fieldbus.base import (
+    FAULT_DRIVE,
+    AxisState,
+    BusSettings,
+    DriveFault,
+    Fieldbus,
+    FieldbusConnectionError,
+    FieldbusError,
+    FieldbusTimeout,
+    MachineState,
+)
+from bwsd.twin.machine import Machine
+
+CONTROLWORD, STATUSWORD, MODE, MODE_DISPLAY = 0x6040, 0x6041, 0x6060, 0x6061
+TARGET, POSITION, ERROR_CODE, HEARTBEAT = 0x607A, 0x6064, 0x603F, 0x1017
+OCCUPANCY, LAST_STROKE, DONE_SEQ, SETPOINT_SEQ, FAULT_CODE, ESTOP = range(0x2000, 0x2006)
+
+DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
+    CONTROLWORD: ("controlword", UNSIGNED16, "rw"),
+    STATUSWORD: ("statusword", UNSIGNED16, "ro"),
+    MODE: ("modes of operation", INTEGER8, "rw"),
+    MODE_DISPLAY: ("modes of operation display", INTEGER8, "ro"),
+    TARGET: ("target position", INTEGER32, "rw"),
+    POSITION: ("position actual value", INTEGER32, "ro"),
+    ERROR_CODE: ("error code", UNSIGNED16, "ro"),
+    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
+    LAST_STROKE: ("last stroke", INTEGER32, "ro"),
+    DONE_SEQ: ("done sequence", UNSIGNED16, "ro"),
+    SETPOINT_SEQ: ("set-point sequence", UNSIGNED16, "rw"),
+    FAULT_CODE: ("fault code", UNSIGNED8, "ro"),
+}
+IO_OBJECTS: dict[int, tuple[str, int, str]] = {
+    OCCUPANCY: ("occupancy", DOMAIN, "ro"),
+    ESTOP: ("emergency stop", UNSIGNED8, "ro"),
+    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
+}
+
+CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, CW_SWITCH_ON = 0x00, 0x02, 0x06, 0x07
+CW_ENABLE, CW_NEW_SETPOINT, CW_RELATIVE, CW_FAULT_RESET = 0x0F, 0x10, 0x40, 0x80
+SW_TARGET_REACHED, SW_SETPOINT_ACK = 0x0400, 0x1000
+MODE_PROFILE_POSITION, MODE_HOMING = 1, 6
+NMT_START = 0x01
+# CiA 402 error codes (0x603F) of the bus-independent fault codes (0x2004)
+ERROR_CODES = {1: 0x7500, 2: 0x8611, 3: 0x5530, 4: 0x8612, 5: 0x5441}
+
+
+class Cia402(IntEnum):
+    """The drive states, each as the value its statusword shows under the state's mask."""
+
+    SWITCH_ON_DISABLED = 0x40
+    READY_TO_SWITCH_ON = 0x21
+    SWITCHED_ON = 0x23
+    OPERATION_ENABLED = 0x27
+    QUICK_STOP_ACTIVE = 0x07
+    FAULT = 0x08
+
+    @property
+    def mask(self) -> int:
+        return 0x4F if self in (Cia402.SWITCH_ON_DISABLED, Cia402.FAULT) else 0x6F
+
+    @classmethod
+    def of(cls, statusword: int) -> Cia402 | None:
+        """The state a statusword shows (None: a transient state)."""
+        return next((s for s in cls if statusword & s.mask == s.value), None)
+
+
+# the controlword that moves a drive one step towards "operation enabled"
+WALK = {
+    Cia402.FAULT: CW_FAULT_RESET,
+    Cia402.SWITCH_ON_DISABLED: CW_SHUTDOWN,
+    Cia402.READY_TO_SWITCH_ON: CW_SWITCH_ON,
+    Cia402.SWITCHED_ON: CW_ENABLE,
+    Cia402.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,
+    None: CW_DISABLE_VOLTAGE,
+}
+
+
+def dictionary(objects: Mapping[int, tuple[str, int, str]], heartbeat: int = 0) -> ObjectDictionary:
+    """An object dictionary of ``objects`` (index: name, data type, access); defaults 0."""
+    od = ObjectDictionary()  # type: ignore[no-untyped-call]
+    for index, (name, data_type, access) in objects.items():
+        var = ODVariable(name, index, 0)
+        var.data_type, var.access_type = data_type, access
+        if data_type != DOMAIN:
+            var.default = heartbeat if index == HEARTBEAT else 0
+        od.add_object(var)
+    return od
+
+
+def occupancy_bytes(occupied: Iterable[Iterable[bool]]) -> bytes:
+    """The occupancy bitmap of 0x2000: row-major, least significant bit first."""
+    bits = np.array([bool(v) for row in occupied for v in row], dtype=np.bool_)
+    return np.packbits(bits, bitorder="little").tobytes()
+
+
+class CanopenBus(Fieldbus):
+    """The machine's actuators as CANopen nodes, reached through python-can."""
+
+    def __init__(
+        self,
+        machine: Machine,
+        settings: BusSettings,
+        interface: str = "socketcand",
+        channel: str = "can0",
+        host: str = "127.0.0.1",
+        port: int = 29536,
+        node_base: int = 1,
+        io_node: int = 127,
+        heartbeat_ms: int = 100,
+    ) -> None:
+        super().__init__(machine, settings)
+        self.interface, self.channel, self.host, self.port = interface, channel, host, port
+        self.drive_ids = [node_base + axis.index for axis in self.axes]
+        self.io_node = io_node
+        self.heartbeat_ms = heartbeat_ms
+        self._network: Network | None = None
+        self._nodes: dict[int, RemoteNode] = {}
+        self._locks = {i: threading.Lock() for i in [*self.drive_ids, io_node]}
+        self._seen: dict[int, float] = {}
+        self._watch: _LinkWatch | None = None
+
+    @classmethod
+    def from_config(cls, config: Config) -> CanopenBus:
+        """The bus of ``[fieldbus]`` and ``[fieldbus.canopen]``."""
+        settings = settings_from_config(config)
+        return cls(config.machine, settings, **config.table("fieldbus.canopen"))
+
+    # ----- hooks -----
+    async def _open(self) -> None:
+        await asyncio.to_thread(self._connect_network)
+        try:
+            await self._each(self._init_node, [*self.drive_ids, self.io_node])
+        except FieldbusTimeout as exc:
+            await self._teardown()
+            raise FieldbusConnectionError(str(exc)) from exc
+        except FieldbusError:
+            await self._teardown()
+            raise
+        self._seen = dict.fromkeys(self._locks, time.monotonic())
+
+    async def _close(self) -> None:
+        await self._teardown()
+
+    async def _write_setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        await self._ready()
+        await self._gather([partial(self._setpoint, axis, target, seq)])
+
+    async def _read_state(self) -> MachineState:
+        await self._ready()
+        calls = [partial(self._read_axis, i) for i in range(len(self.axes))]
+        *states, (occupancy, estop) = await self._gather([*calls, self._read_io])
+        return MachineState(axes=tuple(states), occupancy=occupancy, estop=estop)
+
+    async def _quick_stop(self) -> None:
+        await self._ready()
+        await self._each(lambda node: self._set(node, CONTROLWORD, CW_QUICK_STOP), self.drive_ids)
+
+    async def _reset_faults(self) -> None:
+        await self._ready()
+        await self._each(lambda node: self._enable(node, reset=True), self.drive_ids)
+
+    async def _home(self) -> None:
+        await self._ready()
+        homed = [self.drive_ids[a.index] for a in self.axes if a.kind != "takeup"]
+        await self._each(self._home_drive, homed)
+
+    # ----- connection -----
+    def _connect_network(self) -> None:
+        """Open python-can, add the nodes and start them (blocking)."""
+        network = Network()
+        network.NOTIFIER_CYCLE = 0.1  # how long disconnect() waits for the receive thread
+        watch = _LinkWatch(network)
+        self._nodes = {i: self._add_node(network, i) for i in self._locks}
+        try:
+            network.bus = self._socketcand() if self.interface == "socketcand" else None
+            network.connect(interface=self.interface, channel=self.channel)
+            if network.notifier is not None:
+                network.notifier.add_listener(watch)
+            network.nmt.send_command(NMT_START)
+        except (can.CanError, OSError, ValueError) as exc:
+            _shutdown(network)
+            raise FieldbusConnectionError(f"cannot open the CAN bus: {exc}") from exc
+        self._network, self._watch = network, watch
+
+    def _socketcand(self) -> can.BusABC:
+        where = f"socketcand at {self.host}:{self.port}"
+        try:  # python-can retries a refused connection for 10 s: ask once first
+            socket.create_connection((self.host, self.port), self.settings.io_timeout).close()
+        except OSError as exc:
+            raise FieldbusConnectionError(f"cannot reach {where}: {exc}") from exc
+        try:
+            return _Socketcand(  # type: ignore[no-untyped-call]
+                channel=self.channel, host=self.host, port=self.port, tcp_tune=True
+            )
+        except (can.CanError, OSError) as exc:
+            raise FieldbusConnectionError(f"{where}: {exc}") from exc
+
+    def _add_node(self, network: Network, node_id: int) -> RemoteNode:
+        objects = IO_OBJECTS if node_id == self.io_node else DRIVE_OBJECTS
+        node = RemoteNode(node_id, dictionary(objects))
+        node.sdo.RESPONSE_TIMEOUT = self.settings.io_timeout
+        network.add_node(node)
+        network.subscribe(0x700 + node_id, self._on_heartbeat)
+        return node
+
+    def _on_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        self._seen[can_id - 0x700] = time.monotonic()
+
+    async def _ready(self) -> None:
+        """Reconnect after a loss; raise when the link or a node's heartbeat is gone."""
+        if self._network is None:
+            await self.connect()
+        problem = self._link_problem()
+        if problem:
+            await self._teardown()
+            raise FieldbusConnectionError(problem)
+
+    def _lost(self) -> Exception | None:
+        """The receive error that ended the link, if any."""
+        return self._watch.error if self._watch is not None else None
+
+    def _link_problem(self) -> str:
+        if self._lost() is not None:
+            return f"connection to the CAN bus lost: {self._lost()}"
+        if self.heartbeat_ms <= 0:
+            return ""
+        now, limit = time.monotonic(), 3 * self.heartbeat_ms / 1000
+        for node_id, seen in self._seen.items():
+            if now - seen > limit:
+                return f"{self._name(node_id)}: no heartbeat for {now - seen:.2f} s"
+        return ""
+
+    async def _teardown(self) -> None:
+        network, self._network = self._network, None
+        if network is not None:
+            await asyncio.to_thread(_shutdown, network)
+
+    # ----- running SDO work off the event loop -----
+    async def _each(self, fn: Callable[[int], object], items: Iterable[int]) -> None:
+        """``fn(item)`` for every item, in parallel worker threads."""
+        await self._gather([partial(fn, item) for item in items])
+
+    async def _gather(self, calls: Sequence[Callable[[], Any]]) -> list[Any]:
+        """Run the calls in parallel worker threads; the worst error is raised after all end."""
+        threads = [asyncio.to_thread(call) for call in calls]
+        results = await asyncio.gather(*threads, return_exceptions=True)
+        errors = [r for r in results if isinstance(r, BaseException)]
+        if errors:
+            lost = [e for e in errors if isinstance(e, FieldbusConnectionError)]
+            if lost:
+                await self._teardown()
+            raise (lost or errors)[0]
+        return list(results)
+
+    # ----- blocking work, in worker threads -----
+    def _sdo(self, node_id: int, index: int, value: int | None = None) -> Any:
+        """Read (or write ``value`` to) object ``index`` of a node; errors by phase."""
+        node = self._nodes[node_id]
+        try:
+            with self._locks[node_id]:
+                if value is None:
+                    return node.sdo[index].raw
+                node.sdo[index].raw = value
+                return None
+        except SdoCommunicationError as exc:
+            what = f"{self._name(node_id)}: no answer to SDO 0x{index:04X} ({exc})"
+            if self._lost() is not None:
+                raise FieldbusConnectionError(f"{what}; link lost: {self._lost()}") from exc
+            raise FieldbusTimeout(what) from exc
+        except SdoAbortedError as exc:
+            raise FieldbusError(f"{self._name(node_id)}: SDO 0x{index:04X} refused: {exc}") from exc
+        except (can.CanError, OSError, RuntimeError) as exc:
+            raise FieldbusConnectionError(f"{self._name(node_id)}: CAN bus lost: {exc}") from exc
+
+    def _get(self, node_id: int, index: int) -> int:
+        value = self._sdo(node_id, index)
+        if not isinstance(value, int):
+            raise FieldbusError(f"{self._name(node_id)}: 0x{index:04X} is not a number")
+        return value
+
+    def _set(self, node_id: int, index: int, value: int) -> None:
+        self._sdo(node_id, index, value)
+
+    def _init_node(self, node_id: int) -> None:
+        self._set(node_id, HEARTBEAT, self.heartbeat_ms)
+        if node_id != self.io_node:
+            self._set(node_id, MODE, MODE_PROFILE_POSITION)
+            self._enable(node_id, reset=False)
+
+    def _enable(self, node_id: int, reset: bool) -> None:
+        """Walk a drive to "operation enabled"; a faulted drive is left alone unless ``reset``."""
+        for _ in range(8):
+            statusword = self._get(node_id, STATUSWORD)
+            state = Cia402.of(statusword)
+            if state is Cia402.OPERATION_ENABLED or (state is Cia402.FAULT and not reset):
+                return
+            if state is Cia402.FAULT:
+                self._set(node_id, CONTROLWORD, CW_DISABLE_VOLTAGE)  # bit 7 acts on its rise
+            self._set(node_id, CONTROLWORD, WALK[state])
+        axis = self.axes[self.drive_ids.index(node_id)]
+        raise DriveFault(axis, FAULT_DRIVE, f"stays at statusword 0x{statusword:04X}, not enabled")
+
+    def _setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        node = self.drive_ids[axis.index]
+        self._enable(node, reset=False)
+        self._set(node, TARGET, target)
+        self._set(node, SETPOINT_SEQ, seq)
+        self._set(node, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT | (CW_RELATIVE * axis.relative))
+        limit = time.monotonic() + self.settings.io_timeout
+        while True:
+            statusword = self._get(node, STATUSWORD)
+            enabled = Cia402.of(statusword) is Cia402.OPERATION_ENABLED
+            if statusword & SW_SETPOINT_ACK or not enabled:
+                break  # taken, or refused by a fault that wait() reports
+            if time.monotonic() > limit:
+                raise FieldbusTimeout(f"axis {axis.name}: set-point {seq} not acknowledged")
+        self._set(node, CONTROLWORD, CW_ENABLE)
+
+    def _home_drive(self, node_id: int) -> None:
+        self._enable(node_id, reset=False)
+        self._set(node_id, MODE, MODE_HOMING)
+        self._set(node_id, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT)  # bit 4 starts homing
+        self._set(node_id, CONTROLWORD, CW_ENABLE)
+        self._set(node_id, MODE, MODE_PROFILE_POSITION)
+
+    def _read_axis(self, index: int) -> AxisState:
+        node = self.drive_ids[index]
+        statusword = self._get(node, STATUSWORD)
+        fault = self._get(node, FAULT_CODE)
+        if not fault and Cia402.of(statusword) is Cia402.FAULT:
+            fault = FAULT_DRIVE  # faulted for a reason of the drive's own
+        return AxisState(
+            position=self._get(node, POSITION),
+            busy=not statusword & SW_TARGET_REACHED,
+            done_seq=self._get(node, DONE_SEQ),
+            fault=fault,
+            last_stroke=self._get(node, LAST_STROKE),
+        )
+
+    def _read_io(self) -> tuple[np.ndarray[Any, np.dtype[np.bool_]], bool]:
+        rows, cols = self.machine.rows, self.machine.cols
+        data = self._sdo(self.io_node, OCCUPANCY)
+        if not isinstance(data, bytes | bytearray) or len(data) != (rows * cols + 7) // 8:
+            raise FieldbusError(f"I/O node: occupancy of {len(data)} bytes, {rows}x{cols} cells")
+        bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8), bitorder="little")
+        grid = bits[: rows * cols].astype(np.bool_).reshape(rows, cols)
+        return grid, bool(self._get(self.io_node, ESTOP))
+
+    def _name(self, node_id: int) -> str:
+        if node_id == self.io_node:
+            return f"I/O node (node {node_id})"
+        return f"axis {self.axes[self.drive_ids.index(node_id)].name} (node {node_id})"
+
+
+class _Socketcand(SocketCanDaemonBus):
+    """python-can's socketcand client, raising when the server closes the connection.
+
+    python-can 4.6 reads an empty string at the end of the stream and returns no message,
+    so its receive thread would spin at full speed on a closed connection.
+    """
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        msg, filtered = super()._recv_internal(timeout)  # type: ignore[no-untyped-call]
+        sock = getattr(self, "_SocketCanDaemonBus__socket", None)  # its private socket
+        if msg is None and isinstance(sock, socket.socket) and _at_end(sock):
+            raise can.CanOperationError("socketcand closed the connection")
+        return msg, filtered
+
+
+def _at_end(sock: socket.socket) -> bool:
+    """True when the peer has closed ``sock`` (readable, yet nothing to read)."""
+    try:
+        readable, _, _ = select.select([sock], [], [], 0)
+        return bool(readable) and not sock.recv(1, socket.MSG_PEEK)
+    except OSError:
+        return True
+
+
+class _LinkWatch(can.Listener):
+    """Keeps a receive error of the bus (a lost TCP link) and stops the receive thread."""
+
+    def __init__(self, network: Network) -> None:
+        self.network = network
+        self.error: Exception | None = None
+
+    def on_message_received(self, msg: can.Message) -> None:
+        pass
+
+    def on_error(self, exc: Exception) -> None:
+        self.error = exc
+        notifier = self.network.notifier
+        if notifier is not None:
+            # a thread cannot join itself; left running, it would spin on the dead socket
+            threading.Thread(target=notifier.stop, args=(1.0,), daemon=True).start()
+
+
+def _shutdown(network: Network) -> None:
+    """Disconnect; never raises (disconnect re-raises the receive thread's error last)."""
+    with contextlib.suppress(Exception):
+        network.disconnect()
