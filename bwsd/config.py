@@ -72,9 +72,9 @@ SCHEMA: dict[str, dict[str, Spec]] = {
     },
     "simulator": {
         "host": Text("127.0.0.1"),
-        "modbus_port": Num(int, 1, 65535, 15020),
-        "socketcand_port": Num(int, 1, 65535, 29536),
-        "control_port": Num(int, 1, 65535, 15021),
+        "modbus_port": Num(int, 0, 65535, 15020),
+        "socketcand_port": Num(int, 0, 65535, 29536),
+        "control_port": Num(int, 0, 65535, 15021),
         "stroke_speed": Num(float, 0.0, 1e6, 0.0),
         "takeup_speed": Num(float, 0.0, 1e6, 0.0),
         "weft_speed": Num(float, 0.0, 1e6, 0.0),
