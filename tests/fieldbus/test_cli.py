@@ -1,0 +1,73 @@
+"""`bwsd hw`: the commissioning commands against the mock loom, through the console script."""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from simulator_hw.control import request
+from tests.fieldbus.conftest import BUS, MACHINE, Mock, toml
+
+BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
+
+
+def hw_config(tmp: Path, mock: Mock, backend: str) -> Path:
+    path = tmp / f"{backend}.toml"
+    path.write_text(toml({
+        "machine": MACHINE,
+        "fieldbus": {"backend": backend, **BUS},
+        "fieldbus.modbus": {"port": mock.ports["modbus"]},
+        "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
+    }))  # fmt: skip
+    return path
+
+
+def hw(config: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    assert BWSD, "the bwsd console script is not installed beside this Python"
+    return subprocess.run([BWSD, "hw", *args, "--config", str(config)], capture_output=True,
+                          text=True, timeout=120, check=False)  # fmt: skip
+
+
+@pytest.mark.parametrize("backend", ["modbus", "canopen"])
+def test_commissioning_session(tmp_path, mock, backend):
+    config = hw_config(tmp_path, mock, backend)
+    status = hw(config, "status")
+    assert status.returncode == 0, status.stderr
+    assert ".XX.\n.XX." in status.stdout and "released" in status.stdout
+    moved = hw(config, "shift", "row", "1", "1")
+    assert moved.returncode == 0, moved.stderr
+    assert "..XX\n.XX." in moved.stdout
+    jam = hw(config, "shift", "row", "1", "1")
+    assert jam.returncode == 2 and "axis row1: jam" in jam.stderr
+    assert hw(config, "status").returncode == 1  # the jam is latched
+    reset = hw(config, "reset")
+    assert reset.returncode == 0, reset.stderr
+    takeup = hw(config, "takeup", "2.5")
+    assert takeup.returncode == 0 and "2500" in takeup.stdout
+
+
+def test_status_fails_while_the_estop_is_pressed(tmp_path, mock):
+    asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "estop", "pressed": True}))
+    status = hw(hw_config(tmp_path, mock, "modbus"), "status")
+    assert status.returncode == 1
+    assert "PRESSED" in status.stdout
+
+
+def test_bad_requests_and_configs_are_refused_by_name(tmp_path, mock):
+    config = hw_config(tmp_path, mock, "modbus")
+    done = hw(config, "shift", "row", "9", "1")
+    assert done.returncode == 2 and "no axis 'row9'" in done.stderr
+    assert "only advances" in hw(config, "takeup", "-1").stderr
+    bad = tmp_path / "bad.toml"
+    bad.write_text(config.read_text().replace("io_timeout", "io_timout"))
+    done = hw(bad, "status")
+    assert done.returncode == 2 and "[fieldbus.io_timout]: unknown key" in done.stderr
+    closed = tmp_path / "closed.toml"
+    closed.write_text(config.read_text().replace(f"port = {mock.ports['modbus']}", "port = 1"))
+    done = hw(closed, "status")
+    assert done.returncode == 2 and "cannot reach the bus" in done.stderr
