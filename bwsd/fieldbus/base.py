@@ -181,10 +181,12 @@ class Fieldbus(ABC):
         await self._close()
 
     async def move(self, moves: Sequence[AxisMove]) -> None:
-        """Start every move at once (refused while the e-stop is pressed)."""
-        state = await self._read_state()
-        if state.estop:
-            raise EStopError("emergency stop is pressed: no move started")
+        """Start every move at once.
+
+        The drives refuse a set-point while the e-stop is pressed; ``wait`` reports it.
+        """
+        if not self._seeded:
+            await self.connect()  # the sequence numbers go on from the axes' own
         for move in moves:
             axis = self.axes[move.axis]
             self._seq[move.axis] = (self._seq[move.axis] + 1) % 0x8000 or 1

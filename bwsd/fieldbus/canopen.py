@@ -34,6 +34,7 @@ from bwsd.fieldbus.base import (
     AxisState,
     BusSettings,
     DriveFault,
+    EStopError,
     Fieldbus,
     FieldbusConnectionError,
     FieldbusError,
@@ -344,6 +345,9 @@ class CanopenBus(Fieldbus):
             if statusword & SW_SETPOINT_ACK or not enabled:
                 break  # taken, or refused by a fault that wait() reports
             if time.monotonic() > limit:
+                self._set(node, CONTROLWORD, CW_ENABLE)  # bit 4 low: the next set-point rises
+                if self._get(self.io_node, ESTOP):
+                    raise EStopError("emergency stop is pressed: no move started")
                 raise FieldbusTimeout(f"axis {axis.name}: set-point {seq} not acknowledged")
         self._set(node, CONTROLWORD, CW_ENABLE)
 
