@@ -122,6 +122,7 @@ class Fieldbus(ABC):
         self._expected: dict[int, int] = {}
         self._connected = False
         self._seeded = False
+        self._known = [AxisState(0, False, 0, 0, 0)] * len(self.axes)
 
     # ----- hooks for a backend -----
     @abstractmethod
@@ -137,8 +138,11 @@ class Fieldbus(ABC):
         """Send one set-point with its sequence number and start it."""
 
     @abstractmethod
-    async def _read_state(self) -> MachineState:
-        """Read every axis, the occupancy sensors and the e-stop."""
+    async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
+        """Read the axes ``axes`` (every axis when None), the occupancy sensors and the e-stop.
+
+        A backend may read only the axes asked for and build the rest with ``_merge``.
+        """
 
     @abstractmethod
     async def _quick_stop(self) -> None:
@@ -197,7 +201,7 @@ class Fieldbus(ABC):
         """Wait until every axis in ``axes`` completed its last set-point; check the read-back."""
         limit = time.monotonic() + (self.settings.timeout if timeout is None else timeout)
         while True:
-            state = await self._read_state()
+            state = await self._read_state(axes)
             self._check(state, axes)
             if all(state.axes[i].done_seq == self._seq[i] and not state.axes[i].busy
                    for i in axes):  # fmt: skip
@@ -233,6 +237,12 @@ class Fieldbus(ABC):
             self._seq[i] = 0
             self._expected[i] = 0
         return await self.wait(homed, timeout)
+
+    def _merge(self, read: dict[int, AxisState], occupancy: BoolGrid, estop: bool) -> MachineState:
+        """A whole machine state from the axes just read and the last known of the others."""
+        for i, axis in read.items():
+            self._known[i] = axis
+        return MachineState(axes=tuple(self._known), occupancy=occupancy, estop=estop)
 
     def _check(self, state: MachineState, axes: Sequence[int]) -> None:
         if state.estop:

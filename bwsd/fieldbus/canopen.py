@@ -177,11 +177,12 @@ class CanopenBus(Fieldbus):
         await self._ready()
         await self._gather([partial(self._setpoint, axis, target, seq)])
 
-    async def _read_state(self) -> MachineState:
+    async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
         await self._ready()
-        calls = [partial(self._read_axis, i) for i in range(len(self.axes))]
+        wanted = list(range(len(self.axes))) if axes is None else sorted(set(axes))
+        calls = [partial(self._read_axis, i) for i in wanted]
         *states, (occupancy, estop) = await self._gather([*calls, self._read_io])
-        return MachineState(axes=tuple(states), occupancy=occupancy, estop=estop)
+        return self._merge(dict(zip(wanted, states, strict=True)), occupancy, estop)
 
     async def _quick_stop(self) -> None:
         await self._ready()

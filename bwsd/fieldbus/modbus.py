@@ -8,9 +8,9 @@ and the next call reconnects with the base class's backoff (pymodbus's own recon
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pymodbus.client import AsyncModbusTcpClient
@@ -87,6 +87,17 @@ def read_spans(start: int, count: int, limit: int) -> list[tuple[int, int]]:
     return [(a, min(limit, start + count - a)) for a in range(start, start + count, limit)]
 
 
+def _runs(indices: Iterable[int]) -> list[tuple[int, int]]:
+    """Sorted indices as half-open runs of consecutive numbers."""
+    runs: list[tuple[int, int]] = []
+    for i in indices:
+        if runs and runs[-1][1] == i:
+            runs[-1] = (runs[-1][0], i + 1)
+        else:
+            runs.append((i, i + 1))
+    return runs
+
+
 # ----- the client -----
 Send = Callable[[AsyncModbusTcpClient], Awaitable[ModbusPDU]]
 
@@ -152,16 +163,24 @@ class ModbusBus(Fieldbus):
             lambda c: c.write_registers(address, [high, low, seq], device_id=self.device_id),
         )
 
-    async def _read_state(self) -> MachineState:
-        words = await self._read_registers(AXIS_BASE, AXIS_STRIDE * len(self.axes))
-        bits = await self._read_inputs(0, estop_input(self.machine) + 1)
-        axes = tuple(
-            decode_axis(words[i * AXIS_STRIDE : (i + 1) * AXIS_STRIDE])
-            for i in range(len(self.axes))
-        )
+    async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
+        wanted = range(len(self.axes)) if axes is None else sorted(set(axes))
+        groups = _runs(wanted)
         cells = self.machine.rows * self.machine.cols
+        reads: list[Awaitable[list[int]] | Awaitable[list[bool]]] = [
+            self._read_registers(axis_address(lo), AXIS_STRIDE * (hi - lo)) for lo, hi in groups
+        ]
+        reads.append(self._read_inputs(0, estop_input(self.machine) + 1))
+        done: list[Any] = await asyncio.gather(*reads)  # one round trip for all of them
+        blocks: list[list[int]] = done[:-1]
+        bits: list[bool] = done[-1]
+        read = {
+            i: decode_axis(words[(i - lo) * AXIS_STRIDE : (i - lo + 1) * AXIS_STRIDE])
+            for (lo, hi), words in zip(groups, blocks, strict=True)
+            for i in range(lo, hi)
+        }
         grid = np.array(bits[:cells], dtype=np.bool_).reshape(self.machine.rows, self.machine.cols)
-        return MachineState(axes=axes, occupancy=grid, estop=bits[cells])
+        return self._merge(read, grid, bool(bits[cells]))
 
     async def _quick_stop(self) -> None:
         await self._machine_command(CMD_QUICK_STOP)
