@@ -21,6 +21,7 @@ from bwsd.twin.predicates import BoolArray, FloatArray, IntArray, Vec
 from bwsd.twin.state import State
 
 DENSE_LIMIT = 200_000  # case x segment pairs tested densely; above it, a grid join
+SLAB_FROM = 2_000  # pairs: below this the plane filter costs more than the candidates it saves
 Box = tuple[float, float, float, float, float, float]  # lo x, y, z, hi x, y, z
 Candidate = tuple[int, int, Vec, Vec, Box]  # yarn, reference (segment or -(warp + 1)), c, d, box
 Row = tuple[int, Vec, Vec, Box]  # a fixed segment's yarn, ends and box (they never change)
@@ -230,7 +231,7 @@ def _fixed_lists(state: State, planes: _Planes, lo: FloatArray, hi: FloatArray) 
     c, d = xyz[:, :3], xyz[:, 3:]
     m = state.machine
     case, item = _pairs(lo, hi, np.minimum(c, d), np.maximum(c, d), (m.pitch_x, m.pitch_y))
-    near = planes.keep(case, c[item], d[item])
+    near = planes.keep(case, c[item], d[item]) if len(case) > SLAB_FROM else slice(None)
     return _lists(case[near], ids[item[near]], len(lo))
 
 
@@ -245,5 +246,7 @@ def _warp_lists(state: State, planes: _Planes, movers: IntArray, lo: FloatArray,
     case, warp = _pairs(lo, hi, w_lo, w_hi, (m.pitch_x, m.pitch_y))
     moving = np.zeros(state.n_warps, dtype=np.bool_)
     moving[movers] = True
-    keep = (warp != movers[case]) & (moving[warp] | planes.keep(case, c[warp], d[warp]))
+    keep = warp != movers[case]
+    if len(case) > SLAB_FROM:
+        keep &= moving[warp] | planes.keep(case, c[warp], d[warp])
     return _lists(case[keep], warp[keep], len(lo))
