@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -199,4 +200,22 @@ FLAT_CROSSING = (
 @given(braids())
 @example(FLAT_CROSSING)
 def test_braids_match_reference(case):
+    _compare(case)
+
+
+@pytest.mark.parametrize("path", ["grid-join", "per-sweep"])
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+          HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(braids())
+@example(FLAT_CROSSING)
+def test_every_broad_phase_path_matches_reference(monkeypatch, path, case):
+    """The grid join with the plane filter (used on large instructions) and the per-sweep
+    queries (used when an instruction moves a line twice), forced on small braids."""
+    import bwsd.twin.batch as batch
+
+    if path == "grid-join":
+        monkeypatch.setattr(batch, "DENSE_LIMIT", 0)
+        monkeypatch.setattr(batch, "SLAB_FROM", 0)
+    else:
+        monkeypatch.setattr(batch.Batch, "plan", classmethod(lambda cls, state, cases: None))
     _compare(case)
