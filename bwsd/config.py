@@ -35,7 +35,14 @@ class Text:
     choices: tuple[str, ...] = ()
 
 
-Spec = Num | Text
+@dataclass(frozen=True)
+class Flag:
+    """A true/false key."""
+
+    default: bool
+
+
+Spec = Num | Text | Flag
 
 SCHEMA: dict[str, dict[str, Spec]] = {
     "machine": {
@@ -70,6 +77,23 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "io_node": Num(int, 1, 127, 127),
         "heartbeat_ms": Num(int, 0, 65535, 100),
     },
+    "controller": {
+        "max_contacts": Num(int, 0, 10_000_000, 0),
+        "tensioner_stroke": Num(float, 0.0, 1e5, 0.0),
+    },
+    "journal": {"path": Text("journal.db")},
+    "api": {
+        "host": Text("127.0.0.1"),
+        "port": Num(int, 0, 65535, 8080),
+        "tokens_file": Text("tokens.json"),
+        "open_reads": Flag(False),
+    },
+    "plc": {
+        "enabled": Flag(True),
+        "host": Text("127.0.0.1"),
+        "port": Num(int, 0, 65535, 15502),
+        "device_id": Num(int, 0, 247, 1),
+    },
     "simulator": {
         "host": Text("127.0.0.1"),
         "modbus_port": Num(int, 0, 65535, 15020),
@@ -100,6 +124,11 @@ class Config:
 
 def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
     path, table, key = where
+    if isinstance(spec, Flag):
+        if not isinstance(value, bool):
+            raise ConfigError(f"must be true or false, got {value!r}", path=path, table=table,
+                              key=key)  # fmt: skip
+        return value
     if isinstance(spec, Text):
         if not isinstance(value, str):
             raise ConfigError(f"must be a string, got {value!r}", path=path, table=table, key=key)

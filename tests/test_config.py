@@ -102,3 +102,11 @@ def test_modbus_map_limits_the_matrix():
     huge = {**GOOD, "machine": {**GOOD["machine"], "rows": 300, "cols": 300}}
     with pytest.raises(ConfigError, match=r"\[fieldbus.backend\]: 90000 cells"):
         parse_config(huge)
+
+
+def test_daemon_tables_defaults_and_flags():
+    cfg = parse_config(GOOD)
+    assert cfg.table("api")["open_reads"] is False and cfg.table("plc")["enabled"] is True
+    assert cfg.table("controller") == {"max_contacts": 0, "tensioner_stroke": 0.0}
+    with pytest.raises(ConfigError, match=r"\[api.open_reads\]: must be true or false"):
+        parse_config({**GOOD, "api": {"open_reads": 1}})
