@@ -1,0 +1,240 @@
+"""The run loop: every instruction predicted, checked, journaled, moved, verified, committed.
+
+One instruction (docs/packml.md, the project's DESIGN):
+1. the twin predicts it, off the event loop; a limit refuses it (Abort with the reason);
+2. the journal records "started" (on disk before anything moves);
+3. the bus moves the actuators and waits for them; a drive fault or the e-stop aborts,
+   a timeout or a lost connection holds;
+4. the read-back is compared with the prediction (a mismatch holds, nothing committed);
+5. the twin commits, the journal records "done", an event is published.
+
+On start ``recover`` rebuilds the twin from the journal: the done instructions are replayed;
+an instruction started and not done is completed if the machine shows its predicted result,
+and otherwise reported (Held, with the reason), never guessed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Any
+
+from bwsd.controller.packml import Command, PackML, State
+from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
+from bwsd.errors import BwsdError, TwinError
+from bwsd.fieldbus.axes import axis_by_name
+from bwsd.fieldbus.base import (
+    DriveFault,
+    EStopError,
+    Fieldbus,
+    FieldbusError,
+    MachineState,
+)
+from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, Journal
+from bwsd.program import parse_program, validate
+from bwsd.twin import Machine, Prediction, Program, Twin
+
+Publish = Callable[[dict[str, Any]], None]
+
+
+class ControllerError(BwsdError):
+    """A request the controller cannot take in its present state."""
+
+
+class Controller:
+    """The one place that decides: PackML state, the loaded program, the twin, the run."""
+
+    def __init__(self, machine: Machine, bus: Fieldbus, journal: Journal,
+                 limits: Limits | None = None, publish: Publish | None = None) -> None:  # fmt: skip
+        self.machine = machine
+        self.bus = bus
+        self.journal = journal
+        self.limits = limits or Limits()
+        self.publish = publish or (lambda event: None)
+        self.packml = PackML()
+        self.packml.on_change.append(self._on_state)
+        self.program: Program | None = None
+        self.program_id: int | None = None
+        self.twin: Twin | None = None
+        self._task: asyncio.Task[None] | None = None
+
+    # ----- programs -----
+    async def load(self, name: str, text: str) -> int:
+        """Parse, validate and dry-run a program, then make it the one to run."""
+        if self.packml.state not in (State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED):
+            raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
+        program = parse_program(text, name)
+        validate(program, self.machine, name)
+        await asyncio.to_thread(_dry_run, self.machine, program, name)
+        pid = await asyncio.to_thread(self.journal.add_program, name, text,
+                                      len(program.instructions))  # fmt: skip
+        self.program, self.program_id = program, pid
+        self.twin = Twin.from_program(self.machine, program)
+        return pid
+
+    @property
+    def index(self) -> int:
+        """Instructions done of the loaded program."""
+        return self.twin.done if self.twin else 0
+
+    # ----- commands -----
+    async def command(self, command: Command, reason: str = "") -> State:
+        """Apply a PackML command and run the acting state it enters to its end."""
+        if command is Command.START and self.program is None:
+            raise ControllerError("no program is loaded")
+        state = self.packml.command(command, reason)
+        await self._act(state)
+        return self.packml.state
+
+    async def _act(self, state: State) -> None:
+        if state is State.RESETTING:
+            await self._guard(self.bus.reset_faults())
+        elif state in (State.STARTING, State.UNHOLDING, State.UNSUSPENDING):
+            self.packml.state_complete()
+            self._task = asyncio.create_task(self._run())
+            return
+        elif state in (State.ABORTING, State.STOPPING):
+            await self._settle()
+            await self._guard(self.bus.quick_stop())
+            self._outcome(ABORTED if state is State.ABORTING else STOPPED)
+        elif state in (State.HOLDING, State.SUSPENDING):
+            await self._settle()
+            self._outcome(HELD)
+        elif state is State.CLEARING:
+            await self._guard(self.bus.reset_faults())
+        if self.packml.state in (State.RESETTING, State.ABORTING, State.STOPPING,
+                                 State.HOLDING, State.SUSPENDING, State.CLEARING):  # fmt: skip
+            self.packml.state_complete()
+
+    async def _guard(self, action: Any) -> None:
+        try:
+            await action
+        except FieldbusError as exc:
+            self.publish({"event": "fault", "reason": str(exc)})
+
+    async def _settle(self) -> None:
+        """Let the running instruction finish (never cut a move the twin has not seen)."""
+        task, self._task = self._task, None
+        if task is not None and task is not asyncio.current_task():
+            await task
+
+    async def wait(self) -> None:
+        """Until the run loop stops (the program completes, holds or aborts)."""
+        if self._task is not None:
+            await self._task
+
+    # ----- the run loop -----
+    async def _run(self) -> None:
+        assert self.program is not None and self.twin is not None
+        self._outcome(RUNNING)
+        while self.packml.state is State.EXECUTE:
+            if self.twin.done >= len(self.program.instructions):
+                self.packml.execute_done()
+                self._outcome(COMPLETE)
+                self.packml.state_complete()
+                return
+            if not await self._step():
+                return
+
+    async def _step(self) -> bool:
+        """One instruction end to end; False when it stopped the run."""
+        assert self.program is not None and self.twin is not None and self.program_id
+        index = self.twin.done + 1
+        instruction = self.program.instructions[index - 1]
+        try:
+            pred = await asyncio.to_thread(self.twin.predict, instruction)
+            check_limits(pred, self.limits)
+        except (TwinError, RefusedMove) as exc:
+            return await self._stop(Command.ABORT, str(exc))
+        steps = setpoints(self.machine, instruction, self.twin.takeup)
+        payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
+                   "contacts": len(pred.contacts)}  # fmt: skip
+        await asyncio.to_thread(self.journal.started, self.program_id, index, payload)
+        try:
+            for step in steps:
+                await self.bus.execute(step)
+            state = await self.bus.state()
+            self._verify(pred, state)
+        except (DriveFault, EStopError) as exc:
+            return await self._stop(Command.ABORT, f"instruction {index}: {exc}")
+        except (FieldbusError, Mismatch) as exc:
+            return await self._stop(Command.HOLD, f"instruction {index}: {exc}")
+        await self._commit(pred, index)
+        return True
+
+    def _verify(self, pred: Prediction, state: MachineState) -> None:
+        takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
+        verify(pred, state, takeup, self.bus.settings.position_tolerance)
+
+    async def _commit(self, pred: Prediction, index: int) -> None:
+        assert self.twin is not None and self.program_id
+        self.twin.commit(pred)
+        await asyncio.to_thread(self.journal.done, self.program_id, index,
+                                {"contacts": len(pred.contacts)})  # fmt: skip
+        self.publish({"event": "instruction", "index": index, "contacts": len(pred.contacts),
+                      "inserted": len(pred.inserted)})  # fmt: skip
+
+    async def _stop(self, command: Command, reason: str) -> bool:
+        self.publish({"event": "fault", "reason": reason})
+        self._task = None
+        self.packml.command(command, reason)
+        await self._act(self.packml.state)
+        return False
+
+    def _outcome(self, outcome: str) -> None:
+        if self.program_id is not None:
+            self.journal.set_outcome(self.program_id, outcome, self.packml.reason)
+
+    def _on_state(self, old: State, new: State, cause: str) -> None:
+        self.journal.log_state(int(new), new.label, self.packml.reason)
+        self.publish({"event": "state", "from": old.label, "to": new.label, "cause": cause})
+
+    # ----- restart -----
+    async def recover(self) -> str:
+        """Rebuild the twin from the journal; settle a pending instruction. Says what it did."""
+        record = await asyncio.to_thread(self.journal.active_program)
+        if record is None:
+            return "nothing to recover"
+        text = await asyncio.to_thread(self.journal.program_text, record.id)
+        program = parse_program(text, record.name)
+        twin = Twin.from_program(self.machine, program)
+        for instruction in program.instructions[: record.done]:
+            await asyncio.to_thread(twin.apply, instruction)
+        self.program, self.program_id, self.twin = program, record.id, twin
+        self.packml = _held_machine(self.packml)
+        pending = await asyncio.to_thread(self.journal.pending, record.id)
+        if pending is None:
+            return self._hold(f"restarted at instruction {record.done}: resume with Unhold")
+        return await self._settle_pending(program, twin, pending.index)
+
+    def _hold(self, reason: str) -> str:
+        self.packml.command(Command.HOLD, reason)
+        self._outcome(HELD)
+        self.packml.state_complete()
+        return reason
+
+    async def _settle_pending(self, program: Program, twin: Twin, index: int) -> str:
+        pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
+        state = await self.bus.state()
+        try:
+            self._verify(pred, state)
+        except Mismatch as exc:
+            return self._hold(f"restarted: instruction {index} started and not done: {exc}")
+        await self._commit(pred, index)
+        return self._hold(f"restarted: instruction {index} completed from the read-back")
+
+
+def _held_machine(current: PackML) -> PackML:
+    """A state machine in Execute, ready to be held (a restarted run resumes by Unhold)."""
+    machine = PackML(State.EXECUTE, current.mode)
+    machine.on_change.extend(current.on_change)
+    return machine
+
+
+def _dry_run(machine: Machine, program: Program, name: str) -> None:
+    from bwsd.twin import simulate
+
+    try:
+        simulate(machine, program)
+    except TwinError as exc:
+        raise ControllerError(f"{name}: {exc}") from exc

@@ -1,0 +1,49 @@
+"""The daemon's durable record: programs, instructions, events and states (docs/journal.md).
+
+SQLite in WAL mode with ``synchronous=FULL``: a write returns once it is on disk. The
+journal records "instruction i started" before the actuators move and "instruction i done"
+after the twin commits; on restart the twin is rebuilt from the program text and the done
+instructions, and the one pending instruction, if any, is completed or reported.
+"""
+
+from bwsd.journal.records import (
+    ABORTED,
+    ACTIVE,
+    COMPLETE,
+    FINAL,
+    HELD,
+    LOADED,
+    OUTCOMES,
+    RUNNING,
+    STOPPED,
+    SUSPENDED,
+    EventRecord,
+    InstructionRecord,
+    JournalError,
+    PendingInstruction,
+    ProgramRecord,
+    StateRecord,
+)
+from bwsd.journal.schema import SCHEMA_VERSION
+from bwsd.journal.store import Journal
+
+__all__ = [
+    "ABORTED",
+    "ACTIVE",
+    "COMPLETE",
+    "FINAL",
+    "HELD",
+    "LOADED",
+    "OUTCOMES",
+    "RUNNING",
+    "SCHEMA_VERSION",
+    "STOPPED",
+    "SUSPENDED",
+    "EventRecord",
+    "InstructionRecord",
+    "Journal",
+    "JournalError",
+    "PendingInstruction",
+    "ProgramRecord",
+    "StateRecord",
+]

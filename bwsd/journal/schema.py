@@ -1,0 +1,189 @@
+"""The journal's file: schema, identification, durability settings and the writer's lock."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import sqlite3
+from pathlib import Path
+
+from bwsd.journal.records import ACTIVE, FINAL, OUTCOMES, JournalError
+
+SCHEMA_VERSION = 1  # PRAGMA user_version
+APPLICATION_ID = 0x62777364  # PRAGMA application_id: "bwsd" in ASCII
+BUSY_TIMEOUT_MS = 5000  # readers in other processes may hold the WAL briefly
+
+_OUTCOMES = ", ".join(f"'{o}'" for o in OUTCOMES)
+_ACTIVE = ", ".join(f"'{o}'" for o in ACTIVE)
+_FINAL = ", ".join(f"'{o}'" for o in FINAL)
+
+SCHEMA = f"""
+CREATE TABLE programs (
+    id INTEGER PRIMARY KEY,
+    name TEXT NOT NULL CHECK (name <> ''),
+    text TEXT NOT NULL,
+    sha256 TEXT NOT NULL CHECK (length(sha256) = 64),
+    instructions INTEGER NOT NULL CHECK (instructions >= 0),
+    done INTEGER NOT NULL DEFAULT 0 CHECK (done BETWEEN 0 AND instructions),
+    created REAL NOT NULL,
+    started REAL,
+    finished REAL,
+    outcome TEXT NOT NULL DEFAULT 'loaded' CHECK (outcome IN ({_OUTCOMES})),
+    reason TEXT NOT NULL DEFAULT ''
+);
+CREATE UNIQUE INDEX programs_one_active ON programs ((0)) WHERE outcome IN ({_ACTIVE});
+CREATE TRIGGER programs_fixed BEFORE UPDATE OF id, name, text, sha256, instructions, created
+ON programs BEGIN SELECT RAISE(ABORT, 'a program is never rewritten'); END;
+CREATE TRIGGER programs_final BEFORE UPDATE ON programs WHEN OLD.outcome IN ({_FINAL})
+BEGIN SELECT RAISE(ABORT, 'a finished program never changes'); END;
+CREATE TRIGGER programs_complete BEFORE UPDATE OF outcome ON programs
+WHEN NEW.outcome = 'complete' AND NEW.done <> NEW.instructions
+BEGIN SELECT RAISE(ABORT, 'a program completes with all its instructions done'); END;
+CREATE TABLE instructions (
+    program_id INTEGER NOT NULL REFERENCES programs (id),
+    idx INTEGER NOT NULL CHECK (idx >= 1),
+    started REAL NOT NULL,
+    started_payload TEXT NOT NULL,
+    done REAL,
+    done_payload TEXT,
+    CHECK ((done IS NULL) = (done_payload IS NULL)),
+    PRIMARY KEY (program_id, idx)
+) WITHOUT ROWID;
+CREATE TRIGGER instructions_in_order BEFORE INSERT ON instructions
+WHEN NEW.done IS NOT NULL
+    OR NEW.idx IS NOT (SELECT done + 1 FROM programs WHERE id = NEW.program_id)
+    OR (SELECT outcome FROM programs WHERE id = NEW.program_id) IS NOT 'running'
+BEGIN SELECT RAISE(ABORT, 'instruction started out of order'); END;
+CREATE TRIGGER instructions_fixed BEFORE UPDATE OF program_id, idx, started, started_payload
+ON instructions BEGIN SELECT RAISE(ABORT, 'a started instruction is never rewritten'); END;
+CREATE TRIGGER instructions_done_once BEFORE UPDATE OF done, done_payload ON instructions
+WHEN OLD.done IS NOT NULL OR NEW.done IS NULL
+    OR (SELECT outcome FROM programs WHERE id = NEW.program_id) NOT IN ({_ACTIVE})
+BEGIN SELECT RAISE(ABORT, 'instruction done twice or outside a run'); END;
+CREATE TRIGGER instructions_count_done AFTER UPDATE OF done ON instructions
+BEGIN UPDATE programs SET done = done + 1 WHERE id = NEW.program_id; END;
+CREATE TRIGGER instructions_kept BEFORE DELETE ON instructions
+BEGIN SELECT RAISE(ABORT, 'journaled instructions are never deleted'); END;
+CREATE TABLE events (
+    id INTEGER PRIMARY KEY,
+    time REAL NOT NULL,
+    kind TEXT NOT NULL CHECK (kind <> ''),
+    data TEXT NOT NULL
+);
+CREATE TABLE states (
+    id INTEGER PRIMARY KEY,
+    time REAL NOT NULL,
+    state INTEGER NOT NULL CHECK (state >= 0),
+    name TEXT NOT NULL,
+    reason TEXT NOT NULL
+);
+"""
+TABLES = ("events", "instructions", "programs", "states")
+
+
+def lock(path: Path) -> int:
+    """Take the single writer's lock (a ``-lock`` file beside the journal); its descriptor."""
+    lock_path = path.with_name(path.name + "-lock")
+    try:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+    except OSError as exc:
+        raise JournalError(f"cannot create the lock file: {exc.strerror}", path=str(path)) from exc
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        raise JournalError("already open by another writer", path=str(path)) from exc
+    return fd
+
+
+def connect(path: Path) -> sqlite3.Connection:
+    """Open (creating if new) the journal at ``path``: identified, in WAL, synchronous FULL."""
+    where = str(path)
+    if path.is_dir():
+        raise JournalError("is a folder, not a journal file", path=where)
+    created = not path.exists()
+    try:
+        conn = sqlite3.connect(where, isolation_level=None, check_same_thread=False)
+    except sqlite3.Error as exc:
+        raise JournalError(f"cannot open: {exc}", path=where) from exc
+    try:
+        fresh = _identify(conn, where)
+        _configure(conn, where)
+        if fresh:
+            _create(conn)
+    except sqlite3.Error as exc:
+        conn.close()
+        raise JournalError(f"not a usable journal: {exc}", path=where) from exc
+    except JournalError:
+        conn.close()
+        raise
+    if created:
+        _sync_folder(path.parent)
+    return conn
+
+
+def _identify(conn: sqlite3.Connection, where: str) -> bool:
+    """True for an empty database; raise unless the file is a journal of this schema."""
+    app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+    version = conn.execute("PRAGMA user_version").fetchone()[0]
+    tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if app_id == 0 and version == 0 and not tables:
+        return True
+    if app_id != APPLICATION_ID:
+        raise JournalError(f"not a bwsd journal (application id {app_id:#x}, tables: "
+                           f"{', '.join(sorted(tables)) or 'none'})", path=where)  # fmt: skip
+    if version > SCHEMA_VERSION:
+        raise JournalError(f"written by a newer bwsd (schema version {version}; this bwsd "
+                           f"reads version {SCHEMA_VERSION})", path=where)  # fmt: skip
+    if version != SCHEMA_VERSION:
+        raise JournalError(f"unknown schema version {version} (this bwsd reads version "
+                           f"{SCHEMA_VERSION})", path=where)  # fmt: skip
+    if missing := set(TABLES) - tables:
+        raise JournalError(f"damaged: missing tables {', '.join(sorted(missing))}", path=where)
+    return False
+
+
+def _configure(conn: sqlite3.Connection, where: str) -> None:
+    mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+    if str(mode).lower() != "wal":
+        raise JournalError(f"cannot use WAL mode here (SQLite kept {mode!r})", path=where)
+    conn.execute("PRAGMA synchronous = FULL")  # fsync the WAL at every commit
+    conn.execute("PRAGMA foreign_keys = ON")
+    conn.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+
+
+def _create(conn: sqlite3.Connection) -> None:
+    """The schema and the file's identity in one transaction: a crash leaves none of it."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for statement in _statements(SCHEMA):
+            conn.execute(statement)
+        conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+
+
+def _statements(script: str) -> list[str]:
+    """Split a script into complete statements (triggers hold semicolons of their own)."""
+    out: list[str] = []
+    current = ""
+    for line in script.splitlines(keepends=True):
+        current += line
+        if sqlite3.complete_statement(current):
+            out.append(current.strip())
+            current = ""
+    return out
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make the new file's name durable too (its folder entry), best effort."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)

@@ -1,0 +1,217 @@
+"""The journal: programs and their instructions, every write one SQLite transaction.
+
+Write order is checked twice: here, with messages naming the program and instruction, and
+by the schema's triggers (schema.py), so that no code path can journal an instruction out
+of order.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sqlite3
+from typing import Any
+
+from bwsd.journal import codec
+from bwsd.journal.events import EventLog
+from bwsd.journal.records import (
+    ACTIVE,
+    COMPLETE,
+    FINAL,
+    LOADED,
+    OUTCOMES,
+    RUNNING,
+    InstructionRecord,
+    JournalError,
+    PendingInstruction,
+    ProgramRecord,
+)
+
+_PROGRAM = ("SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
+            "reason FROM programs")  # fmt: skip
+_ACTIVE_SQL = ", ".join("?" for _ in ACTIVE)
+
+
+class Journal(EventLog):
+    """The daemon's durable record of programs, instructions, events and states."""
+
+    # -- programs ---------------------------------------------------------------------------
+
+    def add_program(self, name: str, text: str, instructions: int) -> int:
+        """Store a program's .bws text (with its sha256) and instruction count; its id."""
+        if not name:
+            raise self._error("a program needs a name")
+        if isinstance(instructions, bool) or not isinstance(instructions, int) or instructions < 0:
+            raise self._error(f"instruction count must be an integer >= 0, got {instructions!r}")
+        try:
+            digest = hashlib.sha256(text.encode()).hexdigest()
+        except UnicodeEncodeError as exc:
+            raise self._error(f"program text is not valid Unicode: {exc.reason}") from exc
+        with self._write() as conn:
+            cur = conn.execute(
+                "INSERT INTO programs (name, text, sha256, instructions, created) "
+                "VALUES (?, ?, ?, ?, ?)",
+                (name, text, digest, instructions, self._clock()),
+            )
+            assert cur.lastrowid is not None
+            return cur.lastrowid
+
+    def program(self, program_id: int) -> ProgramRecord:
+        """One program's record."""
+        with self._read() as conn:
+            return self._program(conn, program_id)
+
+    def program_text(self, program_id: int) -> str:
+        """The program's .bws text, checked against its sha256: what the twin re-parses."""
+        with self._read() as conn:
+            row = conn.execute(
+                "SELECT text, sha256 FROM programs WHERE id = ?", (program_id,)
+            ).fetchone()
+        if row is None:
+            raise self._error("no such program", program=program_id)
+        if hashlib.sha256(row[0].encode()).hexdigest() != row[1]:
+            raise self._error("program text does not match its sha256", program=program_id)
+        return str(row[0])
+
+    def history(self, limit: int = 50, before_id: int | None = None) -> list[ProgramRecord]:
+        """Programs newest first, at most ``limit``, older than ``before_id`` if given."""
+        self._check_limit(limit)
+        with self._read() as conn:
+            rows = conn.execute(
+                f"{_PROGRAM} WHERE id < ? ORDER BY id DESC LIMIT ?",
+                (before_id if before_id is not None else 2**63 - 1, limit),
+            ).fetchall()
+        return [ProgramRecord(*row) for row in rows]
+
+    def active_program(self) -> ProgramRecord | None:
+        """The program running, held or suspended, if any (at most one is)."""
+        with self._read() as conn:
+            row = conn.execute(f"{_PROGRAM} WHERE outcome IN ({_ACTIVE_SQL})", ACTIVE).fetchone()
+        return None if row is None else ProgramRecord(*row)
+
+    def set_outcome(self, program_id: int, outcome: str, reason: str = "") -> None:
+        """Move a program to ``outcome`` (see records.OUTCOMES), with the reason if it stops."""
+        if outcome not in OUTCOMES or outcome == LOADED:
+            allowed = ", ".join(o for o in OUTCOMES if o != LOADED)
+            raise self._error(f"unknown outcome {outcome!r} (one of {allowed})", program=program_id)
+        with self._write() as conn:
+            self._check_outcome(conn, self._program(conn, program_id), outcome)
+            now = self._clock()
+            conn.execute(
+                "UPDATE programs SET outcome = ?, reason = ?, "
+                "started = CASE WHEN ? THEN coalesce(started, ?) ELSE started END, "
+                "finished = CASE WHEN ? THEN ? ELSE finished END WHERE id = ?",
+                (outcome, reason, outcome == RUNNING, now, outcome in FINAL, now, program_id),
+            )
+
+    def _check_outcome(self, conn: sqlite3.Connection, rec: ProgramRecord, outcome: str) -> None:
+        if rec.outcome in FINAL:
+            raise self._error(f"already {rec.outcome}: a finished program never changes",
+                              program=rec.id)  # fmt: skip
+        if outcome in ACTIVE:
+            row = conn.execute(
+                f"SELECT id, outcome FROM programs WHERE outcome IN ({_ACTIVE_SQL}) AND id <> ?",
+                (*ACTIVE, rec.id),
+            ).fetchone()
+            if row is not None:
+                raise self._error(f"program {row[0]} is {row[1]}: one program is active at a "
+                                  "time", program=rec.id)  # fmt: skip
+        if outcome == COMPLETE and rec.done != rec.instructions:
+            raise self._error(f"{rec.done} of {rec.instructions} instructions done: it cannot "
+                              "complete", program=rec.id)  # fmt: skip
+
+    # -- instructions -----------------------------------------------------------------------
+
+    def started(self, program_id: int, index: int, payload: dict[str, Any]) -> None:
+        """Journal that instruction ``index`` (1-based) starts: before the actuators move."""
+        data = self._payload(payload, program_id, index)
+        with self._write() as conn:
+            rec = self._program(conn, program_id, index)
+            self._check_start(conn, rec, index)
+            conn.execute(
+                "INSERT INTO instructions (program_id, idx, started, started_payload) "
+                "VALUES (?, ?, ?, ?)",
+                (program_id, index, self._clock(), data),
+            )
+
+    def _check_start(self, conn: sqlite3.Connection, rec: ProgramRecord, index: int) -> None:
+        def refuse(message: str) -> JournalError:
+            return self._error(message, program=rec.id, index=index)
+
+        if rec.outcome != RUNNING:
+            raise refuse(f"the program is {rec.outcome}: instructions start only while it runs")
+        if not 1 <= index <= rec.instructions:
+            raise refuse(f"out of range: the program has {rec.instructions} instructions")
+        if index <= rec.done:
+            raise refuse("already started and done")
+        if self._pending_row(conn, rec) is not None:
+            pending = rec.done + 1
+            raise refuse("already started" if index == pending else f"instruction {pending} is "
+                         "started and not done")  # fmt: skip
+        if index != rec.done + 1:
+            raise refuse(f"instruction {index - 1} is not done")
+
+    def done(self, program_id: int, index: int, payload: dict[str, Any]) -> None:
+        """Journal that instruction ``index`` is done: after the twin committed it."""
+        data = self._payload(payload, program_id, index)
+        with self._write() as conn:
+            rec = self._program(conn, program_id, index)
+            if rec.outcome not in ACTIVE:
+                raise self._error(f"the program is {rec.outcome}: no instruction of it can finish",
+                                  program=program_id, index=index)  # fmt: skip
+            row = conn.execute(
+                "SELECT done FROM instructions WHERE program_id = ? AND idx = ?",
+                (program_id, index),
+            ).fetchone()
+            if row is None or row[0] is not None:
+                message = "not started" if row is None else "already done"
+                raise self._error(message, program=program_id, index=index)
+            conn.execute(
+                "UPDATE instructions SET done = ?, done_payload = ? WHERE program_id = ? "
+                "AND idx = ?",
+                (self._clock(), data, program_id, index),
+            )
+
+    def done_count(self, program_id: int) -> int:
+        """How many instructions of the program are done (they are 1 .. this count)."""
+        return self.program(program_id).done
+
+    def pending(self, program_id: int) -> PendingInstruction | None:
+        """The instruction that started and is not done, if any: complete it or report it."""
+        with self._read() as conn:
+            row = self._pending_row(conn, self._program(conn, program_id))
+        if row is None:
+            return None
+        return PendingInstruction(program_id, row[0], codec.load(row[2]), row[1])
+
+    def instructions(
+        self, program_id: int, after: int = 0, limit: int = 1000
+    ) -> list[InstructionRecord]:
+        """The journaled instructions of a program with index > ``after``, in order."""
+        self._check_limit(limit)
+        with self._read() as conn:
+            rows = conn.execute(
+                "SELECT idx, started, started_payload, done, done_payload FROM instructions "
+                "WHERE program_id = ? AND idx > ? ORDER BY idx LIMIT ?",
+                (program_id, after, limit),
+            ).fetchall()
+        return [
+            InstructionRecord(program_id, idx, t0, codec.load(p0), t1, codec.load_optional(p1))
+            for idx, t0, p0, t1, p1 in rows
+        ]
+
+    @staticmethod
+    def _pending_row(conn: sqlite3.Connection, rec: ProgramRecord) -> Any:
+        # instructions 1 .. done are done, so the only one that can be pending is done + 1
+        return conn.execute(
+            "SELECT idx, started, started_payload FROM instructions "
+            "WHERE program_id = ? AND idx = ? AND done IS NULL",
+            (rec.id, rec.done + 1),
+        ).fetchone()
+
+    def _program(
+        self, conn: sqlite3.Connection, program_id: int, index: int | None = None
+    ) -> ProgramRecord:
+        row = conn.execute(f"{_PROGRAM} WHERE id = ?", (program_id,)).fetchone()
+        if row is None:
+            raise self._error("no such program", program=program_id, index=index)
+        return ProgramRecord(*row)

@@ -1,0 +1,171 @@
+"""The run loop against the mock loom in its own process, with a real journal file."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import numpy as np
+
+from bwsd.controller.packml import Command, State
+from bwsd.controller.plan import Limits
+from bwsd.controller.runner import Controller
+from bwsd.fieldbus import open_bus
+from bwsd.journal import Journal
+from bwsd.program import parse_program
+from bwsd.twin import simulate
+from simulator_hw.control import request
+from tests.fieldbus.conftest import client_config
+
+# The mock loom's fill (tests/fieldbus/conftest.py): cases at (1, 1), (1, 2), (2, 1), (2, 2).
+CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
+TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
+
+
+def run(scenario: Any) -> Any:
+    return asyncio.run(asyncio.wait_for(scenario, 120))
+
+
+async def controller(mock, tmp_path, **kw) -> tuple[Controller, Journal, list[dict]]:
+    config = client_config("modbus", mock.ports)
+    bus = open_bus(config)
+    await bus.connect()
+    journal = Journal.open(tmp_path / "journal.db")
+    events: list[dict] = []
+    return Controller(config.machine, bus, journal, publish=events.append, **kw), journal, events
+
+
+def bits(twin) -> list:
+    sk = twin.skeleton()
+    return [(y.node_ids.tobytes(), y.nodes.tobytes()) for y in sk.yarns] + list(sk.contacts)
+
+
+def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, events = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        assert ctl.packml.state is State.IDLE
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE
+        program = parse_program(TEXT)
+        assert bits(ctl.twin) == bits(simulate(client_config("modbus", mock.ports).machine,
+                                               program))  # fmt: skip
+        record = journal.program(pid)
+        assert (record.outcome, record.done, record.instructions) == ("complete", 15, 15)
+        assert [e["index"] for e in events if e["event"] == "instruction"] == list(range(1, 16))
+        state = await ctl.bus.state()
+        assert np.array_equal(state.occupancy, ctl.twin.occupancy >= 0)
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_a_refused_move_aborts_with_its_reason_before_anything_moves(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path, limits=Limits(tensioner_stroke=0.001))
+        pid = await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.ABORTED
+        assert "beyond the tensioner's stroke" in ctl.packml.reason
+        assert journal.program(pid).done == 0 and journal.pending(pid) is None
+        answer = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})
+        assert answer["occupancy"] == [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_a_drive_fault_aborts_without_committing(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        await request("127.0.0.1", mock.ports["control"],
+                      {"cmd": "fault", "kind": "drive", "axis": "col2"})  # fmt: skip
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.ABORTED
+        assert "instruction 2: axis col2: drive fault" in ctl.packml.reason
+        assert ctl.twin.done == 1  # the faulted instruction was not committed
+        await request("127.0.0.1", mock.ports["control"], {"cmd": "clear"})
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_restart_resumes_to_the_same_skeleton(mock, tmp_path):
+    async def scenario() -> None:
+        first, journal, _ = await controller(mock, tmp_path)
+        await first.load("braid.bws", TEXT)
+        await first.command(Command.RESET)
+        await first.command(Command.START)
+        while first.twin.done < 7:
+            await asyncio.sleep(0)
+        await first.command(Command.HOLD, "operator")
+        done = first.twin.done
+        await first.bus.close()
+        journal.close()
+        second, journal, _ = await controller(mock, tmp_path)
+        said = await second.recover()
+        assert "resume with Unhold" in said and second.packml.state is State.HELD
+        assert second.twin.done == done
+        await second.command(Command.UNHOLD)
+        await second.wait()
+        assert second.packml.state is State.COMPLETE
+        whole = simulate(client_config("modbus", mock.ports).machine, parse_program(TEXT))
+        assert bits(second.twin) == bits(whole)
+        assert journal.program(1).done == 15
+        await second.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_restart_settles_a_pending_instruction_from_the_read_back(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        # the daemon journaled "started" for instruction 1 and died before the move
+        journal.set_outcome(pid, "running")
+        journal.started(pid, 1, {})
+        said = await ctl.recover()
+        assert "instruction 1 started and not done" in said
+        assert ctl.packml.state is State.HELD and ctl.twin.done == 0
+        # now the move happens (as if the actuators had finished it) and the daemon restarts
+        from bwsd.controller.plan import setpoints
+
+        program = parse_program(TEXT)
+        for step in setpoints(ctl.machine, program.instructions[0], 0.0):
+            await ctl.bus.execute(step)
+        again = Controller(ctl.machine, ctl.bus, journal)
+        said = await again.recover()
+        assert "instruction 1 completed from the read-back" in said
+        assert again.twin.done == 1 and journal.pending(pid) is None
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_a_silent_bus_holds_with_the_reason(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        await request("127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "mute"})
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.HELD
+        assert ctl.packml.reason.startswith("instruction 1: ")
+        assert journal.program(pid).outcome == "held"
+        assert journal.pending(pid) is not None  # started, never confirmed: for the operator
+        journal.close()
+
+    run(scenario())
