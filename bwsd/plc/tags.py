@@ -1,0 +1,248 @@
+"""The PackML tags served to the plant PLC over Modbus TCP (map and handshake: docs/plc.md).
+
+bwsd is the server, the PLC the client. pymodbus's action callback sees every access: a
+read is answered from the controller as it is now, a write of a change request queues the
+request. One worker task takes the requests in order, outside the callback, through the
+controller, then writes the request register back to 0.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import sys
+from typing import cast
+
+from pymodbus.constants import ExcCodes
+from pymodbus.server import ModbusTcpServer
+from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
+
+from bwsd.config import Config
+from bwsd.controller.packml import Command, State, UnitMode
+from bwsd.controller.runner import Controller
+from bwsd.errors import BwsdError
+from bwsd.plc.reasons import StopReason, stop_reason
+from bwsd.plc.registers import (
+    MAP_VERSION,
+    REG_CMD_CHANGE_REQUEST,
+    REG_CNTRL_CMD,
+    REG_COUNT,
+    REG_MAP_VERSION,
+    REG_UNIT_MODE,
+    REG_UNIT_MODE_CHANGE_REQUEST,
+    REQUEST_REGISTERS,
+    U16,
+    U32,
+    WRITABLE,
+    Tags,
+    encode,
+)
+
+log = logging.getLogger(__name__)
+
+HOLDING_FUNCTIONS = frozenset({3, 6, 16, 22, 23})  # every other function code is refused
+HEARTBEAT_PERIOD = 1.0  # s
+PLC_REASON = "by the PLC"  # the reason given with the PLC's Stop, Hold and Abort
+STOPS = frozenset({State.STOPPING, State.ABORTING, State.HOLDING})
+
+Request = tuple[int, int]  # (request register, the number asked for)
+
+
+class PlcError(BwsdError):
+    """The PLC tag server cannot start."""
+
+
+def build_device(device_id: int, action: SimAction) -> SimDevice:
+    """The map as a SimDevice: the command registers writable, the rest read-only."""
+    first, last = WRITABLE[0], WRITABLE[-1]
+    holding = [
+        SimData(REG_MAP_VERSION, values=MAP_VERSION, datatype=DataType.REGISTERS, readonly=True),
+        SimData(first, count=last - first + 1, datatype=DataType.REGISTERS),
+        SimData(last + 1, count=REG_COUNT - last - 1, datatype=DataType.REGISTERS,
+                readonly=True),
+    ]  # fmt: skip
+    return SimDevice(id=device_id, simdata=holding, action=action)
+
+
+class PlcTags:
+    """Serve a controller's PackML tags on (host, port) as unit ``device_id``; port 0: any."""
+
+    def __init__(
+        self,
+        controller: Controller,
+        host: str = "127.0.0.1",
+        port: int = 15502,
+        device_id: int = 1,
+        *,
+        heartbeat_period: float = HEARTBEAT_PERIOD,
+    ) -> None:
+        self.controller = controller
+        self.host = host
+        self.port = port
+        self.device_id = device_id
+        self.heartbeat_period = heartbeat_period
+        self._cntrl_cmd = 0
+        self._unit_mode = int(controller.packml.mode)
+        self._pending: set[int] = set()  # request registers whose request is not taken yet
+        self._invalid = False
+        self._good = 0
+        self._stop_reason = StopReason.NONE
+        self._beat = 0
+        self._closing = False
+        self._queue: asyncio.Queue[Request | None] = asyncio.Queue()
+        self._server: ModbusTcpServer | None = None
+        self._worker: asyncio.Task[None] | None = None
+        self._beater: asyncio.Task[None] | None = None
+
+    # ----- lifecycle -----
+    async def start(self) -> None:
+        """Listen (the actual port is in ``port`` afterwards), then take requests."""
+        if self._server is not None:
+            raise RuntimeError(f"the PLC tags on port {self.port} are already served")
+        packml = self.controller.packml
+        if packml.reason:
+            self._stop_reason = stop_reason(None, packml.reason)
+        server = ModbusTcpServer(build_device(self.device_id, self._action),
+                                 address=(self.host, self.port))  # fmt: skip
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError as exc:
+            raise PlcError(f"the PLC tags cannot listen on {self.host}:{self.port}") from exc
+        self._server = server
+        sockets = getattr(server.transport, "sockets", None)
+        if sockets:
+            self.port = sockets[0].getsockname()[1]
+        packml.on_change.append(self._on_state)
+        self._closing, self._queue = False, asyncio.Queue()
+        self._pending.clear()
+        self._worker = asyncio.create_task(self._work())
+        self._beater = asyncio.create_task(self._beat_forever())
+
+    async def stop(self) -> None:
+        """Close every connection; a request being taken is finished, queued ones dropped."""
+        server, self._server = self._server, None
+        if server is not None:
+            await server.shutdown()  # type: ignore[no-untyped-call]
+        with contextlib.suppress(ValueError):
+            self.controller.packml.on_change.remove(self._on_state)
+        beater, self._beater = self._beater, None
+        if beater is not None:
+            beater.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await beater
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            self._closing = True
+            self._queue.put_nowait(None)
+            await worker
+
+    # ----- what the PLC reads -----
+    def tags(self) -> Tags:
+        """Every tag as the controller stands now."""
+        ctl = self.controller
+        program = ctl.program
+        return Tags(
+            cntrl_cmd=self._cntrl_cmd,
+            cmd_change_request=int(REG_CMD_CHANGE_REQUEST in self._pending),
+            unit_mode=self._unit_mode,
+            unit_mode_change_request=int(REG_UNIT_MODE_CHANGE_REQUEST in self._pending),
+            state_current=int(ctl.packml.state),
+            unit_mode_current=int(ctl.packml.mode),
+            cmd_invalid=int(self._invalid),
+            instruction_index=ctl.index,
+            instruction_count=len(program.instructions) if program is not None else 0,
+            good_count=self._good,
+            stop_reason=int(self._stop_reason),
+            heartbeat=self._beat,
+        )
+
+    async def _action(
+        self,
+        func_code: int,
+        start: int,
+        address: int,
+        count: int,
+        registers: list[int],
+        values: list[int] | list[bool] | None,
+    ) -> ExcCodes | None:
+        """Called by pymodbus before every access, with the whole block's registers."""
+        if func_code not in HOLDING_FUNCTIONS:
+            return ExcCodes.ILLEGAL_FUNCTION
+        if values is not None:
+            return self._write(address, cast(list[int], values))
+        registers[REG_MAP_VERSION - start : REG_COUNT - start] = encode(self.tags())
+        return None
+
+    # ----- what the PLC writes -----
+    def _write(self, address: int, values: list[int]) -> ExcCodes | None:
+        """Take the command registers, queue a change request; refuse a request but 0 or 1."""
+        written = dict(zip(range(address, address + len(values)), values, strict=True))
+        if any(written.get(register, 0) not in (0, 1) for register in REQUEST_REGISTERS):
+            return ExcCodes.ILLEGAL_VALUE
+        self._cntrl_cmd = written.get(REG_CNTRL_CMD, self._cntrl_cmd)
+        self._unit_mode = written.get(REG_UNIT_MODE, self._unit_mode)
+        asked = {REG_CMD_CHANGE_REQUEST: self._cntrl_cmd,
+                 REG_UNIT_MODE_CHANGE_REQUEST: self._unit_mode}  # fmt: skip
+        for register, number in asked.items():
+            # a 1 while the same request is still pending is the same request
+            if written.get(register) == 1 and register not in self._pending:
+                self._pending.add(register)
+                self._queue.put_nowait((register, number))
+        return None
+
+    async def _work(self) -> None:
+        """Take the requests one at a time, in the order they came."""
+        while (request := await self._queue.get()) is not None and not self._closing:
+            register, number = request
+            accepted = await self._take(register, number)
+            self._invalid = not accepted
+            self._pending.discard(register)
+
+    async def _take(self, register: int, number: int) -> bool:
+        """Apply one request through the controller; False when it was refused."""
+        kind = Command if register == REG_CMD_CHANGE_REQUEST else UnitMode
+        try:
+            wanted = kind(number)
+        except ValueError:
+            log.warning("PLC: %d is not a PackML %s number", number, kind.__name__)
+            return False
+        try:
+            if isinstance(wanted, Command):
+                await self.controller.command(wanted, PLC_REASON)
+            else:
+                self.controller.packml.set_mode(wanted)
+        except BwsdError as exc:
+            log.warning("PLC: %s refused: %s", wanted.label, exc)
+            return False
+        except Exception:  # the PLC must still see its request answered
+            log.exception("PLC: %s failed", wanted.label)
+            return False
+        return True
+
+    # ----- what the daemon keeps -----
+    def _on_state(self, old: State, new: State, cause: str) -> None:
+        """A PackML listener: the good count and the stop reason code."""
+        if new is State.COMPLETE:
+            self._good = (self._good + 1) & U32
+        elif new is State.RESETTING:
+            self._stop_reason = StopReason.NONE
+        elif new in STOPS:
+            # the run loop stops while handling its error: the error is still in flight here
+            self._stop_reason = stop_reason(sys.exception(), self.controller.packml.reason)
+
+    async def _beat_forever(self) -> None:
+        loop = asyncio.get_running_loop()
+        due = loop.time()
+        while True:
+            due += self.heartbeat_period
+            await asyncio.sleep(max(0.0, due - loop.time()))
+            self._beat = (self._beat + 1) & U16
+
+
+def plc_tags(controller: Controller, config: Config) -> PlcTags | None:
+    """The tags of the config's ``[plc]`` table, or None when it disables them."""
+    table = config.table("plc")
+    if not table["enabled"]:
+        return None
+    return PlcTags(controller, table["host"], table["port"], table["device_id"])
