@@ -12,7 +12,8 @@ from bwsd.errors import BwsdError
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
-    from bwsd import run
+    from bwsd import daemon_cli, run
+    from bwsd.api.cli import configure as configure_token
     from bwsd.export.cli import configure as configure_export
     from bwsd.fieldbus.cli import configure as configure_hw
     from bwsd.program.cli import configure as configure_program
@@ -21,6 +22,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"bwsd {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run.configure(sub)
+    daemon_cli.configure(sub)
+    configure_token(sub)
     configure_program(sub)
     configure_export(sub)
     configure_hw(sub)

@@ -1,4 +1,4 @@
-"""`bwsd simulate` and `bwsd demo`: run a program through the twin and write its exports."""
+"""`bwsd simulate`: run a program through the twin and write its exports."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from typing import Any
 
 from bwsd.config import load_config
@@ -16,12 +15,9 @@ from bwsd.errors import ProgramError, TwinError
 from bwsd.twin import Machine, Program, Twin, simulate
 from bwsd.twin.model import ProgressFn
 
-ROOT = Path(__file__).resolve().parent.parent  # the source tree: examples/ and config/
-DEMO = "braid-2x2"
-
 
 def configure(sub: Any) -> None:
-    """Register `simulate` and `demo`."""
+    """Register `simulate`."""
     p = sub.add_parser("simulate", help="run a program through the twin")
     p.add_argument("program", help="a .bws program")
     p.add_argument("--config", required=True, help="machine config (TOML)")
@@ -35,9 +31,6 @@ def configure(sub: Any) -> None:
         help="write FILE.tg3 (TexGen), FILE.vtp (ParaView) or FILE.json; repeatable",
     )
     p.set_defaults(handler=_simulate_cmd)
-    d = sub.add_parser("demo", help="simulate a shipped example and write its exports")
-    d.add_argument("--out", default="out", help="folder for the exports (default: out)")
-    d.set_defaults(handler=_demo_cmd)
 
 
 def load_and_simulate(
@@ -110,19 +103,4 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         print(", ".join(f"{k} {v}" for k, v in summary.items()))
-    return 0
-
-
-def _demo_cmd(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    program = ROOT / "examples" / f"{DEMO}.bws"
-    _, _, twin = load_and_simulate(str(program), str(ROOT / "config" / f"{DEMO}.toml"))
-    files = [out / f"{DEMO}.json", out / f"{DEMO}.tg3", out / f"{DEMO}.vtp"]
-    _write_exports(twin, str(files[0]), [str(f) for f in files[1:]])
-    summary = _summary(twin, 0.0)
-    del summary["seconds"]
-    print(f"simulated examples/{DEMO}.bws: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
-    for path in files:
-        print(f"wrote {path}")
     return 0

@@ -19,7 +19,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from bwsd.controller.packml import Command, PackML, State
+from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
 from bwsd.errors import BwsdError, TwinError
 from bwsd.fieldbus.axes import axis_by_name
@@ -56,7 +56,9 @@ class Controller:
         self.program: Program | None = None
         self.program_id: int | None = None
         self.twin: Twin | None = None
+        self.stop_cause: str = ""  # class of the error that last stopped a run ("" operator)
         self._task: asyncio.Task[None] | None = None
+        self._lock = asyncio.Lock()  # one command at a time, whoever sends it
 
     # ----- programs -----
     async def load(self, name: str, text: str) -> int:
@@ -80,11 +82,22 @@ class Controller:
     # ----- commands -----
     async def command(self, command: Command, reason: str = "") -> State:
         """Apply a PackML command and run the acting state it enters to its end."""
-        if command is Command.START and self.program is None:
-            raise ControllerError("no program is loaded")
-        state = self.packml.command(command, reason)
-        await self._act(state)
-        return self.packml.state
+        async with self._lock:
+            if command is Command.START and self.program is None:
+                raise ControllerError("no program is loaded")
+            if command is Command.RESET:
+                self.stop_cause = ""
+            state = self.packml.command(command, reason)
+            await self._act(state)
+            return self.packml.state
+
+    def set_mode(self, mode: UnitMode) -> None:
+        """Change the unit mode (where PackML allows it), journaled and published."""
+        old = self.packml.mode
+        self.packml.set_mode(mode)
+        if mode is not old:
+            self.journal.log_event("mode", {"from": old.label, "to": mode.label})
+            self.publish({"event": "mode", "from": old.label, "to": mode.label})
 
     async def _act(self, state: State) -> None:
         if state is State.RESETTING:
@@ -145,7 +158,7 @@ class Controller:
             pred = await asyncio.to_thread(self.twin.predict, instruction)
             check_limits(pred, self.limits)
         except (TwinError, RefusedMove) as exc:
-            return await self._stop(Command.ABORT, str(exc))
+            return await self._stop(Command.ABORT, str(exc), exc)
         steps = setpoints(self.machine, instruction, self.twin.takeup)
         payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                    "contacts": len(pred.contacts)}  # fmt: skip
@@ -156,9 +169,9 @@ class Controller:
             state = await self.bus.state()
             self._verify(pred, state)
         except (DriveFault, EStopError) as exc:
-            return await self._stop(Command.ABORT, f"instruction {index}: {exc}")
+            return await self._stop(Command.ABORT, f"instruction {index}: {exc}", exc)
         except (FieldbusError, Mismatch) as exc:
-            return await self._stop(Command.HOLD, f"instruction {index}: {exc}")
+            return await self._stop(Command.HOLD, f"instruction {index}: {exc}", exc)
         await self._commit(pred, index)
         return True
 
@@ -174,8 +187,9 @@ class Controller:
         self.publish({"event": "instruction", "index": index, "contacts": len(pred.contacts),
                       "inserted": len(pred.inserted)})  # fmt: skip
 
-    async def _stop(self, command: Command, reason: str) -> bool:
-        self.publish({"event": "fault", "reason": reason})
+    async def _stop(self, command: Command, reason: str, error: Exception) -> bool:
+        self.stop_cause = type(error).__name__
+        self.publish({"event": "fault", "reason": reason, "cause": self.stop_cause})
         self._task = None
         self.packml.command(command, reason)
         await self._act(self.packml.state)
