@@ -59,6 +59,8 @@ class Controller:
         self.stop_cause: str = ""  # class of the error that last stopped a run ("" operator)
         self._task: asyncio.Task[None] | None = None
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
+        self._resume: int | None = None  # a journaled instruction the machine never ran
+        self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
 
     # ----- programs -----
     async def load(self, name: str, text: str) -> int:
@@ -72,6 +74,7 @@ class Controller:
                                       len(program.instructions))  # fmt: skip
         self.program, self.program_id = program, pid
         self.twin = Twin.from_program(self.machine, program)
+        self._resume, self._blocked = None, ""
         return pid
 
     @property
@@ -85,6 +88,8 @@ class Controller:
         async with self._lock:
             if command is Command.START and self.program is None:
                 raise ControllerError("no program is loaded")
+            if command is Command.UNHOLD and self._blocked:
+                raise ControllerError(f"cannot resume: {self._blocked} (Abort ends the program)")
             if command is Command.RESET:
                 self.stop_cause = ""
             state = self.packml.command(command, reason)
@@ -162,7 +167,10 @@ class Controller:
         steps = setpoints(self.machine, instruction, self.twin.takeup)
         payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                    "contacts": len(pred.contacts)}  # fmt: skip
-        await asyncio.to_thread(self.journal.started, self.program_id, index, payload)
+        if self._resume == index:
+            self._resume = None  # journaled as started before the restart
+        else:
+            await asyncio.to_thread(self.journal.started, self.program_id, index, payload)
         try:
             for step in steps:
                 await self.bus.execute(step)
@@ -228,14 +236,32 @@ class Controller:
         return reason
 
     async def _settle_pending(self, program: Program, twin: Twin, index: int) -> str:
+        """Complete a started instruction from what the machine shows, or report it.
+
+        The machine shows the predicted result: the move happened, commit it. It shows the
+        state before the move: the move never started, and Unhold runs it. Anything else is
+        for the operator: Unhold is refused until the journal is settled (Abort ends it).
+        """
+        before = twin.occupancy >= 0, round(twin.takeup * 1000)
         pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
         state = await self.bus.state()
         try:
             self._verify(pred, state)
         except Mismatch as exc:
-            return self._hold(f"restarted: instruction {index} started and not done: {exc}")
+            if self._shows(state, *before):
+                self._resume = index
+                return self._hold(f"restarted: instruction {index} started, the machine has "
+                                  "not moved: Unhold runs it")  # fmt: skip
+            self._blocked = f"instruction {index} started and not done: {exc}"
+            return self._hold(f"restarted: {self._blocked}")
         await self._commit(pred, index)
         return self._hold(f"restarted: instruction {index} completed from the read-back")
+
+    def _shows(self, state: MachineState, occupancy: Any, takeup_um: int) -> bool:
+        """The machine shows this occupancy and take-up (within the position tolerance)."""
+        takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
+        tolerance = self.bus.settings.position_tolerance
+        return bool((state.occupancy == occupancy).all()) and abs(takeup - takeup_um) <= tolerance
 
 
 def _held_machine(current: PackML) -> PackML:

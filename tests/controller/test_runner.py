@@ -6,11 +6,12 @@ import asyncio
 from typing import Any
 
 import numpy as np
+import pytest
 
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
-from bwsd.controller.runner import Controller
-from bwsd.fieldbus import open_bus
+from bwsd.controller.runner import Controller, ControllerError
+from bwsd.fieldbus import AxisMove, open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program
 from bwsd.twin import simulate
@@ -136,9 +137,9 @@ def test_restart_settles_a_pending_instruction_from_the_read_back(mock, tmp_path
         journal.set_outcome(pid, "running")
         journal.started(pid, 1, {})
         said = await ctl.recover()
-        assert "instruction 1 started and not done" in said
+        assert "instruction 1 started, the machine has not moved: Unhold runs it" in said
         assert ctl.packml.state is State.HELD and ctl.twin.done == 0
-        # now the move happens (as if the actuators had finished it) and the daemon restarts
+        # the move happens now (the actuators finished it) and the daemon restarts again
         from bwsd.controller.plan import setpoints
 
         program = parse_program(TEXT)
@@ -148,6 +149,49 @@ def test_restart_settles_a_pending_instruction_from_the_read_back(mock, tmp_path
         said = await again.recover()
         assert "instruction 1 completed from the read-back" in said
         assert again.twin.done == 1 and journal.pending(pid) is None
+        await again.command(Command.UNHOLD)
+        await again.wait()
+        assert again.packml.state is State.COMPLETE
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_a_pending_instruction_the_machine_never_ran_runs_on_unhold(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        journal.set_outcome(pid, "running")
+        journal.started(pid, 1, {})
+        await ctl.recover()
+        await ctl.command(Command.UNHOLD)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE
+        assert [i.index for i in journal.instructions(pid)] == list(range(1, 16))
+        whole = simulate(ctl.machine, parse_program(TEXT))
+        assert bits(ctl.twin) == bits(whole)
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
+
+
+def test_a_machine_in_neither_state_blocks_unhold(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        journal.set_outcome(pid, "running")
+        journal.started(pid, 1, {})
+        takeup = 10  # the take-up somewhere unexpected: neither before nor after
+        await ctl.bus.execute([AxisMove(takeup, 7_000)])
+        said = await ctl.recover()
+        assert "instruction 1 started and not done" in said
+        with pytest.raises(ControllerError, match="cannot resume"):
+            await ctl.command(Command.UNHOLD)
+        assert ctl.packml.state is State.HELD
+        await ctl.command(Command.ABORT, "operator")
+        assert journal.program(pid).outcome == "aborted"
         await ctl.bus.close()
         journal.close()
 
