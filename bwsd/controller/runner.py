@@ -16,6 +16,7 @@ and otherwise reported (Held, with the reason), never guessed.
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -61,6 +62,7 @@ class Controller:
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
         self._resume: int | None = None  # a journaled instruction the machine never ran
         self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
+        self._timing: dict[str, float] = {}  # seconds of the running instruction, published
 
     # ----- programs -----
     async def load(self, name: str, text: str) -> int:
@@ -159,8 +161,10 @@ class Controller:
         assert self.program is not None and self.twin is not None and self.program_id
         index = self.twin.done + 1
         instruction = self.program.instructions[index - 1]
+        begun = time.perf_counter()
         try:
             pred = await asyncio.to_thread(self.twin.predict, instruction)
+            self._timing = {"predict_s": time.perf_counter() - begun}
             check_limits(pred, self.limits)
         except (TwinError, RefusedMove) as exc:
             return await self._stop(Command.ABORT, str(exc), exc)
@@ -180,6 +184,7 @@ class Controller:
             return await self._stop(Command.ABORT, f"instruction {index}: {exc}", exc)
         except (FieldbusError, Mismatch) as exc:
             return await self._stop(Command.HOLD, f"instruction {index}: {exc}", exc)
+        self._timing["step_s"] = time.perf_counter() - begun
         await self._commit(pred, index)
         return True
 
@@ -193,7 +198,9 @@ class Controller:
         await asyncio.to_thread(self.journal.done, self.program_id, index,
                                 {"contacts": len(pred.contacts)})  # fmt: skip
         self.publish({"event": "instruction", "index": index, "contacts": len(pred.contacts),
-                      "inserted": len(pred.inserted)})  # fmt: skip
+                      "inserted": len(pred.inserted), "at": time.time(),
+                      **self._timing})  # fmt: skip
+        self._timing = {}
 
     async def _stop(self, command: Command, reason: str, error: Exception) -> bool:
         self.stop_cause = type(error).__name__
@@ -209,7 +216,8 @@ class Controller:
 
     def _on_state(self, old: State, new: State, cause: str) -> None:
         self.journal.log_state(int(new), new.label, self.packml.reason)
-        self.publish({"event": "state", "from": old.label, "to": new.label, "cause": cause})
+        self.publish({"event": "state", "from": old.label, "to": new.label, "cause": cause,
+                      "at": time.time()})  # fmt: skip
 
     # ----- restart -----
     async def recover(self) -> str:

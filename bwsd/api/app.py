@@ -1,0 +1,189 @@
+"""The FastAPI app: REST under /api/v1, the event WebSocket, /metrics and /healthz.
+
+Serve it on the controller's own event loop (the controller, its bus and the WebSocket
+fan-out share that loop), e.g. with ``server(app, host, port).serve()``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import re
+from collections.abc import AsyncIterator, Callable
+from contextlib import AbstractAsyncContextManager, asynccontextmanager, suppress
+from typing import Any
+
+import uvicorn
+from fastapi import Depends, FastAPI, WebSocket, WebSocketDisconnect
+from fastapi.responses import JSONResponse, Response
+
+from bwsd import __version__
+from bwsd.controller.runner import Controller
+
+from . import control, data, problems
+from .auth import Auth, TokenStore, refused_token, require
+from .context import Context
+from .events import QUEUE_SIZE, EventHub, Subscriber
+from .metrics import CONTENT_TYPE, Metrics, RequestTimer
+from .models import MAX_BODY_BYTES, Error, Health
+from .problems import ApiError, error_body
+from .view import HealthTracker, SkeletonView
+
+PREFIX = "/api/v1"
+DESCRIPTION = """Control and state of a braiding-weaving machine (see docs/api.md).
+
+Reads need a viewer token unless the daemon's config opens them; every change needs an
+operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the WebSocket).
+"""
+
+
+def create_app(
+    controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
+    queue_size: int = QUEUE_SIZE,
+) -> FastAPI:  # fmt: skip
+    """The API of ``controller``; installs a forwarder behind ``controller.publish``."""
+    metrics = Metrics(controller)
+    hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
+    metrics.clients.set_function(lambda: float(hub.clients))
+    ctx = Context(controller, SkeletonView(controller), HealthTracker(), metrics, hub)
+    app = FastAPI(title="bwsd", version=__version__, description=DESCRIPTION,
+                  lifespan=_lifespan(ctx))  # fmt: skip
+    app.state.ctx = ctx
+    app.state.auth = Auth(tokens, open_reads)
+    problems.install(app, refused_token)
+    app.add_middleware(problems.BodyLimit, limit=MAX_BODY_BYTES)
+    app.add_middleware(RequestTimer, metrics=metrics)
+    control.router.install(app, PREFIX, ["machine"], MAX_BODY_BYTES)
+    data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
+    app.add_api_websocket_route(f"{PREFIX}/events", _events(ctx))
+    app.add_api_route("/healthz", healthz, methods=["GET"], response_model=Health,
+                      tags=["service"])  # fmt: skip
+    app.add_api_route("/metrics", _metrics(metrics), methods=["GET"], tags=["service"],
+                      dependencies=[Depends(require("viewer"))], response_class=Response,
+                      responses={200: {"content": {CONTENT_TYPE: {}}}, 401: {"model": Error},
+                                 403: {"model": Error}})  # fmt: skip
+    ctx.install()
+    _redact_server_logs()
+    return app
+
+
+def server(app: FastAPI, host: str = "127.0.0.1", port: int = 8080) -> uvicorn.Server:
+    """A uvicorn server for ``app``; run ``await server.serve()`` on the controller's loop."""
+    config = uvicorn.Config(app, host=host, port=port, lifespan="on", log_level="info",
+                            access_log=False)  # fmt: skip
+    return uvicorn.Server(config)
+
+
+class RedactTokens(logging.Filter):
+    """Keeps the event WebSocket's ``?token=...`` out of the server's log lines."""
+
+    _TOKEN = re.compile(r"(token=)[^&\s\"']+")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.msg, str):
+            record.msg = self._TOKEN.sub(r"\1***", record.msg)
+        if isinstance(record.args, tuple):
+            record.args = tuple(self._TOKEN.sub(r"\1***", a) if isinstance(a, str) else a
+                                for a in record.args)  # fmt: skip
+        return True
+
+
+def _redact_server_logs() -> None:
+    for name in ("uvicorn.error", "uvicorn.access"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactTokens) for f in logger.filters):
+            logger.addFilter(RedactTokens())
+
+
+def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[None]]:
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        yield
+        ctx.uninstall()
+
+    return lifespan
+
+
+async def healthz() -> Health:
+    """The daemon answers (no token needed)."""
+    return Health(ok=True)
+
+
+def _metrics(metrics: Metrics) -> Callable[[], Any]:
+    async def get_metrics() -> Response:
+        """Prometheus text exposition of the daemon's metrics."""
+        return Response(metrics.render(), media_type=CONTENT_TYPE)
+
+    return get_metrics
+
+
+# ----- the event WebSocket -----
+def _events(ctx: Context) -> Callable[[WebSocket], Any]:
+    async def events(websocket: WebSocket) -> None:
+        """Every controller event as JSON; first a hello with the current state."""
+        token = websocket.query_params.get("token") or _bearer(websocket)
+        auth: Auth = websocket.app.state.auth
+        try:
+            auth.authorize(token, "viewer")
+        except ApiError as exc:
+            await _deny(websocket, exc)
+            return
+        await websocket.accept()
+        sub = ctx.hub.subscribe()
+        try:
+            await websocket.send_text(json.dumps(_hello(ctx)))
+            await _serve(websocket, sub)
+        finally:
+            ctx.hub.unsubscribe(sub)
+
+    return events
+
+
+def _bearer(websocket: WebSocket) -> str | None:
+    scheme, _, token = websocket.headers.get("authorization", "").partition(" ")
+    return token.strip() if scheme.lower() == "bearer" else None
+
+
+async def _deny(websocket: WebSocket, exc: ApiError) -> None:
+    """Refuse the handshake with the HTTP status and JSON body (or close 1008 where unsupported)."""
+    if "websocket.http.response" in websocket.scope.get("extensions", {}):
+        body = error_body(str(exc.detail), **exc.extra)
+        await websocket.send_denial_response(
+            JSONResponse(body, status_code=exc.status_code, headers=exc.headers)
+        )
+    else:
+        await websocket.close(code=1008, reason=str(exc.detail))
+
+
+def _hello(ctx: Context) -> dict[str, Any]:
+    ctl = ctx.controller
+    state = ctl.packml.state
+    return {"event": "hello", "state": int(state), "name": state.label,
+            "program_id": ctl.program_id, "index": ctl.index}  # fmt: skip
+
+
+async def _serve(websocket: WebSocket, sub: Subscriber) -> None:
+    """Send the queue while reading (and ignoring) what the client says, until it leaves."""
+    tasks = {asyncio.create_task(_pump(websocket, sub)), asyncio.create_task(_drain(websocket))}
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError, OSError):
+                await task
+
+
+async def _pump(websocket: WebSocket, sub: Subscriber) -> None:
+    while True:
+        for text in await sub.next():
+            await websocket.send_text(text)
+
+
+async def _drain(websocket: WebSocket) -> None:
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return

@@ -1,0 +1,194 @@
+"""Request and response bodies of the REST API (they make the OpenAPI schema)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+CommandName = Literal[
+    "reset", "start", "stop", "hold", "unhold", "suspend", "unsuspend", "abort", "clear"
+]
+XYZ = tuple[float, float, float]
+MAX_PROGRAM_CHARS = 1_000_000
+MAX_REASON_CHARS = 500
+MAX_BODY_BYTES = 4 * MAX_PROGRAM_CHARS + 65536  # a program of 4-byte characters, and the JSON
+
+
+class Error(BaseModel):
+    """Every error: what is wrong (other fields by case, see docs/api.md)."""
+
+    error: str
+
+
+class InvalidOut(Error):
+    """A malformed request: the fields at fault, as the validator names them."""
+
+    details: list[dict[str, Any]]
+
+
+class ProgramErrorOut(Error):
+    """A program refused: the message and where (line and column, 1-based; 0: unknown)."""
+
+    line: int
+    column: int
+
+
+class CommandErrorOut(Error):
+    """A command the current state does not take, and those it does."""
+
+    state: str
+    allowed: list[str]
+
+
+class BusHealth(BaseModel):
+    """What the daemon last saw of the actuator bus (None: not seen yet)."""
+
+    connected: bool | None = None
+    last_error: str | None = None
+    checked: float | None = Field(None, description="Unix time of the last observation")
+
+
+class StateOut(BaseModel):
+    state: int = Field(description="PackML state number (ISA-TR88.00.02)")
+    name: str
+    mode: int
+    mode_name: str
+    program_id: int | None
+    program_name: str | None
+    index: int = Field(description="instructions done of the loaded program")
+    count: int = Field(description="instructions in the loaded program")
+    reason: str = Field(description="why the machine last stopped, held or aborted")
+    allowed: list[str] = Field(description="the commands accepted now")
+    bus: BusHealth
+    last_fault: str | None = Field(description="the controller's last fault report, if any")
+
+
+class AxisOut(BaseModel):
+    index: int
+    name: str
+    kind: str
+    position: int = Field(description="micrometres (millidegrees for weft_angle)")
+    busy: bool
+    fault: int
+    fault_name: str
+
+
+class MachineOut(BaseModel):
+    axes: list[AxisOut]
+    occupancy: list[list[bool]] = Field(description="the occupancy sensors, by row")
+    estop: bool
+    twin_occupancy: list[list[int]] | None = Field(
+        description="yarn id of the case in each cell per the twin, -1 where empty"
+    )
+
+
+class ProgramIn(BaseModel):
+    name: str = Field(min_length=1, max_length=200)
+    text: str = Field(max_length=MAX_PROGRAM_CHARS)
+
+
+class LoadedOut(BaseModel):
+    """The dry run of a program just loaded."""
+
+    id: int
+    name: str
+    instructions: int
+    contacts: int
+    yarns: int
+    nodes: int
+    takeup: float
+
+
+class ProgramOut(BaseModel):
+    id: int
+    name: str
+    sha256: str
+    instructions: int
+    done: int
+    created: float
+    started: float | None
+    finished: float | None
+    outcome: str
+    reason: str
+
+
+class ProgramDetailOut(ProgramOut):
+    text: str
+
+
+class CommandIn(BaseModel):
+    reason: str = Field("", max_length=MAX_REASON_CHARS)
+
+
+class CommandOut(BaseModel):
+    state: int
+    name: str
+    reason: str
+    allowed: list[str]
+
+
+class ContactOut(BaseModel):
+    yarns: tuple[int, int] = Field(description="moving yarn, hit yarn")
+    nodes: tuple[int, int] = Field(description="node added to each")
+
+
+class NodeOut(BaseModel):
+    yarn: int
+    node: int
+    after: int = Field(description="the node it follows in the yarn")
+    xyz: XYZ
+
+
+class FreeNodeOut(BaseModel):
+    yarn: int
+    xyz: XYZ
+
+
+class LengthOut(BaseModel):
+    yarn: int
+    change: float = Field(description="mm, change of the warp's path length")
+
+
+class PreviewOut(BaseModel):
+    index: int = Field(description="the instruction previewed (1-based)")
+    line: int = Field(description="its line in the program text (0: unknown)")
+    instruction: dict[str, Any]
+    refused: str | None = Field(description="why the controller would refuse it, if it would")
+    contacts: list[ContactOut]
+    inserted: list[NodeOut]
+    free_nodes: list[FreeNodeOut]
+    occupancy: list[list[int]]
+    takeup: float
+    new_yarns: list[int]
+    length_change: list[LengthOut]
+
+
+class StateRecordOut(BaseModel):
+    id: int
+    time: float
+    state: int
+    name: str
+    reason: str
+
+
+class EventRecordOut(BaseModel):
+    id: int
+    time: float
+    kind: str
+    data: dict[str, Any]
+
+
+class HistoryOut(BaseModel):
+    states: list[StateRecordOut]
+    events: list[EventRecordOut]
+
+
+class Health(BaseModel):
+    ok: bool
+
+
+Responses = dict[int | str, dict[str, Any]]
+AUTH_ERRORS: Responses = {401: {"model": Error}, 403: {"model": Error}}
+INVALID: Responses = {422: {"model": InvalidOut}}
+BODY_ERRORS: Responses = {400: {"model": Error}, 413: {"model": Error}}  # unreadable, too large

@@ -1,0 +1,108 @@
+"""Every error the API answers is JSON: ``{"error": "<what is wrong>", ...details}``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from bwsd.errors import BwsdError
+from bwsd.fieldbus import FieldbusError
+from bwsd.journal import JournalError
+
+
+class ApiError(HTTPException):
+    """An HTTP error with a message and extra fields for the JSON body."""
+
+    def __init__(
+        self, status: int, message: str, *, headers: dict[str, str] | None = None, **extra: Any
+    ) -> None:
+        super().__init__(status, message, headers)
+        self.extra = extra
+
+
+def error_body(message: str, **extra: Any) -> dict[str, Any]:
+    return {"error": message, **extra}
+
+
+async def _http_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, HTTPException)
+    extra = exc.extra if isinstance(exc, ApiError) else {}
+    return JSONResponse(
+        error_body(str(exc.detail), **extra), status_code=exc.status_code, headers=exc.headers
+    )
+
+
+def _where(loc: Any) -> str:
+    return ".".join(str(part) for part in loc) if isinstance(loc, list | tuple) else str(loc)
+
+
+Gate = Callable[[Request], HTTPException | None]
+"""Says whether a request's token is refused (checked before its body is judged)."""
+
+
+def _invalid_request(gate: Gate) -> Callable[[Request, Exception], Any]:
+    async def handler(request: Request, exc: Exception) -> JSONResponse:
+        """422 naming the first bad field, unless the token is refused (then 401/403)."""
+        assert isinstance(exc, RequestValidationError)
+        refused = gate(request)
+        if refused is not None:
+            return await _http_error(request, refused)
+        errors = list(exc.errors())
+        first = errors[0] if errors else {}
+        where = _where(first.get("loc", ()))
+        message = f"invalid request: {where}: {first.get('msg', 'invalid')}"
+        return JSONResponse(error_body(message, details=jsonable_encoder(errors)), status_code=422)
+
+    return handler
+
+
+def describe(exc: Exception) -> str:
+    """The message for a client: a journal error without the journal's path on the server."""
+    if isinstance(exc, JournalError):
+        return f"the journal refused: {exc.reason}"
+    return str(exc)
+
+
+async def _bwsd_error(request: Request, exc: Exception) -> JSONResponse:
+    """A fault the request ran into that no route mapped: the bus or journal (503), else 409."""
+    status = 503 if isinstance(exc, FieldbusError | JournalError) else 409
+    return JSONResponse(error_body(describe(exc)), status_code=status)
+
+
+def install(app: FastAPI, gate: Gate) -> None:
+    """Make every error answer JSON; ``gate`` puts a refused token before a malformed body."""
+    app.add_exception_handler(HTTPException, _http_error)
+    app.add_exception_handler(RequestValidationError, _invalid_request(gate))
+    app.add_exception_handler(BwsdError, _bwsd_error)
+
+
+class BodyLimit:
+    """ASGI middleware: a request whose Content-Length passes ``limit`` gets a JSON 413.
+
+    (A chunked body is cut at the same size by FastAPI's own limit.)
+    """
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and self._length(scope) > self.limit:
+            message = f"the request body is too large (limit: {self.limit} bytes)"
+            await JSONResponse(error_body(message), status_code=413)(scope, receive, send)
+            return
+        await self.app(scope, receive, send)
+
+    @staticmethod
+    def _length(scope: Scope) -> int:
+        for name, value in scope.get("headers", []):
+            if name == b"content-length":
+                return int(value) if value.isdigit() else 0
+        return 0

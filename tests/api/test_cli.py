@@ -1,0 +1,59 @@
+"""`bwsd token add|list|remove`: the token printed once, only its hash on disk."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+
+import pytest
+
+from bwsd.api import TokenError, TokenStore
+from bwsd.api.cli import configure, tokens_path
+from bwsd.config import parse_config
+
+CONFIG = (
+    "[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\nd_mat = 100.0\nc_mat = 0.5\n"
+)
+
+
+def _run(*argv: str) -> int:
+    parser = argparse.ArgumentParser(prog="bwsd")
+    configure(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.handler(args))
+
+
+def test_add_prints_the_token_once_and_stores_its_hash(tmp_path, capsys):
+    config = tmp_path / "bwsd.toml"
+    config.write_text(CONFIG + '[api]\ntokens_file = "keys/tokens.json"\n')
+    (tmp_path / "state" / "keys").mkdir(parents=True)
+    where = ("--config", str(config), "--state-dir", str(tmp_path / "state"))
+    assert _run("token", "add", "line-3", "--role", "operator", *where) == 0
+    out, err = capsys.readouterr()
+    token = out.strip()
+    assert len(out.splitlines()) == 1 and len(token) >= 40 and token not in err
+    path = tmp_path / "state" / "keys" / "tokens.json"
+    stored = json.loads(path.read_text())["tokens"]
+    assert [(t["name"], t["role"]) for t in stored] == [("line-3", "operator")]
+    assert stored[0]["sha256"] == hashlib.sha256(token.encode()).hexdigest()
+    assert token not in path.read_text()
+    assert TokenStore.load(path).check(token) == ("line-3", "operator")
+    assert _run("token", "list", *where) == 0
+    listed = capsys.readouterr().out
+    assert listed.startswith("line-3\toperator\t") and token not in listed
+    assert _run("token", "remove", "line-3", *where) == 0
+    assert TokenStore.load(path).check(token) is None
+    with pytest.raises(TokenError, match="no token named 'line-3'"):
+        _run("token", "remove", "line-3", *where)
+
+
+def test_a_relative_file_starts_at_the_state_folder(tmp_path, monkeypatch):
+    config = parse_config({"machine": {"rows": 2, "cols": 2, "pitch_x": 1.0, "pitch_y": 1.0,
+                                       "d_mat": 10.0, "c_mat": 0.5}})  # fmt: skip
+    assert tokens_path(config, tmp_path) == tmp_path / "tokens.json"
+    monkeypatch.setenv("STATE_DIRECTORY", f"{tmp_path}/a:{tmp_path}/b")
+    assert tokens_path(config) == tmp_path / "a" / "tokens.json"
+    absolute = parse_config({"machine": dict(config.table("machine")),
+                             "api": {"tokens_file": str(tmp_path / "t.json")}})  # fmt: skip
+    assert tokens_path(absolute, "/elsewhere") == tmp_path / "t.json"

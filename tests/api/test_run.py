@@ -1,0 +1,216 @@
+"""A program uploaded, run to Complete over HTTP, watched over the WebSocket, and read back."""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+import httpx
+from websockets.sync.client import ClientConnection, connect
+
+from bwsd.controller.packml import State
+from bwsd.export.skeleton_json import skeleton_to_dict
+from bwsd.program import parse_program
+from bwsd.twin import simulate
+from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
+from tests.api.skeletons import apply_delta, yarns_of
+from tests.fieldbus.conftest import client_config
+
+RUN_STATES = ["Resetting", "Idle", "Starting", "Execute", "Completing", "Complete"]
+
+
+def _events_until_complete(ws: ClientConnection) -> list[dict[str, Any]]:
+    """Every event up to the state change to Complete (each wait bounded)."""
+    deadline = time.monotonic() + WAIT
+    events: list[dict[str, Any]] = []
+    while not (events and events[-1].get("to") == "Complete"):
+        remaining = deadline - time.monotonic()
+        assert remaining > 0, f"no Complete within {WAIT} s: {events[-3:]}"
+        events.append(json.loads(ws.recv(timeout=remaining)))
+    return events
+
+
+def _metric(text: str, name: str) -> float:
+    for line in text.splitlines():
+        if line.startswith(name + " "):
+            return float(line.split()[1])
+    raise AssertionError(f"{name} not in /metrics")
+
+
+def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
+    operator, viewer = live.client("operator"), live.client("viewer")
+    with connect(f"{live.ws}?token={live.tokens['viewer']}", open_timeout=WAIT) as ws:
+        assert json.loads(ws.recv(timeout=WAIT))["event"] == "hello"
+        loaded = operator.post("/programs", json={"name": "braid.bws", "text": BRAID})
+        assert loaded.status_code == 201, loaded.text
+        expected = simulate(client_config("modbus", {"modbus": 1, "socketcand": 1}).machine,
+                            parse_program(BRAID))  # fmt: skip
+        assert loaded.json() == {"id": 1, "name": "braid.bws", "instructions": BRAID_STEPS,
+                                 "contacts": expected.contact_count, "yarns": 4,
+                                 "nodes": expected.node_count, "takeup": 6.0}  # fmt: skip
+        start = viewer.get("/skeleton").json()
+        assert operator.post("/commands/reset").json()["name"] == "Idle"
+        assert operator.post("/commands/start").status_code == 200
+        assert viewer.get("/machine").status_code == 200  # a read while it runs
+        events = _events_until_complete(ws)
+    states = [e["to"] for e in events if e["event"] == "state"]
+    assert states == RUN_STATES
+    assert [e["state"] for e in events if e["event"] == "state"] == [15, 4, 3, 6, 16, 17]
+    steps = [e for e in events if e["event"] == "instruction"]
+    assert [e["index"] for e in steps] == list(range(1, BRAID_STEPS + 1))
+    assert all(e["program_id"] == 1 for e in steps)
+    assert sum(e["contacts"] for e in steps) == expected.contact_count
+    assert all(len(e["skeleton"]["contacts"]) == e["contacts"] for e in steps)
+    yarns = yarns_of(start)
+    for event in steps:
+        assert event["skeleton"]["since"] == event["index"] - 1
+        apply_delta(yarns, event["skeleton"])
+    final = viewer.get("/skeleton").json()
+    assert yarns == yarns_of(final) == yarns_of(skeleton_to_dict(expected.skeleton()))
+    _check_records(viewer, expected.contact_count)
+    _check_metrics(live, expected.contact_count)
+
+
+def _check_records(viewer: httpx.Client, contacts: int) -> None:
+    state = viewer.get("/state").json()
+    assert (state["name"], state["state"], state["index"], state["count"]) == (
+        "Complete", 17, BRAID_STEPS, BRAID_STEPS)  # fmt: skip
+    assert (state["program_id"], state["program_name"]) == (1, "braid.bws")
+    assert state["allowed"] == ["reset", "stop", "abort"]
+    assert state["bus"]["connected"] is True
+    record = viewer.get("/programs/1").json()
+    assert (record["outcome"], record["done"], record["text"]) == ("complete", BRAID_STEPS, BRAID)
+    assert [p["id"] for p in viewer.get("/programs").json()] == [1]
+    history = viewer.get("/history", params={"limit": 1000}).json()
+    assert [s["name"] for s in history["states"]] == RUN_STATES
+
+
+def _check_metrics(live: Live, contacts: int) -> None:
+    answer = httpx.get(f"{live.base}/metrics", headers=live.headers("viewer"), timeout=WAIT)
+    assert answer.headers["content-type"].startswith("text/plain")
+    text = answer.text
+    assert _metric(text, "bwsd_instructions_done_total") == BRAID_STEPS
+    assert _metric(text, "bwsd_contacts_total") == contacts
+    assert _metric(text, "bwsd_packml_state") == State.COMPLETE
+    assert _metric(text, "bwsd_instruction_index") == BRAID_STEPS
+    assert 'bwsd_http_request_duration_seconds_count{method="POST",route="/api/v1/commands/' \
+        '{name}",status="200"} 2.0' in text  # fmt: skip
+
+
+def test_a_syntax_error_gives_its_line_and_column(live: Live):
+    operator = live.client("operator")
+    text = "YARN diameter=1\nFILL row=1 col=0\n.XX.\nEND\nROW 1:+1 2:-1\nCOL 1:+1 2:?1\n"
+    answer = operator.post("/programs", json={"name": "bad.bws", "text": text})
+    assert answer.status_code == 422
+    body = answer.json()
+    assert (body["line"], body["column"]) == (6, 12), body  # at the "?"
+    assert body["error"]
+    impossible = "FILL row=1 col=0\n.XX.\nEND\nROW 1:+1\nROW 9:+1\n"
+    body = operator.post("/programs", json={"name": "x.bws", "text": impossible}).json()
+    assert (body["line"], body["column"]) == (5, 5) and "row 9" in body["error"]
+    # a weft straight through the warps: the dry run refuses it (a closed shed)
+    weft = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nWEFT x=15 y=10 z=90 angle=0 "
+    weft += "length=60\n"
+    body = operator.post("/programs", json={"name": "w.bws", "text": weft}).json()
+    assert (body["line"], body["column"]) == (6, 1) and "instruction 1" in body["error"], body
+    assert operator.post("/programs", json={"name": "", "text": ""}).status_code == 422
+    huge = json.dumps({"name": "h.bws", "text": "#" * 5_000_000}).encode()
+    for body in (huge, iter([huge[:1000], huge[1000:]])):  # with a length, then chunked
+        answer = operator.post("/programs", content=body)
+        assert answer.status_code == 413 and "too large" in answer.json()["error"].lower()
+    assert live.controller.program is None  # nothing was loaded
+
+
+def test_an_invalid_command_is_409_with_the_allowed_ones(live: Live):
+    operator = live.client("operator")
+    no_program = operator.post("/commands/start")
+    assert no_program.status_code == 409 and no_program.json()["error"] == "no program is loaded"
+    assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
+    answer = operator.post("/commands/start")
+    assert answer.status_code == 409
+    assert answer.json()["state"] == "Stopped" and answer.json()["allowed"] == ["reset", "abort"]
+    assert "Start is not accepted in state Stopped" in answer.json()["error"]
+    assert operator.post("/commands/unhold").status_code == 409
+    assert live.controller.packml.state is State.STOPPED
+    assert operator.post("/commands/reset").json()["name"] == "Idle"
+    assert operator.post("/commands/jump").status_code == 422
+    too_long = operator.post("/commands/stop", json={"reason": "x" * 501})
+    assert too_long.status_code == 422 and "reason" in too_long.json()["error"]
+    stopped = operator.post("/commands/stop", json={"reason": "end of shift"}).json()
+    assert (stopped["name"], stopped["reason"]) == ("Stopped", "end of shift")
+    assert live.client("viewer").get("/state").json()["reason"] == "end of shift"
+
+
+def test_the_skeleton_in_json_tg3_and_vtp(live: Live, tmp_path):
+    from bwsd.export.texgen import read_tg3
+
+    viewer, operator = live.client("viewer"), live.client("operator")
+    assert viewer.get("/skeleton").status_code == 409  # nothing loaded yet
+    assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
+    document = viewer.get("/skeleton").json()
+    assert document["schema"] == "bwsd-skeleton" and len(document["yarns"]) == 4
+    tg3 = viewer.get("/skeleton", params={"format": "tg3"})
+    assert tg3.status_code == 200 and tg3.headers["content-type"] == "application/xml"
+    assert 'filename="skeleton.tg3"' in tg3.headers["content-disposition"]
+    (tmp_path / "s.tg3").write_bytes(tg3.content)
+    yarns = read_tg3(tmp_path / "s.tg3")
+    assert [y.tolist() for y in yarns] == [y["nodes"] for y in document["yarns"]]
+    vtp = viewer.get("/skeleton", params={"format": "vtp"})
+    assert vtp.status_code == 200 and b"<VTKFile" in vtp.content and b"PolyData" in vtp.content
+    assert viewer.get("/skeleton", params={"format": "stl"}).status_code == 422
+
+
+def test_preview_works_on_a_copy_and_never_touches_the_twin(live: Live):
+    operator = live.client("operator")
+    assert operator.post("/preview").status_code == 409
+    assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
+    before = operator.get("/skeleton").json()
+    twin = live.controller.twin
+    calls: list[object] = []
+    real = twin.predict
+
+    def spy(instruction):
+        calls.append(instruction)
+        return real(instruction)
+
+    twin.predict = spy  # type: ignore[method-assign]
+    answer = operator.post("/preview")
+    assert answer.status_code == 200, answer.text
+    preview = answer.json()
+    assert calls == [] and live.controller.twin is twin and twin.done == 0
+    assert operator.get("/skeleton").json() == before
+    program = parse_program(BRAID)
+    assert (preview["index"], preview["line"], preview["refused"]) == (1, program.lines[0], None)
+    assert preview["instruction"] == {"kind": "shift", "axis": "row", "moves": [[1, 1], [2, -1]]}
+    assert preview["occupancy"] == _occupancy_after_first(program, twin.machine)
+    assert [n["yarn"] for n in preview["free_nodes"]] == [0, 1, 2, 3]
+
+
+def _occupancy_after_first(program, machine) -> list[list[int]]:
+    from bwsd.twin import Twin
+
+    twin = Twin.from_program(machine, program)
+    twin.apply(program.instructions[0])
+    return twin.occupancy.tolist()
+
+
+def test_unknown_programs_are_404_and_pages_are_bounded(live: Live):
+    viewer = live.client("viewer")
+    assert viewer.get("/programs/7").status_code == 404
+    assert viewer.get("/programs/7").json() == {"error": "no program 7"}
+    assert viewer.get("/programs/0").status_code == 422
+    assert viewer.get("/programs", params={"limit": 0}).status_code == 422
+    assert viewer.get("/programs", params={"before": 2**70}).status_code == 422
+    assert viewer.get("/nowhere").json() == {"error": "Not Found"}
+
+
+def test_a_bus_that_is_gone_is_503_with_the_reason(live: Live, mock):
+    viewer = live.client("viewer")
+    assert viewer.get("/machine").status_code == 200
+    mock.stop()
+    answer = viewer.get("/machine")
+    assert answer.status_code == 503
+    assert "the bus cannot be read" in answer.json()["error"]
+    bus = viewer.get("/state").json()["bus"]
+    assert bus["connected"] is False and bus["last_error"]

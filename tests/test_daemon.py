@@ -1,0 +1,156 @@
+"""The whole daemon as a user runs it: `bwsd serve` against the mock loom, over HTTP.
+
+The crash test kills the daemon with SIGKILL at random moments while a program runs,
+restarts it, resumes, and checks that the final skeleton equals an uninterrupted run's and
+that the journal holds every instruction exactly once.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from bwsd.api.auth import TokenStore
+from bwsd.config import parse_config
+from bwsd.export.skeleton_json import skeleton_to_dict
+from bwsd.program import parse_program
+from bwsd.twin import simulate
+from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+
+CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
+TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"
+LONG = TEXT.replace("REPEAT 4", "REPEAT 40")  # 200 instructions: room for every kill
+KILLS = int(os.environ.get("BWSD_CRASH_KILLS", "100"))
+
+
+def daemon_config(tmp: Path, mock: Mock) -> Path:
+    path = tmp / "bwsd.toml"
+    path.write_text(toml({
+        "machine": MACHINE,
+        "fieldbus": {"backend": "modbus", **BUS},
+        "fieldbus.modbus": {"port": mock.ports["modbus"]},
+        "api": {"port": 0},
+        "plc": {"port": 0},
+    }))  # fmt: skip
+    return path
+
+
+class Served:
+    """`bwsd serve` in its own process, and an HTTP client with an operator token."""
+
+    def __init__(self, config: Path, state: Path, token: str) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+             "--state-dir", str(state)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+        )  # fmt: skip
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line.startswith("ready "):
+            self.proc.kill()
+            raise RuntimeError(f"daemon did not start: {line!r} {self.proc.stderr.read()!r}")  # type: ignore[union-attr]
+        urls = dict(part.split("=", 1) for part in line.split()[1:])
+        self.http = httpx.Client(base_url=urls["api"] + "/api/v1", timeout=30,
+                                 headers={"Authorization": f"Bearer {token}"})  # fmt: skip
+
+    def state(self) -> dict[str, Any]:
+        answer: dict[str, Any] = self.http.get("/state").raise_for_status().json()
+        return answer
+
+    def command(self, name: str) -> None:
+        self.http.post(f"/commands/{name}", json={}).raise_for_status()
+
+    def wait_for(self, names: set[str], limit: float = 120) -> dict[str, Any]:
+        deadline = time.monotonic() + limit
+        while (state := self.state())["name"] not in names:
+            assert time.monotonic() < deadline, f"still {state['name']}: {state['reason']}"
+            time.sleep(0.05)
+        return state
+
+    def kill(self) -> None:
+        self.http.close()
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=20)
+
+    def stop(self) -> None:
+        self.http.close()
+        self.proc.send_signal(signal.SIGTERM)
+        self.proc.wait(timeout=30)
+
+
+@pytest.fixture
+def rig(tmp_path: Path) -> Iterator[tuple[Path, Path, str, Mock]]:
+    mock = start_mock(tmp_path, {"stroke_speed": 400.0, "takeup_speed": 400.0})
+    state = tmp_path / "state"
+    state.mkdir()
+    token = TokenStore.load(state / "tokens.json").add("tester", "operator")
+    yield daemon_config(tmp_path, mock), state, token, mock
+    mock.stop()
+
+
+def expected_skeleton(text: str = TEXT) -> dict[str, Any]:
+    machine = parse_config({"machine": MACHINE}).machine
+    return skeleton_to_dict(simulate(machine, parse_program(text)).skeleton())
+
+
+def same_geometry(got: dict[str, Any], want: dict[str, Any]) -> bool:
+    return [y["nodes"] for y in got["yarns"]] == [y["nodes"] for y in want["yarns"]] and got[
+        "contacts"
+    ] == want["contacts"]
+
+
+def test_a_program_runs_to_complete_over_http_and_equals_simulate(rig):
+    config, state, token, _ = rig
+    served = Served(config, state, token)
+    try:
+        loaded = served.http.post("/programs", json={"name": "braid.bws", "text": TEXT})
+        assert loaded.status_code == 201, loaded.text
+        served.command("reset")
+        served.command("start")
+        final = served.wait_for({"Complete", "Aborted", "Held"})
+        assert final["name"] == "Complete", final["reason"]
+        assert final["index"] == final["count"] == 20
+        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
+        assert same_geometry(skeleton, expected_skeleton())
+    finally:
+        served.stop()
+
+
+def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
+    config, state, token, _ = rig
+    rng = random.Random(20261123)
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
+    served.command("reset")
+    served.command("start")
+    for _ in range(KILLS):
+        time.sleep(rng.uniform(0.0, 0.15))  # anywhere: predicting, journaling, moving...
+        served.kill()
+        served = Served(config, state, token)
+        now = served.state()
+        if now["name"] == "Complete":
+            break
+        assert now["name"] == "Held" and now["reason"].startswith("restarted"), now
+        served.command("unhold")
+    try:
+        final = served.wait_for({"Complete", "Held", "Aborted"})
+        assert final["name"] == "Complete" and final["index"] == 200, final
+        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
+        assert same_geometry(skeleton, expected_skeleton(LONG))
+    finally:
+        served.stop()
+    journal = sqlite3.connect(state / "journal.db")
+    rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
+    journal.close()
+    assert rows == [(i, 1) for i in range(1, 201)]  # every instruction exactly once, all done
