@@ -102,14 +102,6 @@ def test_a_case_leaving_the_matrix_is_refused_with_line_and_column(tmp_path):
     assert done.stdout == ""
 
 
-def test_demo_writes_its_exports(tmp_path):
-    done = bwsd("demo", "--out", str(tmp_path / "out"), cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    for suffix in ("json", "tg3", "vtp"):
-        assert (tmp_path / "out" / f"braid-2x2.{suffix}").stat().st_size > 0
-    assert "contacts" in done.stdout
-
-
 def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     import os
     import pty
