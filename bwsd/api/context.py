@@ -80,6 +80,7 @@ class Context:
             out["reason"] = self.controller.packml.reason
         elif kind == "fault":
             self.last_fault = str(event.get("reason", ""))
+            self.health.fault(str(event.get("cause", "")), self.last_fault)
         self.metrics.observe(event)
         self.hub.publish(out)
 

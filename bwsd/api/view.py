@@ -138,6 +138,10 @@ def contact_dict(contact: ContactData) -> dict[str, Any]:
     }
 
 
+_LOST = frozenset({"FieldbusConnectionError", "FieldbusTimeout"})
+_ANSWERED = frozenset({"FieldbusError", "DriveFault", "EStopError"})  # the bus did answer
+
+
 class HealthTracker:
     """What the API has seen of the bus: its own reads and the instructions done."""
 
@@ -152,6 +156,13 @@ class HealthTracker:
     def failed(self, exc: FieldbusError) -> None:
         lost = isinstance(exc, FieldbusConnectionError | FieldbusTimeout)
         self.connected, self.last_error, self.checked = not lost, str(exc), time.time()
+
+    def fault(self, cause: str, reason: str) -> None:
+        """A fault the controller reported, by the name of its error class."""
+        if cause in _LOST:
+            self.connected, self.last_error, self.checked = False, reason, time.time()
+        elif cause in _ANSWERED:
+            self.connected, self.last_error, self.checked = True, reason, time.time()
 
     def out(self) -> BusHealth:
         return BusHealth(connected=self.connected, last_error=self.last_error,

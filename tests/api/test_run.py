@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import time
 from typing import Any
+from unittest.mock import ANY
 
 import httpx
 from websockets.sync.client import ClientConnection, connect
@@ -203,6 +204,21 @@ def test_unknown_programs_are_404_and_pages_are_bounded(live: Live):
     assert viewer.get("/programs", params={"limit": 0}).status_code == 422
     assert viewer.get("/programs", params={"before": 2**70}).status_code == 422
     assert viewer.get("/nowhere").json() == {"error": "Not Found"}
+
+
+def test_bus_faults_the_controller_reports_show_in_the_bus_health(live: Live):
+    viewer, ctx = live.client("viewer"), live.app.state.ctx
+    ctx.forward(
+        {"event": "fault", "reason": "instruction 2: axis col2: jam", "cause": "DriveFault"}
+    )
+    state = viewer.get("/state").json()
+    assert state["bus"]["connected"] is True and state["last_fault"].endswith("jam")
+    ctx.forward({"event": "fault", "reason": "lost", "cause": "FieldbusConnectionError"})
+    assert viewer.get("/state").json()["bus"] == {"connected": False, "last_error": "lost",
+                                                  "checked": ANY}  # fmt: skip
+    ctx.forward({"event": "fault", "reason": "too many contacts", "cause": "RefusedMove"})
+    state = viewer.get("/state").json()
+    assert state["bus"]["last_error"] == "lost" and state["last_fault"] == "too many contacts"
 
 
 def test_a_bus_that_is_gone_is_503_with_the_reason(live: Live, mock):
