@@ -51,12 +51,12 @@ def check_limits(prediction: Prediction, limits: Limits) -> None:
 
 
 def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
-              weft_length: float | None = None) -> list[list[AxisMove]]:  # fmt: skip
+              origin_um: int = 0) -> list[list[AxisMove]]:  # fmt: skip
     """The set-points of one instruction, as steps run one after the other.
 
     A shift is one step (every listed line at once); a take-up one step to the new absolute
-    position; a weft two steps: turn the inserter to the angle, then an insert stroke of the
-    weft's length.
+    position (``origin_um``: where the take-up stood when the program started); a weft two
+    steps: turn the inserter to the angle, then an insert stroke of the weft's length.
     """
     if isinstance(instruction, Shift):
         step = []
@@ -65,12 +65,12 @@ def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
             step.append(AxisMove(axis.index, shift_stroke_um(machine, axis, k)))
         return [step]
     if isinstance(instruction, TakeUp):
-        target = round((takeup_before + instruction.length) * UM_PER_MM)
+        target = origin_um + round((takeup_before + instruction.length) * UM_PER_MM)
         return [[AxisMove(axis_by_name(machine, "takeup").index, target)]]
     assert isinstance(instruction, Weft)
     angle = axis_by_name(machine, "weft_angle").index
     insert = axis_by_name(machine, "weft_insert").index
-    stroke = round((weft_length or instruction.length) * UM_PER_MM)
+    stroke = round(instruction.length * UM_PER_MM)
     return [[AxisMove(angle, round(instruction.angle * MDEG_PER_DEG))],
             [AxisMove(insert, stroke)]]  # fmt: skip
 

@@ -31,7 +31,7 @@ from bwsd.fieldbus.base import (
     FieldbusError,
     MachineState,
 )
-from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, Journal
+from bwsd.journal import ABORTED, COMPLETE, FINAL, HELD, RUNNING, STOPPED, Journal
 from bwsd.program import parse_program, validate
 from bwsd.twin import Machine, Prediction, Program, Twin
 
@@ -63,10 +63,16 @@ class Controller:
         self._resume: int | None = None  # a journaled instruction the machine never ran
         self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
         self._timing: dict[str, float] = {}  # seconds of the running instruction, published
+        self._finished = False  # the loaded program reached complete, aborted or stopped
+        self._origin: int | None = None  # take-up position (um) where the program started
 
     # ----- programs -----
     async def load(self, name: str, text: str) -> int:
         """Parse, validate and dry-run a program, then make it the one to run."""
+        async with self._lock:
+            return await self._load(name, text)
+
+    async def _load(self, name: str, text: str) -> int:
         if self.packml.state not in (State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED):
             raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
         program = parse_program(text, name)
@@ -76,7 +82,8 @@ class Controller:
                                       len(program.instructions))  # fmt: skip
         self.program, self.program_id = program, pid
         self.twin = Twin.from_program(self.machine, program)
-        self._resume, self._blocked = None, ""
+        self._resume, self._blocked, self._finished = None, "", False
+        self._origin = None
         return pid
 
     @property
@@ -90,6 +97,8 @@ class Controller:
         async with self._lock:
             if command is Command.START and self.program is None:
                 raise ControllerError("no program is loaded")
+            if command is Command.START and self._finished:
+                raise ControllerError("the loaded program has ended: load a program to start")
             if command is Command.UNHOLD and self._blocked:
                 raise ControllerError(f"cannot resume: {self._blocked} (Abort ends the program)")
             if command is Command.RESET:
@@ -168,9 +177,13 @@ class Controller:
             check_limits(pred, self.limits)
         except (TwinError, RefusedMove) as exc:
             return await self._stop(Command.ABORT, str(exc), exc)
-        steps = setpoints(self.machine, instruction, self.twin.takeup)
+        try:
+            origin = await self._takeup_origin()
+        except FieldbusError as exc:
+            return await self._stop(Command.HOLD, _about(index, exc), exc)
+        steps = setpoints(self.machine, instruction, self.twin.takeup, origin)
         payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
-                   "contacts": len(pred.contacts)}  # fmt: skip
+                   "contacts": len(pred.contacts), "takeup_origin": origin}  # fmt: skip
         if self._resume == index:
             self._resume = None  # journaled as started before the restart
         else:
@@ -181,16 +194,25 @@ class Controller:
             state = await self.bus.state()
             self._verify(pred, state)
         except (DriveFault, EStopError) as exc:
-            return await self._stop(Command.ABORT, f"instruction {index}: {exc}", exc)
+            return await self._stop(Command.ABORT, _about(index, exc), exc)
         except (FieldbusError, Mismatch) as exc:
-            return await self._stop(Command.HOLD, f"instruction {index}: {exc}", exc)
+            return await self._stop(Command.HOLD, _about(index, exc), exc)
         self._timing["step_s"] = time.perf_counter() - begun
         await self._commit(pred, index)
         return True
 
+    async def _takeup_origin(self) -> int:
+        """Where the take-up stood when this program started (read once, journaled)."""
+        if self._origin is None:
+            assert self.twin is not None
+            state = await self.bus.state()
+            position = state.axes[axis_by_name(self.machine, "takeup").index].position
+            self._origin = position - round(self.twin.takeup * 1000)
+        return self._origin
+
     def _verify(self, pred: Prediction, state: MachineState) -> None:
         takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
-        verify(pred, state, takeup, self.bus.settings.position_tolerance)
+        verify(pred, state, takeup - (self._origin or 0), self.bus.settings.position_tolerance)
 
     async def _commit(self, pred: Prediction, index: int) -> None:
         assert self.twin is not None and self.program_id
@@ -211,8 +233,11 @@ class Controller:
         return False
 
     def _outcome(self, outcome: str) -> None:
-        if self.program_id is not None:
-            self.journal.set_outcome(self.program_id, outcome, self.packml.reason)
+        """Journal the program's outcome; an ended program's outcome never changes again."""
+        if self.program_id is None or self._finished:
+            return
+        self.journal.set_outcome(self.program_id, outcome, self.packml.reason)
+        self._finished = outcome in FINAL
 
     def _on_state(self, old: State, new: State, cause: str) -> None:
         self.journal.log_state(int(new), new.label, self.packml.reason)
@@ -231,6 +256,8 @@ class Controller:
         for instruction in program.instructions[: record.done]:
             await asyncio.to_thread(twin.apply, instruction)
         self.program, self.program_id, self.twin = program, record.id, twin
+        first = await asyncio.to_thread(self.journal.instructions, record.id, 0, 1)
+        self._origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None
         self.packml = _held_machine(self.packml)
         pending = await asyncio.to_thread(self.journal.pending, record.id)
         if pending is None:
@@ -250,7 +277,7 @@ class Controller:
         state before the move: the move never started, and Unhold runs it. Anything else is
         for the operator: Unhold is refused until the journal is settled (Abort ends it).
         """
-        before = twin.occupancy >= 0, round(twin.takeup * 1000)
+        before = twin.occupancy >= 0, (self._origin or 0) + round(twin.takeup * 1000)
         pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
         state = await self.bus.state()
         try:
@@ -270,6 +297,12 @@ class Controller:
         takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
         tolerance = self.bus.settings.position_tolerance
         return bool((state.occupancy == occupancy).all()) and abs(takeup - takeup_um) <= tolerance
+
+
+def _about(index: int, error: Exception) -> str:
+    """The reason of a stop, naming the instruction once."""
+    text = str(error)
+    return text if text.startswith(f"instruction {index}:") else f"instruction {index}: {text}"
 
 
 def _held_machine(current: PackML) -> PackML:

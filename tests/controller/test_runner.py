@@ -209,7 +209,33 @@ def test_a_silent_bus_holds_with_the_reason(mock, tmp_path):
         assert ctl.packml.state is State.HELD
         assert ctl.packml.reason.startswith("instruction 1: ")
         assert journal.program(pid).outcome == "held"
-        assert journal.pending(pid) is not None  # started, never confirmed: for the operator
+        assert journal.pending(pid) is None  # the bus was silent before anything was journaled
+        journal.close()
+
+    run(scenario())
+
+
+def test_after_a_program_ends_every_command_still_lands_in_a_waiting_state(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE
+        assert await ctl.command(Command.STOP) is State.STOPPED
+        assert await ctl.command(Command.ABORT) is State.ABORTED
+        assert await ctl.command(Command.CLEAR) is State.STOPPED
+        assert await ctl.command(Command.RESET) is State.IDLE
+        with pytest.raises(ControllerError, match="has ended"):
+            await ctl.command(Command.START)
+        assert ctl.packml.state is State.IDLE
+        assert journal.program(pid).outcome == "complete"  # an ended program stays ended
+        await ctl.load("again.bws", TEXT.replace("REPEAT 3", "REPEAT 1"))
+        await ctl.command(Command.START)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE
+        await ctl.bus.close()
         journal.close()
 
     run(scenario())
