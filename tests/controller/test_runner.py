@@ -239,3 +239,51 @@ def test_after_a_program_ends_every_command_still_lands_in_a_waiting_state(mock,
         journal.close()
 
     run(scenario())
+
+
+@pytest.mark.parametrize(
+    ("fault", "state", "words"),
+    [
+        ({"cmd": "fault", "kind": "stall", "axis": "col1"}, State.ABORTED, "axis col1: stall"),
+        ({"cmd": "fault", "kind": "drive", "axis": "col1"}, State.ABORTED, "drive fault"),
+        ({"cmd": "fault", "kind": "wrong_position", "axis": "col1"}, State.ABORTED,
+         "wrong position"),
+        ({"cmd": "estop", "pressed": True}, State.ABORTED, "emergency stop"),
+        ({"cmd": "fault", "kind": "mute"}, State.HELD, "instruction 2: "),
+        ({"cmd": "fault", "kind": "drop"}, State.HELD, "instruction 2: "),
+    ],
+)  # fmt: skip
+def test_every_injected_fault_stops_with_its_reason_and_no_unpredicted_move(
+    slow_mock, tmp_path, fault, state, words
+):
+    """After one instruction a fault is injected; the second instruction (COL) meets it."""
+
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(slow_mock, tmp_path)
+        await ctl.load("braid.bws", TEXT)
+        await ctl.command(Command.RESET)
+        seen: list[int] = []
+
+        def inject(event: dict) -> None:
+            if event.get("event") == "instruction":
+                seen.append(event["index"])
+
+        ctl.publish = inject
+        await ctl.command(Command.START)
+        while not seen:
+            await asyncio.sleep(0.001)
+        await request("127.0.0.1", slow_mock.ports["control"], fault)
+        await ctl.wait()
+        assert ctl.packml.state is state
+        assert words in ctl.packml.reason
+        committed = ctl.twin.occupancy >= 0
+        predicted = ctl.twin.predict(parse_program(TEXT).instructions[ctl.twin.done])
+        answer = await request("127.0.0.1", slow_mock.ports["control"], {"cmd": "state"})
+        machine = np.array(answer["occupancy"], dtype=bool)
+        assert np.array_equal(machine, committed) or np.array_equal(
+            machine, predicted.occupancy >= 0
+        )  # the machine is where the twin is, or where it predicted: no unpredicted move
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
