@@ -154,3 +154,31 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
     journal.close()
     assert rows == [(i, 1) for i in range(1, 201)]  # every instruction exactly once, all done
+
+
+def test_serve_talks_to_systemd(rig, tmp_path):
+    """READY=1 once it listens, WATCHDOG=1 at half the interval, STOPPING=1 on SIGTERM."""
+    import socket
+
+    config, state, _, _ = rig
+    path = str(tmp_path / "notify.sock")
+    with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as sock:
+        sock.bind(path)
+        sock.settimeout(30)
+        env = {**os.environ, "NOTIFY_SOCKET": path, "WATCHDOG_USEC": "400000"}
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+             "--state-dir", str(state)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
+        )  # fmt: skip
+        try:
+            messages = [sock.recv(4096).decode() for _ in range(3)]
+            assert messages[0].startswith("READY=1\nSTATUS=Stopped, instruction 0, http://")
+            assert all("WATCHDOG=1" in m for m in messages[1:])
+            proc.send_signal(signal.SIGTERM)
+            while "STOPPING=1" not in (last := sock.recv(4096).decode()):
+                assert "WATCHDOG=1" in last
+            assert proc.wait(timeout=30) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
