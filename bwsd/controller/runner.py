@@ -25,6 +25,7 @@ from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, se
 from bwsd.errors import BwsdError, TwinError
 from bwsd.fieldbus.axes import axis_by_name
 from bwsd.fieldbus.base import (
+    BoolGrid,
     DriveFault,
     EStopError,
     Fieldbus,
@@ -33,7 +34,8 @@ from bwsd.fieldbus.base import (
 )
 from bwsd.journal import ABORTED, COMPLETE, FINAL, HELD, RUNNING, STOPPED, Journal
 from bwsd.program import parse_program, validate
-from bwsd.twin import Machine, Prediction, Program, Twin
+from bwsd.twin import Machine, Prediction, Program, Shift, Twin
+from bwsd.twin.instructions import Instruction
 
 Publish = Callable[[dict[str, Any]], None]
 
@@ -61,6 +63,7 @@ class Controller:
         self._task: asyncio.Task[None] | None = None
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
         self._resume: int | None = None  # a journaled instruction the machine never ran
+        self._remaining: Shift | None = None  # the lines of that instruction still to move
         self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
         self._timing: dict[str, float] = {}  # seconds of the running instruction, published
         self._finished = False  # the loaded program reached complete, aborted or stopped
@@ -181,7 +184,9 @@ class Controller:
             origin = await self._takeup_origin()
         except FieldbusError as exc:
             return await self._stop(Command.HOLD, _about(index, exc), exc)
-        steps = setpoints(self.machine, instruction, self.twin.takeup, origin)
+        doing = self._remaining if self._resume == index and self._remaining else instruction
+        self._remaining = None
+        steps = setpoints(self.machine, doing, self.twin.takeup, origin)
         payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                    "contacts": len(pred.contacts), "takeup_origin": origin}  # fmt: skip
         if self._resume == index:
@@ -280,6 +285,7 @@ class Controller:
         before = twin.occupancy >= 0, (self._origin or 0) + round(twin.takeup * 1000)
         pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
         state = await self.bus.state()
+        instruction = program.instructions[index - 1]
         try:
             self._verify(pred, state)
         except Mismatch as exc:
@@ -287,6 +293,12 @@ class Controller:
                 self._resume = index
                 return self._hold(f"restarted: instruction {index} started, the machine has "
                                   "not moved: Unhold runs it")  # fmt: skip
+            rest = _lines_left(instruction, state.occupancy, before[0], pred.occupancy >= 0)
+            if rest is not None and self._shows(state, state.occupancy, before[1]):
+                self._resume, self._remaining = index, rest
+                left = len(rest.moves)
+                return self._hold(f"restarted: instruction {index} started, some of its lines "
+                                  f"moved: Unhold moves the other {left}")  # fmt: skip
             self._blocked = f"instruction {index} started and not done: {exc}"
             return self._hold(f"restarted: {self._blocked}")
         await self._commit(pred, index)
@@ -297,6 +309,27 @@ class Controller:
         takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
         tolerance = self.bus.settings.position_tolerance
         return bool((state.occupancy == occupancy).all()) and abs(takeup - takeup_um) <= tolerance
+
+
+def _lines_left(instruction: Instruction, machine: BoolGrid, before: BoolGrid,
+                after: BoolGrid) -> Shift | None:  # fmt: skip
+    """The entries of a shift whose line is still as before, when every other listed line
+    shows its predicted result and no other line moved; None otherwise (or for no shift)."""
+    if not isinstance(instruction, Shift):
+        return None
+    if instruction.axis == "col":  # work on columns as rows
+        machine, before, after = machine.T, before.T, after.T
+    rest = []
+    for line, k in instruction.moves:
+        if (machine[line] == before[line]).all():
+            rest.append((line, k))
+        elif not (machine[line] == after[line]).all():
+            return None
+    listed = {line for line, _ in instruction.moves}
+    untouched = [i for i in range(machine.shape[0]) if i not in listed]
+    if not (machine[untouched] == before[untouched]).all():
+        return None
+    return Shift(instruction.axis, tuple(rest)) if rest else None
 
 
 def _about(index: int, error: Exception) -> str:

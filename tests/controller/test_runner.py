@@ -287,3 +287,30 @@ def test_every_injected_fault_stops_with_its_reason_and_no_unpredicted_move(
         journal.close()
 
     run(scenario())
+
+
+def test_a_shift_cut_between_its_lines_is_completed_line_by_line(mock, tmp_path):
+    """Killed after row 1 moved and before row 2 did: Unhold moves row 2 only."""
+
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path)
+        pid = await ctl.load("braid.bws", TEXT)
+        journal.set_outcome(pid, "running")
+        journal.started(pid, 1, {})
+        from bwsd.controller.plan import setpoints
+
+        first = parse_program(TEXT).instructions[0]  # ROW 1:+1 2:-1
+        row1, _row2 = setpoints(ctl.machine, first, 0.0)[0]
+        await ctl.bus.execute([row1])
+        said = await ctl.recover()
+        assert "some of its lines moved: Unhold moves the other 1" in said
+        await ctl.command(Command.UNHOLD)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE
+        assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))
+        answer = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})
+        assert np.array_equal(np.array(answer["occupancy"], dtype=bool), ctl.twin.occupancy >= 0)
+        await ctl.bus.close()
+        journal.close()
+
+    run(scenario())
