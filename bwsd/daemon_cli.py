@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -86,7 +87,11 @@ async def _demo(state_dir: Path, exit_when_done: bool) -> int:
         print(f"{ctl.packml.state.label}: {ctl.index} instructions done, "
               f"{ctl.twin.contact_count if ctl.twin else 0} contacts", flush=True)  # fmt: skip
         if not exit_when_done:
-            await asyncio.Event().wait()
+            stopping = asyncio.Event()
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                loop.add_signal_handler(sig, stopping.set)
+            await stopping.wait()  # then the mock loom is stopped too
         return 0 if ctl.packml.state is State.COMPLETE else 1
     finally:
         await stop(daemon)
