@@ -14,6 +14,7 @@ import asyncio
 import logging
 import os
 import signal
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +31,9 @@ from bwsd.journal import Journal
 from bwsd.notify import notify, watchdog_interval
 
 log = logging.getLogger("bwsd")
+# The twin predicts in a worker thread; a short interpreter switch interval lets the event
+# loop (HTTP, WebSocket, bus) take the interpreter lock back sooner (default 5 ms).
+SWITCH_INTERVAL = 0.0005
 
 
 @dataclass
@@ -54,6 +58,7 @@ def state_folder(override: str | None = None) -> Path:
 
 async def start(config: Config, state_dir: Path) -> Daemon:
     """Open everything and start listening; the caller stops it with ``stop``."""
+    sys.setswitchinterval(SWITCH_INTERVAL)
     journal = Journal.open(state_dir / config.table("journal")["path"])
     bus = open_bus(config)
     try:
