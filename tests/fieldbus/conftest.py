@@ -47,6 +47,9 @@ class Mock:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
             self.proc.wait(timeout=20)
+        for pipe in (self.proc.stdout, self.proc.stderr):
+            if pipe is not None:
+                pipe.close()
 
 
 def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | None = None) -> Mock:
