@@ -218,14 +218,8 @@ def _lists(case: IntArray, values: IntArray, m: int) -> list[list[int]]:
 
 def _fixed_lists(state: State, planes: _Planes, lo: FloatArray, hi: FloatArray) -> list[list[int]]:
     """Per case, the live fixed segments that meet its box and reach near its plane."""
-    floor = float(lo[:, 2].min())
-    if floor < state.floor:
-        state.refresh_active(floor - state.margin)
-    start = int(np.searchsorted(state.active_top, floor))
-    ids = state.active[start:]
-    n = len(state.seg_c)
-    if state.active_from < n:
-        ids = np.concatenate((ids, np.arange(state.active_from, n)))
+    start = state.first_reaching(float(lo[:, 2].min()))
+    ids = np.concatenate((state.active[start:], state.recent()))
     ids = ids[state.seg_alive.data[ids]]
     xyz = state.seg_xyz.data[ids]
     c, d = xyz[:, :3], xyz[:, 3:]

@@ -281,11 +281,23 @@ class State:
             recent = np.arange(self.active_from, n)
             self.refresh_active(floor, np.concatenate((self.active, recent)))
 
+    def first_reaching(self, z: float) -> int:
+        """Position in the active set of its first segment reaching height ``z``.
+
+        Below the floor the set is rebuilt from every segment first, so nothing is missed.
+        """
+        if z < self.floor:
+            self.refresh_active(z - self.margin)
+        return int(np.searchsorted(self.active_top, z))
+
+    def recent(self) -> IntArray:
+        """Ids of the segments added since the active set was last built."""
+        result: IntArray = np.arange(self.active_from, len(self.seg_c))
+        return result
+
     def fixed_near(self, lo: Vec, hi: Vec) -> IntArray:
         """Ids of live fixed segments whose box meets the closed box [lo, hi]."""
-        if lo[2] < self.floor:
-            self.refresh_active(lo[2] - self.margin)
-        start = int(np.searchsorted(self.active_top, lo[2]))
+        start = self.first_reaching(lo[2])
         above_lo, above_hi = self.active_lo[start:], self.active_hi[start:]
         keep = (above_hi >= lo).all(axis=1) & (above_lo <= hi).all(axis=1)
         found = self.active[start:][keep]
