@@ -23,7 +23,7 @@ from typing import Any
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
 from bwsd.errors import BwsdError, TwinError
-from bwsd.fieldbus.axes import axis_by_name
+from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
     BoolGrid,
     DriveFault,
@@ -211,13 +211,16 @@ class Controller:
         if self._origin is None:
             assert self.twin is not None
             state = await self.bus.state()
-            position = state.axes[axis_by_name(self.machine, "takeup").index].position
-            self._origin = position - round(self.twin.takeup * 1000)
+            self._origin = self._takeup(state) - round(self.twin.takeup * UM_PER_MM)
         return self._origin
 
     def _verify(self, pred: Prediction, state: MachineState) -> None:
-        takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
-        verify(pred, state, takeup - (self._origin or 0), self.bus.settings.position_tolerance)
+        tolerance = self.bus.settings.position_tolerance
+        verify(pred, state, self._takeup(state) - (self._origin or 0), tolerance)
+
+    def _takeup(self, state: MachineState) -> int:
+        """The take-up axis's position as the machine reports it (um)."""
+        return state.axes[axis_by_name(self.machine, "takeup").index].position
 
     async def _commit(self, pred: Prediction, index: int) -> None:
         assert self.twin is not None and self.program_id
@@ -282,7 +285,7 @@ class Controller:
         state before the move: the move never started, and Unhold runs it. Anything else is
         for the operator: Unhold is refused until the journal is settled (Abort ends it).
         """
-        before = twin.occupancy >= 0, (self._origin or 0) + round(twin.takeup * 1000)
+        before = twin.occupancy >= 0, (self._origin or 0) + round(twin.takeup * UM_PER_MM)
         pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
         state = await self.bus.state()
         instruction = program.instructions[index - 1]
@@ -306,9 +309,9 @@ class Controller:
 
     def _shows(self, state: MachineState, occupancy: Any, takeup_um: int) -> bool:
         """The machine shows this occupancy and take-up (within the position tolerance)."""
-        takeup = state.axes[axis_by_name(self.machine, "takeup").index].position
         tolerance = self.bus.settings.position_tolerance
-        return bool((state.occupancy == occupancy).all()) and abs(takeup - takeup_um) <= tolerance
+        same_cells = bool((state.occupancy == occupancy).all())
+        return same_cells and abs(self._takeup(state) - takeup_um) <= tolerance
 
 
 def _lines_left(instruction: Instruction, machine: BoolGrid, before: BoolGrid,
