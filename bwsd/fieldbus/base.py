@@ -12,7 +12,7 @@ import asyncio
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -96,7 +96,6 @@ class MachineState:
     axes: tuple[AxisState, ...]
     occupancy: BoolGrid  # (rows, cols)
     estop: bool
-    at: float = field(default_factory=time.monotonic)
 
 
 @dataclass(frozen=True)
