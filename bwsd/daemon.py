@@ -84,10 +84,12 @@ async def _recover(controller: Controller) -> str:
 async def _serve_api(daemon: Daemon) -> None:
     from bwsd.api.app import create_app
     from bwsd.api.auth import TokenStore
+    from bwsd.api.web import WEB_ROOT
 
     table = daemon.config.table("api")
     tokens = TokenStore.load(daemon.state_dir / table["tokens_file"])
-    app = create_app(daemon.controller, tokens, table["open_reads"])
+    web_root = daemon.state_dir / table["web_root"] if table["web_root"] else WEB_ROOT
+    app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root)
     server = uvicorn.Server(uvicorn.Config(app, host=table["host"], port=table["port"],
                                            log_level="warning", lifespan="off"))  # fmt: skip
     task = asyncio.create_task(server.serve())

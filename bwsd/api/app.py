@@ -1,4 +1,4 @@
-"""The FastAPI app: REST under /api/v1, the event WebSocket, /metrics and /healthz.
+"""The FastAPI app: REST under /api/v1, the event WebSocket, /metrics, /healthz, the page.
 
 Serve it on the controller's own event loop (the controller, its bus and the WebSocket
 fan-out share that loop), e.g. with ``server(app, host, port).serve()``.
@@ -12,6 +12,7 @@ import logging
 import re
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager, suppress
+from pathlib import Path
 from typing import Any
 
 import uvicorn
@@ -21,7 +22,7 @@ from fastapi.responses import JSONResponse, Response
 from bwsd import __version__
 from bwsd.controller.runner import Controller
 
-from . import control, data, problems
+from . import control, data, problems, web
 from .auth import Auth, TokenStore, refused_token, require
 from .context import Context
 from .events import QUEUE_SIZE, EventHub, Subscriber
@@ -40,9 +41,12 @@ operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the 
 
 def create_app(
     controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
-    queue_size: int = QUEUE_SIZE,
+    queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT,
 ) -> FastAPI:  # fmt: skip
-    """The API of ``controller``; installs a forwarder behind ``controller.publish``."""
+    """The API of ``controller`` and the page at ``/`` (from ``web_root``).
+
+    Installs a forwarder behind ``controller.publish``.
+    """
     metrics = Metrics(controller)
     hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
     metrics.clients.set_function(lambda: float(hub.clients))
@@ -63,6 +67,7 @@ def create_app(
                       dependencies=[Depends(require("viewer"))], response_class=Response,
                       responses={200: {"content": {CONTENT_TYPE: {}}}, 401: {"model": Error},
                                  403: {"model": Error}})  # fmt: skip
+    web.install(app, web_root)
     ctx.install()
     _redact_server_logs()
     return app

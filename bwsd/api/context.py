@@ -15,7 +15,7 @@ from bwsd.journal import JournalError
 
 from .events import EventHub
 from .metrics import Metrics
-from .view import HealthTracker, SkeletonView
+from .view import HealthTracker, SkeletonView, next_step
 
 log = logging.getLogger("bwsd.api")
 
@@ -74,6 +74,7 @@ class Context:
         if kind == "instruction":
             out["program_id"] = self.controller.program_id
             out["skeleton"] = self.view.after_instruction()
+            out["next"] = next_step(self.controller)
             self.health.ok()  # the axes just moved and read back
         elif kind == "state":
             out["state"] = _state_number(str(event.get("to", "")))

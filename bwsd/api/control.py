@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Iterable
-from dataclasses import asdict
 from typing import Any
 
 from fastapi import Depends
@@ -17,7 +16,6 @@ from bwsd.fieldbus import FieldbusError
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
 from bwsd.twin import Machine, Prediction, Program, replay
-from bwsd.twin.instructions import Instruction
 
 from .auth import require
 from .context import Ctx
@@ -35,17 +33,23 @@ from .models import (
     FreeNodeOut,
     LengthOut,
     MachineOut,
+    NextOut,
     NodeOut,
     PreviewOut,
     StateOut,
 )
 from .problems import ApiError, describe
 from .routing import RouteTable
+from .view import instruction_dict, next_step
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]
 WRITE = [Depends(require("operator"))]
 _RUNS = frozenset({Command.START, Command.UNHOLD, Command.UNSUSPEND})
+
+
+def _next_out(step: dict[str, Any] | None) -> NextOut | None:
+    return NextOut(**step) if step is not None else None
 
 
 def command_names(commands: Iterable[Command]) -> list[str]:
@@ -72,6 +76,7 @@ async def get_state(ctx: Ctx) -> StateOut:
         allowed=command_names(pk.allowed()),
         bus=ctx.health.out(),
         last_fault=ctx.last_fault,
+        next=_next_out(next_step(ctl)),
     )
 
 
@@ -187,8 +192,3 @@ def _preview_out(pred: Prediction, line: int, refused: str | None) -> PreviewOut
         new_yarns=list(pred.new_yarns),
         length_change=[LengthOut(yarn=y, change=c) for y, c in sorted(pred.length_change.items())],
     )
-
-
-def instruction_dict(instruction: Instruction) -> dict[str, Any]:
-    """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
-    return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}

@@ -19,7 +19,7 @@ from bwsd.errors import ProgramError, TwinError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program_with_positions, validate
-from bwsd.twin import Machine, simulate
+from bwsd.twin import Machine
 
 from .auth import require
 from .context import Ctx
@@ -52,27 +52,32 @@ SKELETON_CONTENT: dict[str, dict[str, str]] = {"application/json": {}, "applicat
 
 
 @router.post("/programs", status_code=201, response_model=LoadedOut, dependencies=WRITE,
-             responses={**AUTH_ERRORS, **BODY_ERRORS, 409: {"model": Error},
+             responses={200: {"model": LoadedOut, "description": "a dry run (nothing loaded)"},
+                        **AUTH_ERRORS, **BODY_ERRORS, 409: {"model": Error},
                         422: {"model": ProgramErrorOut | InvalidOut}})  # fmt: skip
-async def post_program(body: ProgramIn, ctx: Ctx) -> LoadedOut:
-    """Parse, validate and dry-run a program, and make it the one to run."""
+async def post_program(
+    body: ProgramIn, ctx: Ctx, response: Response,
+    dry_run: Annotated[bool, Query(description="only check the program: load nothing")] = False,
+) -> LoadedOut:  # fmt: skip
+    """Parse, validate and dry-run a program, and (unless ``dry_run``) make it the one to run."""
     ctl = ctx.controller
     try:
-        pid = await ctl.load(body.name, body.text)
+        if dry_run:
+            _, totals = await ctl.check(body.name, body.text)
+            pid = None
+            response.status_code = 200
+        else:
+            pid = await ctl.load(body.name, body.text)
+            ctx.remember(pid, body.name)
+            assert ctl.dry_run is not None
+            totals = ctl.dry_run
     except ProgramError as exc:
         raise _program_error(_located(exc, body, ctl.machine)) from None
     except ControllerError as exc:
         if isinstance(exc.__cause__, TwinError):
             raise _program_error(_refused_at(exc.__cause__, body)) from None
         raise ApiError(409, str(exc)) from None
-    program = ctl.program
-    assert program is not None
-    ctx.remember(pid, body.name)
-    await ctx.view.current()
-    twin = await asyncio.to_thread(simulate, ctl.machine, program)
-    return LoadedOut(id=pid, name=body.name, instructions=len(program.instructions),
-                     contacts=twin.contact_count, yarns=twin.yarn_count, nodes=twin.node_count,
-                     takeup=twin.takeup)  # fmt: skip
+    return LoadedOut(id=pid, name=body.name, **asdict(totals))
 
 
 def _program_error(exc: ProgramError) -> ApiError:

@@ -49,6 +49,14 @@ class BusHealth(BaseModel):
     checked: float | None = Field(None, description="Unix time of the last observation")
 
 
+class NextOut(BaseModel):
+    """The instruction the program runs next."""
+
+    index: int = Field(description="its number (1-based)")
+    line: int = Field(description="its line in the program text")
+    instruction: dict[str, Any] = Field(description="as in the preview's `instruction`")
+
+
 class StateOut(BaseModel):
     state: int = Field(description="PackML state number (ISA-TR88.00.02)")
     name: str
@@ -62,6 +70,7 @@ class StateOut(BaseModel):
     allowed: list[str] = Field(description="the commands accepted now")
     bus: BusHealth
     last_fault: str | None = Field(description="the controller's last fault report, if any")
+    next: NextOut | None = Field(description="the instruction to run next; null if none")
 
 
 class AxisOut(BaseModel):
@@ -89,9 +98,9 @@ class ProgramIn(BaseModel):
 
 
 class LoadedOut(BaseModel):
-    """The dry run of a program just loaded."""
+    """The dry run of a program: just loaded, or only checked (``dry_run``: no id)."""
 
-    id: int
+    id: int | None = Field(description="the journal's id; null for a dry run")
     name: str
     instructions: int
     contacts: int

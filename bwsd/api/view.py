@@ -1,28 +1,91 @@
 """What the API reads of the controller without ever racing its run loop.
 
 The run loop predicts in a worker thread, and a read of the twin rolls a pending prediction
-back; so the API keeps its own copy of the skeleton, taken only when nothing else works on
-the twin: while the machine rests (a PackML waiting state), and inside the controller's
-"instruction done" event (between two instructions). Between those moments it serves the
-last copy, which is the state after the last instruction done.
+back; so the API keeps its own copy of the skeleton. It takes a whole copy only when nothing
+else works on the twin (while the machine rests in a PackML waiting state, or when it has
+no copy yet), and otherwise keeps its copy in step by applying each instruction's delta,
+built from the instruction's prediction inside the controller's "instruction done" event.
+A delta costs what the instruction changed, never the size of the preform.
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from bwsd.controller.packml import WAITING
 from bwsd.controller.runner import Controller
+from bwsd.export.skeleton_json import contact_to_dict, yarn_to_dict
 from bwsd.fieldbus import FieldbusConnectionError, FieldbusError, FieldbusTimeout
-from bwsd.twin import SkeletonData, Twin, replay
+from bwsd.twin import Prediction, SkeletonData, Twin, replay
+from bwsd.twin.instructions import Instruction
 from bwsd.twin.skeleton import ContactData, YarnData
 
 from .models import BusHealth
+
+
+class LiveSkeleton:
+    """A skeleton kept in step by applying instruction deltas, as a client of the events does."""
+
+    def __init__(self, sk: SkeletonData) -> None:
+        self.machine, self.diameter = sk.machine, sk.diameter
+        self.takeup, self.instructions = sk.takeup, sk.instructions
+        self.occupancy = np.array(sk.occupancy, dtype=np.int64)
+        self.contacts = list(sk.contacts)
+        self._meta = [(y.id, y.kind, y.cell, y.angle) for y in sk.yarns]
+        self._ids = [y.node_ids.tolist() for y in sk.yarns]
+        self._pos = [[tuple(p) for p in y.nodes.tolist()] for y in sk.yarns]
+        self._data: SkeletonData | None = sk
+
+    def apply(self, delta: dict[str, Any]) -> None:
+        """One instruction's delta (see ``prediction_delta``): it must follow this copy."""
+        if delta["since"] != self.instructions:
+            raise ValueError(f"a delta since {delta['since']} on a copy at {self.instructions}")
+        for node in delta["inserted"]:
+            ids = self._ids[node["yarn"]]
+            at = 0 if node["after"] == -1 else _from_end(ids, node["after"]) + 1
+            ids.insert(at, node["node"])
+            self._pos[node["yarn"]].insert(at, tuple(node["xyz"]))
+        for node in delta["moved"]:
+            ids = self._ids[node["yarn"]]
+            self._pos[node["yarn"]][_from_end(ids, node["node"])] = tuple(node["xyz"])
+        for yarn in delta["new_yarns"]:
+            cell = tuple(yarn["cell"]) if yarn["cell"] is not None else None
+            self._meta.append((yarn["id"], yarn["kind"], cell, yarn["angle"]))
+            self._ids.append(list(yarn["node_ids"]))
+            self._pos.append([tuple(p) for p in yarn["nodes"]])
+        n = self.instructions + 1
+        self.contacts.extend(ContactData(n, c["yarns"][0], c["nodes"][0], c["yarns"][1],
+                                         c["nodes"][1]) for c in delta["contacts"])  # fmt: skip
+        self.takeup, self.instructions = delta["takeup"], n
+        self.occupancy = np.array(delta["occupancy"], dtype=np.int64)
+        self._data = None
+
+    def data(self) -> SkeletonData:
+        """The copy as skeleton data (built once per instruction, when asked for)."""
+        if self._data is None:
+            rows = zip(self._meta, self._ids, self._pos, strict=True)
+            yarns = tuple(
+                YarnData(i, kind, np.array(ids, dtype=np.int64),
+                         np.array(pos, dtype=np.float64).reshape(-1, 3), cell, angle)
+                for (i, kind, cell, angle), ids, pos in rows
+            )  # fmt: skip
+            self._data = SkeletonData(self.machine, self.diameter, self.takeup,
+                                      self.instructions, yarns, tuple(self.contacts),
+                                      self.occupancy.copy())  # fmt: skip
+        return self._data
+
+
+def _from_end(ids: list[int], node: int) -> int:
+    """Where ``node`` is in a yarn's node list, searched from the free end (where work is)."""
+    for i in range(len(ids) - 1, -1, -1):
+        if ids[i] == node:
+            return i
+    raise ValueError(f"node {node} is not in the yarn")
 
 
 class SkeletonView:
@@ -31,111 +94,90 @@ class SkeletonView:
     def __init__(self, controller: Controller) -> None:
         self._ctl = controller
         self._twin: Twin | None = None
-        self._copy: SkeletonData | None = None
+        self._live: LiveSkeleton | None = None
 
     def refresh(self) -> SkeletonData | None:
         """Copy the skeleton now: only where no prediction can be running (see module)."""
         twin = self._ctl.twin
-        self._twin, self._copy = twin, (twin.skeleton() if twin is not None else None)
-        return self._copy
+        self._twin = twin
+        self._live = LiveSkeleton(twin.skeleton()) if twin is not None else None
+        return self._live.data() if self._live is not None else None
 
     async def current(self) -> SkeletonData | None:
         """The skeleton after the last instruction done; None when no program is loaded."""
         twin = self._ctl.twin
         if twin is None:
             return None
-        mine = self._copy if self._twin is twin else None
-        if mine is not None and mine.instructions == twin.done:
-            return mine
+        live = self._live if self._twin is twin else None
+        if live is not None and live.instructions == twin.done:
+            return live.data()
         if self._ctl.packml.state in WAITING:
             return self.refresh()
-        if mine is not None:
-            return mine  # a run is between "committed" and "done": the copy is one behind
+        if live is not None:
+            return live.data()  # a run is between "committed" and "done": the copy is one behind
         program, done = self._ctl.program, twin.done
         assert program is not None
         aside = await asyncio.to_thread(replay, self._ctl.machine, program, done)
         return aside.skeleton()
 
     def after_instruction(self) -> dict[str, Any]:
-        """Take the new copy (called in the "instruction done" event) and describe the change."""
-        old = self._copy if self._twin is self._ctl.twin else None
-        new = self.refresh()
-        assert new is not None
-        return skeleton_delta(old, new)
+        """The change the instruction just done made (called in its "instruction done" event).
+
+        The copy follows by the same delta, or is taken whole when it is not one behind.
+        """
+        twin, pred = self._ctl.twin, self._ctl.last
+        assert twin is not None and pred is not None and pred.index == twin.done
+        delta = prediction_delta(twin, pred)
+        live = self._live if self._twin is twin else None
+        if live is not None and live.instructions == delta["since"]:
+            live.apply(delta)
+        else:
+            self.refresh()
+        return delta
 
 
-Ints = npt.NDArray[np.int64]
-Floats = npt.NDArray[np.float64]
+def prediction_delta(twin: Twin, pred: Prediction) -> dict[str, Any]:
+    """The skeleton's change by ``pred``, just committed to ``twin`` (nothing predicted since).
 
-
-def _flat(sk: SkeletonData | None) -> tuple[Ints, Floats, Ints]:
-    """Every node of every yarn: ids, positions (n, 3), owning yarn, in yarn order."""
-    yarns = sk.yarns if sk is not None else ()
-    if not yarns:
-        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64)
-    ids = np.concatenate([y.node_ids for y in yarns])
-    pos = np.concatenate([np.asarray(y.nodes).reshape(-1, 3) for y in yarns])
-    owner = np.repeat([y.id for y in yarns], [len(y.node_ids) for y in yarns])
-    return ids.astype(np.int64), pos, owner.astype(np.int64)
-
-
-def _previous(ids: Ints, owner: Ints) -> Ints:
-    """The node before each node in its yarn (-1 for a yarn's first node)."""
-    prev = np.roll(ids, 1)
-    first = np.ones(len(ids), dtype=bool)
-    first[1:] = owner[1:] != owner[:-1]
-    prev[first] = -1
-    return prev
-
-
-def skeleton_delta(old: SkeletonData | None, new: SkeletonData) -> dict[str, Any]:
-    """From ``old`` to ``new``: inserted nodes, moved nodes, new yarns, new contacts."""
-    old_ids, old_pos, _ = _flat(old)
-    ids, pos, owner = _flat(new)
-    known_yarns = len(old.yarns) if old is not None else 0
-    fresh = ~np.isin(ids, old_ids)
-    inserted = np.flatnonzero(fresh & (owner < known_yarns))
-    prev = _previous(ids, owner)
-    table = np.full((int(max(old_ids.max(initial=-1), ids.max(initial=-1))) + 1, 3), np.nan)
-    table[old_ids] = old_pos
-    moved = np.flatnonzero(~fresh & np.any(table[ids] != pos, axis=1))
-    contacts = new.contacts[len(old.contacts) if old is not None else 0 :]
+    ``inserted`` nodes come in yarn order, so each one's ``after`` is in place before it.
+    """
+    first_new = min(pred.new_yarns, default=twin.yarn_count)
     return {
-        "since": old.instructions if old is not None else 0,
-        "inserted": [_node(ids, pos, owner, i, int(prev[i])) for i in inserted.tolist()],
-        "moved": [_node(ids, pos, owner, i, None) for i in moved.tolist()],
-        "new_yarns": [yarn_dict(y) for y in new.yarns[known_yarns:]],
-        "contacts": [contact_dict(c) for c in contacts],
-        "takeup": new.takeup,
-        "occupancy": np.asarray(new.occupancy).tolist(),
+        "since": pred.index - 1,
+        "inserted": [
+            {"yarn": n.yarn, "node": n.node, "after": n.after, "xyz": _xyz(n.xyz)}
+            for n in pred.inserted
+            if n.yarn < first_new
+        ],
+        "moved": [
+            {"yarn": w, "node": twin.free_node(w), "xyz": _xyz(xyz)}
+            for w, xyz in sorted(pred.free_nodes.items())
+            if w < first_new
+        ],
+        "new_yarns": [yarn_to_dict(twin.yarn(i)) for i in pred.new_yarns],
+        "contacts": [contact_to_dict(c) for c in pred.contacts],
+        "takeup": float(pred.takeup),
+        "occupancy": pred.occupancy.tolist(),
     }
 
 
-def _node(ids: Ints, pos: Floats, owner: Ints, i: int, after: int | None) -> dict[str, Any]:
-    out: dict[str, Any] = {"yarn": int(owner[i]), "node": int(ids[i])}
-    if after is not None:
-        out["after"] = after
-    out["xyz"] = pos[i].tolist()
-    return out
+def instruction_dict(instruction: Instruction) -> dict[str, Any]:
+    """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
+    return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
 
 
-def yarn_dict(yarn: YarnData) -> dict[str, Any]:
-    return {
-        "id": yarn.id,
-        "kind": yarn.kind,
-        "cell": list(yarn.cell) if yarn.cell is not None else None,
-        "angle": yarn.angle,
-        "node_ids": np.asarray(yarn.node_ids).tolist(),
-        "nodes": np.asarray(yarn.nodes, dtype=np.float64).tolist(),
-    }
+def next_step(controller: Controller) -> dict[str, Any] | None:
+    """The instruction the loaded program runs next, with its line; None when none is left."""
+    program, done = controller.program, controller.index
+    if program is None or done >= len(program.instructions):
+        return None
+    line = program.lines[done] if done < len(program.lines) else 0
+    return {"index": done + 1, "line": line,
+            "instruction": instruction_dict(program.instructions[done])}  # fmt: skip
 
 
-def contact_dict(contact: ContactData) -> dict[str, Any]:
-    return {
-        "yarns": [contact.moving_yarn, contact.hit_yarn],
-        "nodes": [contact.moving_node, contact.hit_node],
-        "instruction": contact.instruction,
-    }
+def _xyz(xyz: Any) -> list[float]:
+    return [float(v) for v in xyz]
 
 
 _LOST = frozenset({"FieldbusConnectionError", "FieldbusTimeout"})

@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from bwsd.controller.packml import Command, PackML, State, UnitMode
@@ -44,6 +45,17 @@ class ControllerError(BwsdError):
     """A request the controller cannot take in its present state."""
 
 
+@dataclass(frozen=True)
+class DryRun:
+    """What a program makes when the twin runs it to the end."""
+
+    instructions: int
+    contacts: int
+    yarns: int
+    nodes: int
+    takeup: float  # mm
+
+
 class Controller:
     """The one place that decides: PackML state, the loaded program, the twin, the run."""
 
@@ -59,6 +71,8 @@ class Controller:
         self.program: Program | None = None
         self.program_id: int | None = None
         self.twin: Twin | None = None
+        self.dry_run: DryRun | None = None  # the loaded program's
+        self.last: Prediction | None = None  # the instruction done last (read in its event)
         self.stop_cause: str = ""  # class of the error that last stopped a run ("" operator)
         self._task: asyncio.Task[None] | None = None
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
@@ -75,18 +89,24 @@ class Controller:
         async with self._lock:
             return await self._load(name, text)
 
+    async def check(self, name: str, text: str) -> tuple[Program, DryRun]:
+        """Parse, validate and dry-run a program without loading it (any state)."""
+        program = parse_program(text, name)
+        validate(program, self.machine, name)
+        return program, await asyncio.to_thread(_dry_run, self.machine, program, name)
+
     async def _load(self, name: str, text: str) -> int:
         if self.packml.state not in (State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED):
             raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
-        program = parse_program(text, name)
-        validate(program, self.machine, name)
-        await asyncio.to_thread(_dry_run, self.machine, program, name)
+        program, totals = await self.check(name, text)
         pid = await asyncio.to_thread(self.journal.add_program, name, text,
                                       len(program.instructions))  # fmt: skip
-        self.program, self.program_id = program, pid
+        self.program, self.program_id, self.dry_run = program, pid, totals
         self.twin = Twin.from_program(self.machine, program)
         self._resume, self._blocked, self._finished = None, "", False
         self._origin = None
+        self.publish({"event": "program", "program_id": pid, "name": name,
+                      "count": len(program.instructions), "at": time.time()})  # fmt: skip
         return pid
 
     @property
@@ -225,6 +245,7 @@ class Controller:
     async def _commit(self, pred: Prediction, index: int) -> None:
         assert self.twin is not None and self.program_id
         self.twin.commit(pred)
+        self.last = pred
         await asyncio.to_thread(self.journal.done, self.program_id, index,
                                 {"contacts": len(pred.contacts)})  # fmt: skip
         self.publish({"event": "instruction", "index": index, "contacts": len(pred.contacts),
@@ -348,10 +369,12 @@ def _held_machine(current: PackML) -> PackML:
     return machine
 
 
-def _dry_run(machine: Machine, program: Program, name: str) -> None:
+def _dry_run(machine: Machine, program: Program, name: str) -> DryRun:
     from bwsd.twin import simulate
 
     try:
-        simulate(machine, program)
+        twin = simulate(machine, program)
     except TwinError as exc:
         raise ControllerError(f"{name}: {exc}") from exc
+    return DryRun(len(program.instructions), twin.contact_count, twin.yarn_count,
+                  twin.node_count, twin.takeup)  # fmt: skip

@@ -18,7 +18,8 @@ SCHEMA = "bwsd-skeleton"
 VERSION = 1
 
 
-def _yarn_to_dict(yarn: YarnData) -> dict[str, Any]:
+def yarn_to_dict(yarn: YarnData) -> dict[str, Any]:
+    """One yarn as in the document's ``yarns``."""
     return {
         "id": yarn.id,
         "kind": yarn.kind,
@@ -30,7 +31,8 @@ def _yarn_to_dict(yarn: YarnData) -> dict[str, Any]:
     }
 
 
-def _contact_to_dict(contact: ContactData) -> dict[str, Any]:
+def contact_to_dict(contact: ContactData) -> dict[str, Any]:
+    """One contact as in the document's ``contacts``."""
     return {
         "yarns": [contact.moving_yarn, contact.hit_yarn],
         "nodes": [contact.moving_node, contact.hit_node],
@@ -50,8 +52,8 @@ def skeleton_to_dict(sk: SkeletonData) -> dict[str, Any]:
         "takeup": sk.takeup,
         "instructions": sk.instructions,
         "occupancy": np.asarray(sk.occupancy).tolist(),
-        "yarns": [_yarn_to_dict(y) for y in sk.yarns],
-        "contacts": [_contact_to_dict(c) for c in sk.contacts],
+        "yarns": [yarn_to_dict(y) for y in sk.yarns],
+        "contacts": [contact_to_dict(c) for c in sk.contacts],
     }
 
 

@@ -33,7 +33,7 @@ class Prediction:
     index: int  # 1-based instruction number
     instruction: Instruction
     contacts: tuple[ContactData, ...]
-    inserted: tuple[NodeInsert, ...]
+    inserted: tuple[NodeInsert, ...]  # in yarn order: each one's predecessor comes first
     free_nodes: dict[int, tuple[float, float, float]]  # yarn -> new free node position
     cases: dict[int, tuple[int, int]]  # yarn -> cell after the instruction
     occupancy: IntArray
@@ -189,6 +189,20 @@ class Twin:
         self._settle()
         return len(self._state.yarns)
 
+    def free_node(self, warp: int) -> int:
+        """The node id of a warp's free node (the one at its guide)."""
+        self._settle()
+        return int(self._state.free_node[warp])
+
+    def yarn(self, yarn: int) -> YarnData:
+        """A read-only copy of one yarn."""
+        self._settle()
+        st = self._state
+        ids = np.array(st.yarns[yarn], dtype=np.int64)
+        pos = np.array([st.xyz(int(n)) for n in ids], dtype=np.float64).reshape(-1, 3)
+        kind: YarnKind = "warp" if yarn < st.n_warps else "weft"
+        return YarnData(yarn, kind, ids, pos, st.yarn_cell[yarn], st.yarn_angle[yarn])
+
     def skeleton(self) -> SkeletonData:
         """A read-only copy of the whole skeleton."""
         self._settle()
@@ -224,11 +238,13 @@ class Twin:
         contacts = tuple(ContactData(*row) for row in rows)
         owner = {c.moving_node: c.moving_yarn for c in contacts}
         owner.update({c.hit_node: c.hit_yarn for c in contacts})
-        inserted = []
-        for node, yarn in sorted(owner.items()):
+        placed = []
+        for node, yarn in owner.items():
             nodes = st.yarns[yarn]
             at = index_from_end(nodes, node)
-            inserted.append(NodeInsert(yarn, node, nodes[at - 1], st.xyz(node)))
+            placed.append((yarn, at, NodeInsert(yarn, node, nodes[at - 1], st.xyz(node))))
+        # In yarn order, so that each node's predecessor is in place before it is inserted.
+        inserted = [ins for _, _, ins in sorted(placed, key=lambda p: (p[0], p[1]))]
         free = {w: st.xyz(st.free_node[w]) for w in before}
         cases = {w: st.warp_cell[w] for w in before}
         change = {w: path_length(st, w) - length for w, length in before.items()}

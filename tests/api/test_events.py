@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from bwsd.api.events import EventHub, Subscriber
-from bwsd.api.view import skeleton_delta
+from bwsd.api.view import LiveSkeleton, prediction_delta
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
-from bwsd.twin import Machine, Twin
+from bwsd.twin import Machine, Program, Twin
 from tests.api.skeletons import apply_delta, yarns_of
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,33 +56,73 @@ def test_publish_never_waits_for_a_client_and_counts_every_drop():
 
 @pytest.mark.parametrize("example", ["braid-2x2.bws", "weave-plain.bws"])
 def test_the_deltas_rebuild_every_skeleton_of_a_run(example):
-    text = (ROOT / "examples" / example).read_text()
-    header = text.split("# machine: ")[1].split("\n")[0]
-    machine = _machine(header)
-    program = parse_program(text)
+    machine, program, text = _example(example)
     twin = Twin.from_program(machine, program)
     before = twin.skeleton()
-    yarns = yarns_of(skeleton_to_dict(before))
+    yarns = yarns_of(skeleton_to_dict(before))  # the tests' own reading of the deltas
+    live = LiveSkeleton(before)  # the daemon's
     kinds: set[str] = set()
     for instruction in program.instructions[:40]:
-        twin.apply(instruction)
+        delta = json.loads(json.dumps(prediction_delta(twin, twin.apply(instruction))))
         after = twin.skeleton()
-        delta = skeleton_delta(before, after)
-        assert delta["since"] == before.instructions
+        assert delta["since"] == after.instructions - 1
         kinds.update(k for k in ("inserted", "moved", "new_yarns", "contacts") if delta[k])
-        apply_delta(yarns, json.loads(json.dumps(delta)))
+        apply_delta(yarns, delta)
         assert yarns == yarns_of(skeleton_to_dict(after))
-        before = after
+        live.apply(delta)
+        assert skeleton_to_dict(live.data()) == skeleton_to_dict(after)
     assert {"inserted", "moved", "contacts"} <= kinds
     assert ("new_yarns" in kinds) == ("WEFT" in text)
 
 
-def test_a_delta_from_nothing_holds_every_yarn():
-    machine = Machine(rows=4, cols=4, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5)
-    twin = Twin(machine, [(1, 1), (2, 2)])
-    delta = skeleton_delta(None, twin.skeleton())
-    assert [y["id"] for y in delta["new_yarns"]] == [0, 1]
-    assert delta["inserted"] == [] and delta["moved"] == [] and delta["since"] == 0
+def test_a_delta_lists_only_what_the_instruction_changed():
+    machine, program, _ = _example("braid-2x2.bws")
+    twin = Twin.from_program(machine, program)
+    for instruction in program.instructions[:20]:
+        before = twin.skeleton()
+        pred = twin.apply(instruction)
+        delta = prediction_delta(twin, pred)
+        assert len(delta["inserted"]) == len(pred.inserted)
+        assert len(delta["contacts"]) == len(pred.contacts)
+        moved = {m["yarn"] for m in delta["moved"]}
+        old = {y.id: y.nodes[-1].tolist() for y in before.yarns}
+        new = {y.id: y.nodes[-1].tolist() for y in twin.skeleton().yarns}
+        assert {y for y in old if old[y] != new[y]} <= moved <= set(pred.free_nodes)
+
+
+def test_inserts_come_in_yarn_order_when_one_yarn_is_hit_twice():
+    """A second hit before the first one on the same yarn still finds its predecessor."""
+    machine, program, _ = _example("braid-2x2.bws")
+    twin = Twin.from_program(machine, program)
+    seen_twice = False
+    for instruction in program.instructions:
+        pred = twin.apply(instruction)
+        by_yarn: dict[int, list[int]] = {}
+        for node in pred.inserted:
+            by_yarn.setdefault(node.yarn, []).append(node.node)
+        order = {y.id: y.node_ids.tolist() for y in twin.skeleton().yarns}
+        for yarn, nodes in by_yarn.items():
+            where = [order[yarn].index(n) for n in nodes]
+            assert where == sorted(where)
+            seen_twice |= len(nodes) > 1 and nodes != sorted(nodes)
+    assert seen_twice, "no instruction of the example inserted out of id order"
+
+
+def test_a_delta_that_does_not_follow_the_copy_is_refused():
+    machine, program, _ = _example("braid-2x2.bws")
+    twin = Twin.from_program(machine, program)
+    live = LiveSkeleton(twin.skeleton())
+    twin.apply(program.instructions[0])
+    delta = prediction_delta(twin, twin.apply(program.instructions[1]))
+    with pytest.raises(ValueError, match="since 1 on a copy at 0"):
+        live.apply(delta)
+    assert live.instructions == 0
+
+
+def _example(name: str) -> tuple[Machine, Program, str]:
+    text = (ROOT / "examples" / name).read_text()
+    header = text.split("# machine: ")[1].split("\n")[0]
+    return _machine(header), parse_program(text), text
 
 
 def _machine(header: str) -> Machine:

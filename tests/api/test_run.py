@@ -51,6 +51,8 @@ def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
                                  "contacts": expected.contact_count, "yarns": 4,
                                  "nodes": expected.node_count, "takeup": 6.0}  # fmt: skip
         start = viewer.get("/skeleton").json()
+        first = {"kind": "shift", "axis": "row", "moves": [[1, 1], [2, -1]]}
+        assert viewer.get("/state").json()["next"] == {"index": 1, "line": 7, "instruction": first}
         assert operator.post("/commands/reset").json()["name"] == "Idle"
         assert operator.post("/commands/start").status_code == 200
         assert viewer.get("/machine").status_code == 200  # a read while it runs
@@ -58,8 +60,13 @@ def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
     states = [e["to"] for e in events if e["event"] == "state"]
     assert states == RUN_STATES
     assert [e["state"] for e in events if e["event"] == "state"] == [15, 4, 3, 6, 16, 17]
+    assert [e for e in events if e["event"] == "program"] == [
+        {"event": "program", "program_id": 1, "name": "braid.bws", "count": BRAID_STEPS,
+         "at": ANY}]  # fmt: skip
     steps = [e for e in events if e["event"] == "instruction"]
     assert [e["index"] for e in steps] == list(range(1, BRAID_STEPS + 1))
+    lines = parse_program(BRAID).lines
+    assert [e["next"]["line"] if e["next"] else None for e in steps] == [*lines[1:], None]
     assert all(e["program_id"] == 1 for e in steps)
     assert sum(e["contacts"] for e in steps) == expected.contact_count
     assert all(len(e["skeleton"]["contacts"]) == e["contacts"] for e in steps)
@@ -79,6 +86,7 @@ def _check_records(viewer: httpx.Client, contacts: int) -> None:
         "Complete", 17, BRAID_STEPS, BRAID_STEPS)  # fmt: skip
     assert (state["program_id"], state["program_name"]) == (1, "braid.bws")
     assert state["allowed"] == ["reset", "stop", "abort"]
+    assert state["next"] is None
     assert state["bus"]["connected"] is True
     record = viewer.get("/programs/1").json()
     assert (record["outcome"], record["done"], record["text"]) == ("complete", BRAID_STEPS, BRAID)
@@ -121,6 +129,33 @@ def test_a_syntax_error_gives_its_line_and_column(live: Live):
         answer = operator.post("/programs", content=body)
         assert answer.status_code == 413 and "too large" in answer.json()["error"].lower()
     assert live.controller.program is None  # nothing was loaded
+
+
+def test_a_dry_run_checks_a_program_in_any_state_and_loads_nothing(live: Live):
+    operator = live.client("operator")
+    checked = operator.post("/programs", params={"dry_run": "true"},
+                            json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    assert checked.status_code == 200, checked.text
+    assert checked.json()["id"] is None and checked.json()["instructions"] == BRAID_STEPS
+    assert live.controller.program is None and operator.get("/programs").json() == []
+    loaded = operator.post("/programs", json={"name": "b.bws", "text": BRAID}).json()
+    assert loaded == checked.json() | {"id": 1}  # the same totals (checked against the twin above)
+    operator.post("/commands/reset")
+    operator.post("/commands/start")
+    assert operator.post("/commands/hold").json()["name"] == "Held"
+    other = BRAID.replace("REPEAT 3", "REPEAT 2")
+    refused = operator.post("/programs", json={"name": "o.bws", "text": other})
+    assert refused.status_code == 409
+    again = operator.post("/programs", params={"dry_run": "true"},
+                          json={"name": "o.bws", "text": other})  # fmt: skip
+    assert again.status_code == 200 and again.json()["instructions"] == 10
+    bad = operator.post("/programs", params={"dry_run": "true"},
+                        json={"name": "x.bws", "text": other + "ROW 9:+1\n"})  # fmt: skip
+    assert bad.status_code == 422 and bad.json()["line"] == 13, bad.text
+    viewer = live.client("viewer").post("/programs", params={"dry_run": "true"},
+                                        json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    assert viewer.status_code == 403
+    assert live.controller.program_id == 1 and live.controller.packml.state is State.HELD
 
 
 def test_an_invalid_command_is_409_with_the_allowed_ones(live: Live):
