@@ -81,6 +81,7 @@ async def _demo(state_dir: Path, exit_when_done: bool) -> int:
         for name, url in daemon.urls.items():
             print(f"{name}: {url}")
         print(f"operator token: {token}")
+        print(f"live preview: {daemon.urls['api']}/#token={token}")
         print(f"running {DEMO_PROGRAM.name}: {len(ctl.program.instructions) if ctl.program else 0}"
               " instructions (Ctrl-C to stop)", flush=True)  # fmt: skip
         await ctl.wait()

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import uvicorn
-from fastapi import Depends, FastAPI, WebSocket, WebSocketDisconnect
+from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import JSONResponse, Response
 
 from bwsd import __version__
@@ -110,9 +110,10 @@ def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[N
     return lifespan
 
 
-async def healthz() -> Health:
-    """The daemon answers (no token needed)."""
-    return Health(ok=True)
+async def healthz(request: Request) -> Health:
+    """The daemon answers (no token needed), and says whether reads need a token."""
+    auth: Auth = request.app.state.auth
+    return Health(ok=True, open_reads=auth.open_reads)
 
 
 def _metrics(metrics: Metrics) -> Callable[[], Any]:

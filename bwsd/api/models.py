@@ -195,6 +195,7 @@ class HistoryOut(BaseModel):
 
 class Health(BaseModel):
     ok: bool
+    open_reads: bool = Field(description="reads are served without a token")
 
 
 Responses = dict[int | str, dict[str, Any]]

@@ -134,7 +134,7 @@ def test_reads_need_a_viewer_token_unless_open(live):
         assert client.get(live.base + "/metrics", headers=live.headers("viewer")).status_code == 200
         for open_path in ("/healthz", "/openapi.json", "/docs"):
             assert client.get(live.base + open_path).status_code == 200
-        assert client.get(live.base + "/healthz").json() == {"ok": True}
+        assert client.get(live.base + "/healthz").json() == {"ok": True, "open_reads": False}
 
 
 def test_open_reads_serve_anyone_but_writes_still_need_an_operator(open_live):
@@ -143,6 +143,7 @@ def test_open_reads_serve_anyone_but_writes_still_need_an_operator(open_live):
         for path in READS[:-1]:
             assert client.get(path).status_code == 200, path
         assert client.get(open_live.base + "/metrics").status_code == 200
+        assert client.get(open_live.base + "/healthz").json()["open_reads"] is True
         assert client.get("/state", headers={"Authorization": "Bearer nope"}).status_code == 401
         assert client.post("/preview").status_code == 401
         assert client.post("/commands/reset").status_code == 401
