@@ -1,0 +1,171 @@
+"""Benchmark of the live preview page: prints the markdown tables of docs/benchmarks.md.
+
+    python bench/page.py [--cycles 40] [--screenshot docs/preview.png]
+
+`bwsd serve` and the mock loom (zero travel time) run in their own processes on loopback
+with the 24x24 braid; Debian's chromium shows the page while the program runs. Measured:
+
+- how long an executed instruction takes to appear: from the instruction event's own time
+  stamp (taken when the instruction is done) to the page's frame that drew it, against
+  the same time to a plain WebSocket client in Python (the baseline, in the same run);
+- whether the page stays smooth as the preform grows: the interval between the page's
+  frames while updates flow, and the page's work per frame (applying the deltas and
+  drawing) on the first tenth of the run against the last tenth, with the preform's node
+  count at each;
+- the size of the instruction events on the wire, first tenth against last tenth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import websockets
+from playwright.sync_api import sync_playwright
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.daemon import start  # noqa: E402
+from bwsd.program.generators import braid4  # noqa: E402
+from tests.test_daemon import Served  # noqa: E402
+from tests.web.conftest import ARGS, CHROMIUM  # noqa: E402
+
+
+class Listener(threading.Thread):
+    """A plain WebSocket client: when each instruction event arrives, and its size."""
+
+    def __init__(self, url: str) -> None:
+        super().__init__(daemon=True)
+        self.url = url
+        self.lag: list[float] = []  # ms, receipt - event time
+        self.sizes: list[int] = []  # bytes of each instruction event
+        self.connected = threading.Event()
+        self.finished = threading.Event()
+
+    def run(self) -> None:
+        asyncio.run(self._listen())
+
+    async def _listen(self) -> None:
+        async with websockets.connect(self.url, max_size=None) as ws:
+            self.connected.set()
+            async for text in ws:
+                now = time.time()
+                event = json.loads(text)
+                if event.get("event") == "instruction":
+                    self.lag.append((now - event["at"]) * 1e3)
+                    self.sizes.append(len(text.encode()))
+                if event.get("event") == "state" and event.get("to") in (
+                    "Complete", "Held", "Aborted"):  # fmt: skip
+                    self.finished.set()
+                    return
+
+
+def row(name: str, ms: list[float], unit: float = 1.0) -> str:
+    if not ms:
+        return f"| {name} | 0 | | |"
+    values = [v * unit for v in ms]
+    return (f"| {name} | {len(values)} | {statistics.median(values):.1f} | "
+            f"{np.percentile(values, 99):.1f} |")  # fmt: skip
+
+
+def tenths(values: list[Any]) -> tuple[list[Any], list[Any]]:
+    k = max(1, len(values) // 10)
+    return values[:k], values[-k:]
+
+
+def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
+    base = str(served.http.base_url).rstrip("/").removesuffix("/api/v1")
+    token = served.http.headers["Authorization"].split()[1]
+    listener = Listener(base.replace("http", "ws", 1) + f"/api/v1/events?token={token}")
+    listener.start()
+    listener.connected.wait(30)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors: list[str] = []
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.goto(f"{base}/#token={token}")
+        page.wait_for_function("() => window.bwsd && window.bwsd.ready", timeout=60_000)
+        loaded = served.http.post("/programs", json={"name": "b.bws", "text": program})
+        count = int(loaded.raise_for_status().json()["instructions"])
+        served.command("reset")
+        page.wait_for_function("() => window.bwsd.state === 'Idle'", timeout=60_000)
+        served.command("start")
+        began = time.monotonic()
+        while not listener.finished.wait(5):
+            done = page.evaluate("window.bwsd.done")
+            print(f"  {done}/{count} instructions, {time.monotonic() - began:.0f} s",
+                  file=sys.stderr)  # fmt: skip
+        page.wait_for_function(f"() => window.bwsd.done === {count}", timeout=120_000)
+        hooks = page.evaluate("({...window.bwsd})")
+        if shot is not None:
+            page.screenshot(path=str(shot))
+        browser.close()
+    return {
+        "hooks": hooks,
+        "lag": listener.lag,
+        "sizes": listener.sizes,
+        "errors": errors,
+        "count": count,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--cycles", type=int, default=40)
+    parser.add_argument("--screenshot", type=Path, help="save the page at the end (PNG)")
+    args = parser.parse_args()
+    program = braid4(24, 24, cycles=args.cycles, takeup=3.0, pitch=10.0, d_mat=300.0,
+                     c_mat=0.3, diameter=1.5).program  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        mock, served = start(Path(tmp), program)
+        try:
+            result = run(served, program, args.screenshot)
+        finally:
+            served.stop()
+            mock.terminate()
+            mock.wait(timeout=20)
+    hooks, count = result["hooks"], result["count"]
+    work = hooks.get("work", [])
+    first, last = tenths(work)
+    size_first, size_last = tenths(result["sizes"])
+    print(f"24x24 braid (624 carriers), {args.cycles} cycles ({count} instructions), zero "
+          f"travel time; headless chromium (software WebGL), 1280x800.\n")  # fmt: skip
+    print("| measure | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
+    print(row("instruction event to a Python WebSocket client (baseline)", result["lag"]))
+    print(row("instruction event to the page's frame that drew it", hooks["latencies"]))
+    print(row("page frame interval while updates flow", hooks["frames"]))
+    nodes0 = int(np.median([w["nodes"] for w in first])) if first else 0
+    nodes1 = int(np.median([w["nodes"] for w in last])) if last else 0
+    print(row(f"page work per frame, first tenth (~{nodes0:,} nodes)", [w["ms"] for w in first]))
+    print(row(f"page work per frame, last tenth (~{nodes1:,} nodes)", [w["ms"] for w in last]))
+    if first and last:
+        ratio = statistics.median(w["ms"] for w in last) / statistics.median(
+            w["ms"] for w in first)  # fmt: skip
+        print(f"\nPage work per frame, last tenth over first tenth (p50): {ratio:.2f}x "
+              f"for {nodes1 / max(nodes0, 1):.1f}x the nodes.")  # fmt: skip
+    if size_first and size_last:
+        print(
+            f"Instruction event size, p50: {statistics.median(size_first) / 1e3:.1f} kB "
+            f"(first tenth), {statistics.median(size_last) / 1e3:.1f} kB (last tenth)."
+        )
+    lag = statistics.median(result["lag"]) if result["lag"] else 0.0
+    page = statistics.median(hooks["latencies"]) if hooks["latencies"] else 0.0
+    print(
+        f"Page over baseline (p50): {page / lag if lag else float('nan'):.2f}x. "
+        f"Console errors: {len(result['errors'])}."
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,89 @@
+"""A real browser on the page: Playwright driving Debian's chromium against a live daemon.
+
+Chromium is never downloaded: the tests launch the one at ``$BWSD_CHROMIUM`` (default
+/usr/bin/chromium), which ``.ci/run`` installs. Without it the tests are skipped, except
+under CI (``CI=true``), where a missing browser fails them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
+
+from tests.api.conftest import WAIT, Live, live, mock, start_live
+from tests.fieldbus.conftest import slow_mock
+
+__all__ = ["Browsing", "browser", "live", "mock", "page", "slow_live", "slow_mock"]
+
+CHROMIUM = os.environ.get("BWSD_CHROMIUM", "/usr/bin/chromium")
+# Headless, and quiet: this machine's network is closed, so nothing that phones home.
+ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+        "--disable-quic", "--disable-default-apps"]  # fmt: skip
+MS = int(WAIT * 1000)
+_DRIVER_NOTE = re.compile(r"\[\.WebGL-[0-9a-fx]+\]GL Driver Message \(OpenGL, Performance,")
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Browser]:
+    if not Path(CHROMIUM).exists():
+        message = f"chromium is not installed at {CHROMIUM} (.ci/run installs it)"
+        if os.environ.get("CI") == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield browser
+        browser.close()
+
+
+@dataclass
+class Browsing:
+    """A page and everything it said on its console."""
+
+    page: Page
+    errors: list[str] = field(default_factory=list)
+
+    def open(self, live: Live, token: str | None = None) -> None:
+        """The daemon's page, logged in with ``token`` by the address's fragment."""
+        self.page.goto(live.base + "/" + (f"#token={token}" if token else ""))
+
+    def ready(self) -> None:
+        self.page.wait_for_function("() => window.bwsd && window.bwsd.ready", timeout=MS)
+
+    def until(self, expression: str, arg: Any = None) -> Any:
+        """Wait until a JS expression (a function of ``arg``) is truthy; its value."""
+        return self.page.wait_for_function(expression, arg=arg, timeout=MS).json_value()
+
+    def state(self, name: str) -> None:
+        """Wait until the page shows PackML state ``name``."""
+        self.page.wait_for_selector(f'#state[data-state="{name}"]', timeout=MS)
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Browsing]:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    browsing = Browsing(context.new_page())
+
+    def console(message: ConsoleMessage) -> None:
+        if message.type == "warning" and _DRIVER_NOTE.match(message.text):
+            return  # the software GL driver's performance notes: the browser's, not the page's
+        if message.type in ("error", "warning"):
+            browsing.errors.append(f"{message.type}: {message.text} ({message.location})")
+
+    browsing.page.on("console", console)
+    browsing.page.on("pageerror", lambda exc: browsing.errors.append(f"page error: {exc}"))
+    yield browsing
+    context.close()
+
+
+@pytest.fixture
+def slow_live(slow_mock: Any, tmp_path: Path) -> Iterator[Live]:
+    yield from start_live(slow_mock, tmp_path)
