@@ -96,7 +96,9 @@ def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
         page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
         page.goto(f"{base}/#token={token}")
         page.wait_for_function("() => window.bwsd && window.bwsd.ready", timeout=60_000)
-        loaded = served.http.post("/programs", json={"name": "b.bws", "text": program})
+        # the load dry-runs the whole program first: minutes for a large preform
+        loaded = served.http.post("/programs", json={"name": "b.bws", "text": program},
+                                  timeout=3600)  # fmt: skip
         count = int(loaded.raise_for_status().json()["instructions"])
         served.command("reset")
         page.wait_for_function("() => window.bwsd.state === 'Idle'", timeout=60_000)

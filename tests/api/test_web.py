@@ -6,6 +6,7 @@ import asyncio
 import base64
 import hashlib
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import httpx
@@ -45,7 +46,8 @@ class _Client:
             async with httpx.AsyncClient(transport=self.transport, base_url="http://t") as c:
                 return await c.get(path)
 
-        return asyncio.run(fetch())
+        with ThreadPoolExecutor(1) as pool:  # a loop of its own, whatever runs in this thread
+            return pool.submit(asyncio.run, fetch()).result()
 
 
 def _client(root: Path) -> _Client:

@@ -31,8 +31,10 @@ MS = int(WAIT * 1000)
 _DRIVER_NOTE = re.compile(r"\[\.WebGL-[0-9a-fx]+\]GL Driver Message \(OpenGL, Performance,")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
+    """One chromium per test module (Playwright's loop must not outlive the module: later
+    tests may run event loops of their own)."""
     if not Path(CHROMIUM).exists():
         message = f"chromium is not installed at {CHROMIUM} (.ci/run installs it)"
         if os.environ.get("CI") == "true":

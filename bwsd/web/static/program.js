@@ -1,0 +1,180 @@
+// The program panel: pick a .bws file (or type it), check it with a dry run, load it.
+//
+// A dry run answers the totals the twin predicts (instructions, contacts, yarns, nodes,
+// take-up); a refused program answers the error with its line and column, shown here
+// under the offending line of the text with a caret at the column.
+
+import { errorText, request } from './api.js';
+
+const $ = (id) => document.getElementById(id);
+
+function element(tag, className, text) {
+  const node = document.createElement(tag);
+  if (className) node.className = className;
+  if (text !== undefined) node.textContent = text;
+  return node;
+}
+
+/** Millimetres for a person: 3, 22.5, 0.125. */
+function mm(value) {
+  return `${Number(Number(value).toFixed(3))} mm`;
+}
+
+export class ProgramPanel {
+  /**
+   * @param onLoaded called after a program was loaded (the page refetches everything)
+   * @param onUnauthorized called on a 401 (the page shows the login form)
+   * @param onForbidden called with the answer of a 403 (a token whose role is too low)
+   */
+  constructor({ onLoaded, onUnauthorized, onForbidden }) {
+    this.onLoaded = onLoaded;
+    this.onUnauthorized = onUnauthorized;
+    this.onForbidden = onForbidden;
+    this.file = $('program-file');
+    this.text = $('program-text');
+    this.name = $('program-name');
+    this.checkButton = $('check');
+    this.loadButton = $('load');
+    this.result = $('dry-run');
+    this.busy = false;
+    this.allowed = false;
+
+    this.file.addEventListener('change', () => this.readFile());
+    this.checkButton.addEventListener('click', () => this.submit(true));
+    this.loadButton.addEventListener('click', () => this.submit(false));
+    this.text.addEventListener('input', () => this.update());
+  }
+
+  /** Enable Check and Load only with a token (and not while a request runs). */
+  setAllowed(allowed) {
+    this.allowed = allowed;
+    this.update();
+  }
+
+  update() {
+    const usable = this.allowed && !this.busy && this.text.value.trim() !== '';
+    this.checkButton.disabled = !usable;
+    this.loadButton.disabled = !usable;
+  }
+
+  async readFile() {
+    const file = this.file.files && this.file.files[0];
+    if (!file) return;
+    this.text.value = await file.text();
+    this.name.value = file.name;
+    this.result.replaceChildren();
+    this.update();
+  }
+
+  /** The program's name: the field, else "program.bws". */
+  programName() {
+    const name = this.name.value.trim();
+    return name || 'program.bws';
+  }
+
+  /** POST the program: a dry run (`check`) or a load. */
+  async submit(dryRun) {
+    const text = this.text.value;
+    const name = this.programName();
+    this.busy = true;
+    this.update();
+    this.result.replaceChildren(element('p', 'pending', dryRun ? 'checking…' : 'loading…'));
+    try {
+      const answer = await request(`api/v1/programs${dryRun ? '?dry_run=true' : ''}`, {
+        method: 'POST',
+        body: { name, text },
+      });
+      if (answer.ok) {
+        this.showTotals(answer.body, dryRun);
+        if (!dryRun) this.onLoaded(answer.body);
+      } else if (answer.status === 422 && answer.body && 'line' in answer.body) {
+        this.showProgramError(answer.body, text);
+      } else if (answer.status === 422 && answer.body && Array.isArray(answer.body.details)) {
+        this.showInvalid(answer.body);
+      } else {
+        if (answer.status === 401) this.onUnauthorized();
+        if (answer.status === 403) this.onForbidden(answer);
+        this.result.replaceChildren(element('p', 'error', errorText(answer)));
+      }
+    } catch (error) {
+      this.result.replaceChildren(element('p', 'error', `the daemon cannot be reached (${error.message})`));
+    } finally {
+      this.busy = false;
+      this.update();
+    }
+  }
+
+  /** What the twin predicts for the program (and its id once loaded). */
+  showTotals(totals, dryRun) {
+    const head = dryRun
+      ? 'check passed: the twin runs it to the end'
+      : `loaded as program ${totals.id}: ${totals.name}`;
+    const list = element('dl', 'totals');
+    const rows = [
+      ['instructions', totals.instructions],
+      ['contacts', totals.contacts],
+      ['yarns', totals.yarns],
+      ['nodes', totals.nodes],
+      ['take-up', mm(totals.takeup)],
+    ];
+    for (const [label, value] of rows) list.append(element('dt', '', label), element('dd', '', String(value)));
+    this.result.replaceChildren(element('p', 'ok', head), list);
+  }
+
+  /** A refused program: "line N, column M: error" and the line quoted with a caret. */
+  showProgramError({ error, line, column }, text) {
+    const box = element('div', 'program-error');
+    box.setAttribute('role', 'alert');
+    const where = line > 0 ? `line ${line}${column > 0 ? `, column ${column}` : ''}` : 'line unknown';
+    const head = element('p', 'error');
+    if (line > 0) {
+      // The place, as a button that puts the text cursor there.
+      const goTo = element('button', 'goto', where);
+      goTo.type = 'button';
+      goTo.title = 'show it in the program text';
+      goTo.addEventListener('click', () => this.select(text, line, column));
+      head.append(goTo);
+    } else {
+      head.append(element('strong', '', where));
+    }
+    head.append(document.createTextNode(`: ${error}`));
+    box.append(head);
+    const source = line > 0 ? text.split(/\r\n|\r|\n/)[line - 1] : undefined;
+    if (source !== undefined) {
+      const gutter = `${line} | `;
+      // Keep tabs under tabs so the caret lines up with the column however tabs render.
+      const lead = column > 0 ? source.slice(0, column - 1).replace(/[^\t]/g, ' ') : '';
+      const quote = element('pre', 'source');
+      quote.textContent = `${gutter}${source}\n${' '.repeat(gutter.length)}${lead}${column > 0 ? '^' : ''}`;
+      box.append(quote);
+    }
+    this.result.replaceChildren(box);
+  }
+
+  /** Select the character at line, column (1-based) of the text area, scrolled into view. */
+  select(text, line, column) {
+    const lines = text.split(/\r\n|\r|\n/);
+    if (this.text.value !== text) return; // edited since: the place is no longer known
+    let offset = 0;
+    for (let i = 0; i < line - 1; i += 1) offset += lines[i].length + 1;
+    offset += Math.max(column - 1, 0);
+    this.text.focus();
+    this.text.setSelectionRange(offset, offset + (column > 0 ? 1 : lines[line - 1].length));
+    const lineHeight = this.text.scrollHeight / Math.max(lines.length, 1);
+    this.text.scrollTop = Math.max(0, (line - 3) * lineHeight);
+  }
+
+  /** A malformed request (e.g. an empty name): the validator's words. */
+  showInvalid({ error, details }) {
+    const box = element('div', 'program-error');
+    box.setAttribute('role', 'alert');
+    box.append(element('p', 'error', error));
+    const list = element('ul');
+    for (const detail of details) {
+      const field = Array.isArray(detail.loc) ? detail.loc.filter((part) => part !== 'body').join('.') : '';
+      list.append(element('li', '', `${field ? `${field}: ` : ''}${detail.msg ?? JSON.stringify(detail)}`));
+    }
+    box.append(list);
+    this.result.replaceChildren(box);
+  }
+}
