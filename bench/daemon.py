@@ -18,6 +18,8 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +64,25 @@ def start(tmp: Path, program: str) -> tuple[Any, Served]:
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("bench", "operator")
     return mock, Served(tmp / "bwsd.toml", state, token)
+
+
+def braid_24x24(cycles: int) -> str:
+    """The benchmarks' 24x24 braid program (624 carriers)."""
+    return braid4(24, 24, cycles=cycles, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
+                  diameter=1.5).program  # fmt: skip
+
+
+@contextmanager
+def serving(program: str) -> Iterator[Served]:
+    """The mock loom and `bwsd serve` for ``program``, stopped at the end."""
+    with tempfile.TemporaryDirectory() as tmp:
+        mock, served = start(Path(tmp), program)
+        try:
+            yield served
+        finally:
+            served.stop()
+            mock.terminate()
+            mock.wait(timeout=20)
 
 
 async def measure(served: Served, program: str, rate: float) -> dict[str, list[float]]:
@@ -125,16 +146,9 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=2)
     parser.add_argument("--rate", type=float, default=500.0)
     args = parser.parse_args()
-    program = braid4(24, 24, cycles=args.cycles, takeup=3.0, pitch=10.0, d_mat=300.0,
-                     c_mat=0.3, diameter=1.5).program  # fmt: skip
-    with tempfile.TemporaryDirectory() as tmp:
-        mock, served = start(Path(tmp), program)
-        try:
-            result = asyncio.run(measure(served, program, args.rate))
-        finally:
-            served.stop()
-            mock.terminate()
-            mock.wait(timeout=20)
+    program = braid_24x24(args.cycles)
+    with serving(program) as served:
+        result = asyncio.run(measure(served, program, args.rate))
     print(
         f"24x24 braid (624 carriers), {args.cycles} cycles, zero travel time, "
         f"GET state at {args.rate:g} requests/s during the run.\n"

@@ -22,7 +22,6 @@ import asyncio
 import json
 import statistics
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -35,8 +34,7 @@ from playwright.sync_api import sync_playwright
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.daemon import start  # noqa: E402
-from bwsd.program.generators import braid4  # noqa: E402
+from bench.daemon import braid_24x24, serving  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 from tests.web.conftest import ARGS, CHROMIUM  # noqa: E402
 
@@ -127,16 +125,9 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=40)
     parser.add_argument("--screenshot", type=Path, help="save the page at the end (PNG)")
     args = parser.parse_args()
-    program = braid4(24, 24, cycles=args.cycles, takeup=3.0, pitch=10.0, d_mat=300.0,
-                     c_mat=0.3, diameter=1.5).program  # fmt: skip
-    with tempfile.TemporaryDirectory() as tmp:
-        mock, served = start(Path(tmp), program)
-        try:
-            result = run(served, program, args.screenshot)
-        finally:
-            served.stop()
-            mock.terminate()
-            mock.wait(timeout=20)
+    program = braid_24x24(args.cycles)
+    with serving(program) as served:
+        result = run(served, program, args.screenshot)
     hooks, count = result["hooks"], result["count"]
     work = hooks.get("work", [])
     first, last = tenths(work)
