@@ -14,6 +14,7 @@ import asyncio
 import logging
 import os
 import signal
+import socket
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from bwsd.config import Config
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
 from bwsd.controller.runner import Controller
+from bwsd.errors import ConfigError
 from bwsd.fieldbus import FieldbusError, open_bus
 from bwsd.journal import Journal
 from bwsd.notify import notify, watchdog_interval
@@ -69,8 +71,12 @@ async def start(config: Config, state_dir: Path) -> Daemon:
     controller = Controller(config.machine, bus, journal, limits)
     daemon = Daemon(config, state_dir, controller, journal)
     log.info("%s", await _recover(controller))
-    await _serve_api(daemon)
-    await _serve_plc(daemon)
+    try:
+        await _serve_api(daemon)
+        await _serve_plc(daemon)
+    except BaseException:
+        await stop(daemon)  # what did start is closed again
+        raise
     return daemon
 
 
@@ -92,11 +98,17 @@ async def _serve_api(daemon: Daemon) -> None:
     app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root)
     server = uvicorn.Server(uvicorn.Config(app, host=table["host"], port=table["port"],
                                            log_level="warning", lifespan="off"))  # fmt: skip
-    task = asyncio.create_task(server.serve())
+    where = f"{table['host']}:{table['port']}"
+    family = socket.AF_INET6 if ":" in table["host"] else socket.AF_INET
+    try:  # bound here, so that a port in use is an error of ours, not the server's exit
+        sock = socket.create_server((table["host"], table["port"]), family=family)
+    except OSError as exc:
+        raise ConfigError(f"[api] cannot listen on {where}: {exc.strerror or exc}") from None
+    task = asyncio.create_task(server.serve(sockets=[sock]))
     while not server.started:
         if task.done():
-            task.result()  # raises the reason (port in use...)
-            raise RuntimeError("the API server stopped at start")
+            task.result()  # raises the reason
+            raise ConfigError(f"[api] the server on {where} stopped at start")
         await asyncio.sleep(0.02)
     port = server.servers[0].sockets[0].getsockname()[1]
     daemon.urls["api"] = f"http://{table['host']}:{port}"

@@ -182,3 +182,24 @@ def test_serve_talks_to_systemd(rig, tmp_path):
         finally:
             if proc.poll() is None:
                 proc.kill()
+
+
+def test_a_port_in_use_is_a_clear_error_and_nothing_stays_open(rig):
+    import socket
+
+    config, state, _, _ = rig
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config.write_text(config.read_text().replace("port = 0", f"port = {port}", 1))
+        assert f"port = {port}" in config.read_text()
+        done = subprocess.run(
+            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+             "--state-dir", str(state)],
+            capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60,
+        )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"bwsd: error: [api] cannot listen on 127.0.0.1:{port}: "), last
+    assert "address already in use" in last.lower() and "Traceback" not in done.stderr
