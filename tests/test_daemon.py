@@ -30,7 +30,8 @@ from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"
-LONG = TEXT.replace("REPEAT 4", "REPEAT 40")  # 200 instructions: room for every kill
+LONG = TEXT.replace("REPEAT 4", "REPEAT 80")  # 400 instructions: room for every kill
+LONG_STEPS = 400
 KILLS = int(os.environ.get("BWSD_CRASH_KILLS", "100"))
 
 
@@ -134,18 +135,20 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
     served.command("reset")
     served.command("start")
-    for _ in range(KILLS):
+    for kill in range(KILLS):
         time.sleep(rng.uniform(0.0, 0.15))  # anywhere: predicting, journaling, moving...
+        # A program that completes is no longer resumed: every kill must come before its end.
+        assert served.state()["index"] < LONG_STEPS - 10, f"LONG is too short for {KILLS} kills"
         served.kill()
         served = Served(config, state, token)
         now = served.state()
-        if now["name"] == "Complete":
-            break
-        assert now["name"] == "Held" and now["reason"].startswith("restarted"), now
+        assert now["name"] == "Held" and now["reason"].startswith("restarted"), (
+            f"after kill {kill + 1}: {now['name']}: {now['reason']} at {now['index']}"
+        )
         served.command("unhold")
     try:
         final = served.wait_for({"Complete", "Held", "Aborted"})
-        assert final["name"] == "Complete" and final["index"] == 200, final
+        assert final["name"] == "Complete" and final["index"] == LONG_STEPS, final
         skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
         assert same_geometry(skeleton, expected_skeleton(LONG))
     finally:
@@ -153,7 +156,7 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     journal = sqlite3.connect(state / "journal.db")
     rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
     journal.close()
-    assert rows == [(i, 1) for i in range(1, 201)]  # every instruction exactly once, all done
+    assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
 
 
 def test_serve_talks_to_systemd(rig, tmp_path):
