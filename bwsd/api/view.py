@@ -24,6 +24,7 @@ from bwsd.fieldbus import FieldbusConnectionError, FieldbusError, FieldbusTimeou
 from bwsd.twin import Prediction, SkeletonData, Twin, replay
 from bwsd.twin.instructions import Instruction
 from bwsd.twin.skeleton import ContactData, YarnData
+from bwsd.twin.sweep import index_from_end
 
 from .models import BusHealth
 
@@ -47,12 +48,12 @@ class LiveSkeleton:
             raise ValueError(f"a delta since {delta['since']} on a copy at {self.instructions}")
         for node in delta["inserted"]:
             ids = self._ids[node["yarn"]]
-            at = 0 if node["after"] == -1 else _from_end(ids, node["after"]) + 1
+            at = 0 if node["after"] == -1 else index_from_end(ids, node["after"]) + 1
             ids.insert(at, node["node"])
             self._pos[node["yarn"]].insert(at, tuple(node["xyz"]))
         for node in delta["moved"]:
             ids = self._ids[node["yarn"]]
-            self._pos[node["yarn"]][_from_end(ids, node["node"])] = tuple(node["xyz"])
+            self._pos[node["yarn"]][index_from_end(ids, node["node"])] = tuple(node["xyz"])
         for yarn in delta["new_yarns"]:
             cell = tuple(yarn["cell"]) if yarn["cell"] is not None else None
             self._meta.append((yarn["id"], yarn["kind"], cell, yarn["angle"]))
@@ -78,14 +79,6 @@ class LiveSkeleton:
                                       self.instructions, yarns, tuple(self.contacts),
                                       self.occupancy.copy())  # fmt: skip
         return self._data
-
-
-def _from_end(ids: list[int], node: int) -> int:
-    """Where ``node`` is in a yarn's node list, searched from the free end (where work is)."""
-    for i in range(len(ids) - 1, -1, -1):
-        if ids[i] == node:
-            return i
-    raise ValueError(f"node {node} is not in the yarn")
 
 
 class SkeletonView:

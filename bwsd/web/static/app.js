@@ -56,10 +56,6 @@ const live = {
 
 let inbox = []; // instruction events to apply at the next frame
 let waiting = []; // instruction events that arrived while the skeleton was being fetched
-let refetching = null; // the fetch of state + skeleton under way, if any
-let refetchAgain = false; // something asked for one more fetch meanwhile
-let stateFetch = null; // a GET state under way
-let stateAgain = false;
 
 let frameRequested = false;
 let lastTick = 0; // time of the previous frame while updates flow (0: none)
@@ -125,7 +121,7 @@ function applyInbox() {
   inbox = [];
   const applied = [];
   for (let i = 0; i < batch.length; i += 1) {
-    if (refetching) {
+    if (fullFetch.running) {
       waiting.push(...batch.slice(i));
       break;
     }
@@ -174,29 +170,48 @@ function noteProgress(event) {
 
 // ----- fetching -----
 
+/** Runs `work` one at a time: asking while it runs asks for one more run after it. */
+class Coalesced {
+  constructor(work, after = () => {}) {
+    this.work = work;
+    this.after = after; // once the runs are over, whatever happened
+    this.running = null; // the runs under way, if any
+    this.again = false;
+  }
+
+  run() {
+    if (this.running) {
+      this.again = true;
+      return this.running;
+    }
+    this.running = (async () => {
+      try {
+        do {
+          this.again = false;
+          await this.work();
+        } while (this.again);
+      } catch (error) {
+        say(`the daemon cannot be reached (${error.message})`, 'error');
+      } finally {
+        this.running = null;
+        this.after();
+      }
+    })();
+    return this.running;
+  }
+}
+
+/** The fetch of the state and the whole skeleton; events wait while it runs. */
+const fullFetch = new Coalesced(fetchAll, () => {
+  live.fetchedOnce = true;
+  inbox = waiting.concat(inbox); // then the same rule, in order
+  waiting = [];
+  scheduleFrame();
+});
+
 /** Fetch the state and the whole skeleton again (one fetch at a time; asks coalesce). */
 function refetch() {
-  if (refetching) {
-    refetchAgain = true;
-    return refetching;
-  }
-  refetching = (async () => {
-    try {
-      do {
-        refetchAgain = false;
-        await fetchAll();
-      } while (refetchAgain);
-    } catch (error) {
-      say(`the daemon cannot be reached (${error.message})`, 'error');
-    } finally {
-      refetching = null;
-      live.fetchedOnce = true;
-      inbox = waiting.concat(inbox); // then the same rule, in order
-      waiting = [];
-      scheduleFrame();
-    }
-  })();
-  return refetching;
+  return fullFetch.run();
 }
 
 async function fetchAll() {
@@ -219,25 +234,13 @@ async function fetchAll() {
 }
 
 /** GET the state alone (after a state, mode or fault event, or a command). */
+const stateFetch = new Coalesced(async () => {
+  const answer = await request('api/v1/state');
+  if (accept(answer)) showState(answer.body);
+});
+
 function refreshState() {
-  if (stateFetch) {
-    stateAgain = true;
-    return stateFetch;
-  }
-  stateFetch = (async () => {
-    try {
-      do {
-        stateAgain = false;
-        const answer = await request('api/v1/state');
-        if (accept(answer)) showState(answer.body);
-      } while (stateAgain);
-    } catch (error) {
-      say(`the daemon cannot be reached (${error.message})`, 'error');
-    } finally {
-      stateFetch = null;
-    }
-  })();
-  return stateFetch;
+  return stateFetch.run();
 }
 
 /** GET the state at most every STATE_EVERY_MS while instructions flow. */
