@@ -1,266 +1,288 @@
-"""The twin: predict, commit, snapshot, restore and replay over the sweep kernel."""
+"""The twin: predict, commit, snapshot and restore over the compiled kernel (docs/twin.md).
+
+``predict`` runs an instruction in the kernel, in place and with the interpreter lock
+released, copies the record of what changed, and rolls the state back: the committed state is
+all any reader ever sees, and no read changes anything. ``commit`` replays that record, in the
+size of the change. A prediction names the state it was made on; any other is refused.
+"""
 
 from __future__ import annotations
 
+import math
+import threading
+from array import array
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
 
 import numpy as np
 
-from bwsd.errors import TwinError
-from bwsd.twin.instructions import Instruction, Program
+from bwsd.errors import MoveError, ShedClosedError, TwinError
+from bwsd.twin import _kernel
+from bwsd.twin.exact import MAX_DIAMETER, MIN_LENGTH, SCALE, as_bytes, exact
+from bwsd.twin.geometry import Geometry, Point, weft_ends
+from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp, Weft
 from bwsd.twin.machine import Machine
-from bwsd.twin.moves import execute, path_length
-from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData, YarnKind
-from bwsd.twin.state import State
-from bwsd.twin.sweep import index_from_end
+from bwsd.twin.prediction import NodeInsert, Prediction, Snapshot, mm
+from bwsd.twin.shed import closest
+from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData
 
-
-@dataclass(frozen=True)
-class NodeInsert:
-    """A node added by an instruction: into ``yarn`` right after node ``after``."""
-
-    yarn: int
-    node: int
-    after: int
-    xyz: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class Prediction:
-    """The would-be result of one instruction, computed without touching the committed twin."""
-
-    index: int  # 1-based instruction number
-    instruction: Instruction
-    contacts: tuple[ContactData, ...]
-    inserted: tuple[NodeInsert, ...]  # in yarn order: each one's predecessor comes first
-    free_nodes: dict[int, tuple[float, float, float]]  # yarn -> new free node position
-    cases: dict[int, tuple[int, int]]  # yarn -> cell after the instruction
-    occupancy: IntArray
-    takeup: float
-    new_yarns: tuple[int, ...]
-    length_change: dict[int, float]  # moved warp -> change of its path length (mm)
-    token: int = field(repr=False, default=0)
-
-
-@dataclass(frozen=True)
-class Snapshot:
-    """A point the twin can be restored to (cheap: a mark in the change log)."""
-
-    mark: int
-    done: int
-    generation: int
+__all__ = ["NodeInsert", "Prediction", "Snapshot", "Twin", "replay", "simulate"]
 
 
 class Twin:
-    """The geometric model of the machine (docs/twin.md).
+    """The geometric model of the machine (docs/twin.md), over the compiled kernel.
 
-    ``predict`` runs an instruction in place with an undo log and leaves it pending; any
-    read of the state, or another ``predict``, rolls a pending prediction back first, so
-    the committed state is what every caller sees. ``commit`` of the pending prediction
-    only drops its log.
+    Safe to share between threads: calls are serialised by a lock; ``takeup`` and ``done``
+    are plain attributes that a running prediction never touches.
     """
 
     def __init__(
         self, machine: Machine, fill: Iterable[tuple[int, int]], diameter: float | None = None
     ) -> None:
         self.machine = machine
-        self.diameter = machine.yarn_diameter if diameter is None else diameter
-        self._state = State(machine, self.diameter)
+        self.diameter = float(machine.yarn_diameter if diameter is None else diameter)
+        d = exact(self.diameter)
+        if not (d == 0 or MIN_LENGTH <= d < MAX_DIAMETER):
+            raise TwinError(f"yarn diameter {self.diameter:g} mm: it must be 0 or lie in "
+                            f"[{float(MIN_LENGTH):g}, {MAX_DIAMETER}) mm")  # fmt: skip
+        self._geo = Geometry(machine)
+        grid_d = d * SCALE
+        self._kernel = _kernel.Kernel(
+            array("q", self._geo.gx).tobytes(), array("q", self._geo.gy).tobytes(),
+            self._geo.guide_z(Fraction(0)), self._geo.cell_shift(), float(grid_d),
+            as_bytes(grid_d.numerator), as_bytes(grid_d.denominator),
+        )  # fmt: skip
+        self._fill: list[tuple[int, int]] = []
         for row, col in fill:
-            if not machine.inside(row, col):
-                raise TwinError(f"fill cell ({row}, {col}) is outside the matrix")
-            if self._state.occupancy[row][col] >= 0:
-                raise TwinError(f"fill cell ({row}, {col}) is filled twice")
-            self._state.add_warp(row, col)
+            self._add_warp(row, col)
+        self._angles: list[float | None] = [None] * len(self._fill)
+        self._takeup = Fraction(0)
         self.done = 0
-        self._pending: Prediction | None = None
-        self._pending_mark = 0
-        self._token = 0
-        self._snapshots: list[int] = []
-        self._generation = 0
+        self._lock = threading.Lock()
+        self._changed()
+
+    def _add_warp(self, row: int, col: int) -> None:
+        if not self.machine.inside(row, col):
+            raise TwinError(f"fill cell ({row}, {col}) is outside the matrix")
+        if (row, col) in self._fill:
+            raise TwinError(f"fill cell ({row}, {col}) is filled twice")
+        self._kernel.add_warp(row, col, *self._geo.fell(row, col, Fraction(0)))
+        self._fill.append((row, col))
 
     @classmethod
     def from_program(cls, machine: Machine, program: Program) -> Twin:
         """A twin filled as the program says, before its first instruction."""
         return cls(machine, program.fill, program.diameter)
 
-    # ----- predict / commit -----
+    def _changed(self) -> None:
+        """A new committed state: predictions made before it no longer apply."""
+        self._state = object()
+        nodes, yarns, _, contacts, _ = self._kernel.counts()
+        self.node_count, self.yarn_count, self.contact_count = nodes, yarns, contacts
+        self._warps: tuple[IntArray, IntArray] | None = None
+
+    # ----- instructions -----
     def predict(self, instruction: Instruction) -> Prediction:
-        """The result of ``instruction`` from the committed state; raises TwinError if refused."""
-        self._settle()
-        st = self._state
-        mark = len(st.log)
-        contacts0, yarns0 = st.contact_count, len(st.yarns)
-        index = self.done + 1
-        try:
-            before = execute(st, instruction, index)
-        except BaseException:
-            st.undo_to(mark)
-            raise
-        self._token += 1
-        pred = self._describe(index, instruction, before, contacts0, yarns0)
-        self._pending, self._pending_mark = pred, mark
-        return pred
+        """The result of ``instruction`` from the committed state, which stays as it is.
+
+        Raises MoveError, ShedClosedError or TwinError (naming the instruction) if refused.
+        """
+        with self._lock:
+            index = self.done + 1
+            result, takeup, angles = self._run(instruction, index, predict=True)
+            return Prediction.build(index, instruction, result, takeup, angles, self._state,
+                                    self.machine)  # fmt: skip
 
     def commit(self, prediction: Prediction) -> None:
-        """Make ``prediction`` the committed state (it must come from this twin's state)."""
-        if self._pending is not prediction:
-            self._settle()
-            if prediction.index != self.done + 1:
-                raise TwinError(
-                    "prediction is stale: the twin has moved on", instruction=prediction.index
-                )
-            again = self.predict(prediction.instruction)
-            if again.contacts != prediction.contacts:
-                raise TwinError(
-                    "prediction does not match the current state", instruction=prediction.index
-                )
-        self._pending = None
-        self.done += 1
-        if not self._snapshots:
-            self._state.forget_log()
+        """Make ``prediction`` the committed state; it must have been made on this one."""
+        with self._lock:
+            if prediction.state is not self._state:
+                raise TwinError("prediction is stale: it was not made on the twin's current "
+                                "state", instruction=prediction.index)  # fmt: skip
+            self._kernel.replay(prediction.record)
+            self._advance(prediction.takeup_exact, prediction.angles)
 
     def apply(self, instruction: Instruction) -> Prediction:
         """Predict and commit in one step."""
-        pred = self.predict(instruction)
-        self.commit(pred)
-        return pred
+        prediction = self.predict(instruction)
+        self.commit(prediction)
+        return prediction
 
-    def _settle(self) -> None:
-        if self._pending is not None:
-            self._state.undo_to(self._pending_mark)
-            self._pending = None
+    def advance(self, instruction: Instruction) -> None:
+        """Apply ``instruction`` without describing it (the fast path of simulate and replay)."""
+        with self._lock:
+            _, takeup, angles = self._run(instruction, self.done + 1, predict=False)
+            self._advance(takeup, angles)
+
+    def _advance(self, takeup: Fraction, angles: tuple[float, ...]) -> None:
+        self._takeup = takeup
+        self._angles.extend(angles)
+        self.done += 1
+        self._changed()
+
+    def _run(self, instruction: Instruction, index: int,
+             predict: bool) -> tuple[Any, Fraction, tuple[float, ...]]:  # fmt: skip
+        takeup, angles = self._takeup, ()
+        try:
+            if isinstance(instruction, Shift):
+                axis = 0 if instruction.axis == "row" else 1
+                moves = array("i", [v for move in instruction.moves for v in move]).tobytes()
+                result = self._kernel.shift(axis, moves, index, predict)
+            elif isinstance(instruction, TakeUp):
+                takeup = self._takeup + exact(instruction.length)
+                result = self._kernel.takeup(self._geo.guide_z(takeup), index, predict)
+            else:
+                p0, p1 = weft_ends(instruction, takeup)
+                self._check_shed(p0, p1)
+                result = self._kernel.weft(*p0, *p1, predict)
+                angles = (instruction.angle,)
+        except _kernel.KernelError as exc:
+            raise _refusal(exc.args, instruction, index) from None
+        except TwinError as exc:
+            if exc.instruction:
+                raise
+            raise type(exc)(exc.reason, instruction=index) from None
+        return result, takeup, angles
+
+    def _check_shed(self, p0: Point, p1: Point) -> None:
+        """Refuse a weft passing closer than the yarn diameter to a yarn (exactly d is fine)."""
+        limit = exact(self.diameter) * SCALE
+        if limit == 0:
+            return
+        reach = math.ceil(limit)
+        lo = [min(p0[k], p1[k]) - reach for k in range(3)]
+        hi = [max(p0[k], p1[k]) + reach for k in range(3)]
+        table = np.frombuffer(self._kernel.near(*lo, *hi), dtype=np.int32).reshape(-1, 3)
+        ends = np.frombuffer(self._kernel.points(table[:, :2].tobytes()), dtype=np.int64)
+        xyz = ends.reshape(-1, 2, 3).tolist()
+        segments = [(int(y), c, d) for y, (c, d) in zip(table[:, 2].tolist(), xyz, strict=True)]
+        found = closest(p0, p1, segments, limit)
+        if found is not None:
+            yarn, gap2 = found
+            raise ShedClosedError(f"shed closed: the weft passes {math.sqrt(gap2) / SCALE:.6g} mm "
+                                  f"from yarn {yarn} (yarn diameter {self.diameter:g} mm)")  # fmt: skip
 
     # ----- snapshots -----
     def snapshot(self) -> Snapshot:
-        """Mark the committed state; the change log is kept until the snapshot is released."""
-        self._settle()
-        mark = len(self._state.log)
-        self._snapshots.append(mark)
-        return Snapshot(mark, self.done, self._generation)
+        """The committed state as an immutable value (``Snapshot.to_bytes`` to store it)."""
+        with self._lock:
+            return Snapshot.make(self.machine, self.diameter, self._fill, self._angles,
+                                 self._takeup, self.done, self._kernel.dump())  # fmt: skip
 
-    def restore(self, snap: Snapshot) -> None:
-        """Return to ``snap`` (and release it and every later snapshot)."""
-        self._settle()
-        if snap.generation != self._generation or snap.mark not in self._snapshots:
-            raise TwinError("snapshot is no longer valid")
-        self._state.undo_to(snap.mark)
-        self.done = snap.done
-        self._snapshots = [m for m in self._snapshots if m < snap.mark]
-        self._trim()
+    def restore(self, snapshot: Snapshot) -> None:
+        """Return to ``snapshot`` (taken of a twin of the same machine and diameter)."""
+        snapshot.check(self.machine, self.diameter)
+        kernel = _load(snapshot)
+        with self._lock:
+            self._kernel = kernel
+            self._fill = [tuple(cell) for cell in snapshot.header["fill"]]  # type: ignore[misc]
+            self._angles = [None if a is None else float(a) for a in snapshot.header["angles"]]
+            self._takeup = Fraction(snapshot.header["takeup"])
+            self.done = snapshot.done
+            self._changed()
 
-    def release(self, snap: Snapshot) -> None:
-        """Forget ``snap`` without restoring it."""
-        if snap.generation == self._generation and snap.mark in self._snapshots:
-            self._snapshots.remove(snap.mark)
-        self._trim()
+    @classmethod
+    def from_snapshot(cls, machine: Machine, snapshot: Snapshot) -> Twin:
+        """A twin in the state of ``snapshot``."""
+        twin = cls(machine, [], snapshot.header["diameter"])
+        twin.restore(snapshot)
+        return twin
 
-    def _trim(self) -> None:
-        if not self._snapshots:
-            self._settle()
-            self._state.forget_log()
-            self._generation += 1
+    # ----- reading (never changes anything) -----
+    @property
+    def takeup(self) -> float:
+        """Total take-up so far (mm)."""
+        return float(self._takeup)
 
-    # ----- reading -----
+    @property
+    def takeup_exact(self) -> Fraction:
+        """Total take-up so far, exactly (mm)."""
+        return self._takeup
+
+    def _warp_table(self) -> tuple[IntArray, IntArray]:
+        """Per warp (row, col, free node, last fixed node), and the occupancy."""
+        with self._lock:
+            if self._warps is None:
+                table, occupancy = self._kernel.warps()
+                m = self.machine
+                self._warps = (np.frombuffer(table, dtype=np.int32).reshape(-1, 4).astype(np.int64),
+                               np.frombuffer(occupancy, dtype=np.int32).reshape(m.rows, m.cols)
+                               .astype(np.int64))  # fmt: skip
+            return self._warps
+
     @property
     def occupancy(self) -> IntArray:
         """Yarn id of the case in each cell, -1 where empty (a copy)."""
-        self._settle()
-        return np.array(self._state.occupancy, dtype=np.int64)
-
-    @property
-    def takeup(self) -> float:
-        self._settle()
-        return self._state.takeup
-
-    @property
-    def contact_count(self) -> int:
-        self._settle()
-        return self._state.contact_count
-
-    @property
-    def node_count(self) -> int:
-        self._settle()
-        return self._state.node_count
-
-    @property
-    def yarn_count(self) -> int:
-        self._settle()
-        return len(self._state.yarns)
+        return self._warp_table()[1].copy()
 
     def free_node(self, warp: int) -> int:
         """The node id of a warp's free node (the one at its guide)."""
-        self._settle()
-        return int(self._state.free_node[warp])
+        return int(self._warp_table()[0][warp, 2])
 
     def yarn(self, yarn: int) -> YarnData:
         """A read-only copy of one yarn."""
-        self._settle()
-        st = self._state
-        ids = np.array(st.yarns[yarn], dtype=np.int64)
-        pos = np.array([st.xyz(int(n)) for n in ids], dtype=np.float64).reshape(-1, 3)
-        kind: YarnKind = "warp" if yarn < st.n_warps else "weft"
-        return YarnData(yarn, kind, ids, pos, st.yarn_cell[yarn], st.yarn_angle[yarn])
+        with self._lock:
+            ids_raw, _ = self._kernel.chains(yarn, yarn + 1)
+            ids = np.frombuffer(ids_raw, dtype=np.int32).astype(np.int64)
+            pos = np.frombuffer(self._kernel.points(ids_raw), dtype=np.int64).reshape(-1, 3)
+        return self._yarn_data(yarn, ids, mm(pos))
+
+    def _yarn_data(self, yarn: int, ids: IntArray, pos: np.ndarray[Any, Any]) -> YarnData:
+        if yarn < len(self._fill):
+            return YarnData(yarn, "warp", ids, pos, self._fill[yarn], None)
+        return YarnData(yarn, "weft", ids, pos, None, self._angles[yarn])
 
     def skeleton(self) -> SkeletonData:
         """A read-only copy of the whole skeleton."""
-        self._settle()
-        st = self._state
-        pos = np.array(st.pos, dtype=np.float64).reshape(-1, 3)
-        yarns = []
-        for i, nodes in enumerate(st.yarns):
-            ids = np.array(nodes, dtype=np.int64)
-            kind: YarnKind = "warp" if i < st.n_warps else "weft"
-            yarns.append(YarnData(i, kind, ids, pos[ids], st.yarn_cell[i], st.yarn_angle[i]))
-        table = np.array(st.contacts, dtype=np.int64).reshape(-1, 5).tolist()
-        contacts = tuple(ContactData(*row) for row in table)
-        return SkeletonData(
-            self.machine,
-            self.diameter,
-            st.takeup,
-            self.done,
-            tuple(yarns),
-            contacts,
-            self.occupancy,
+        occupancy = self.occupancy
+        with self._lock:
+            ids_raw, starts_raw = self._kernel.chains(0, self.yarn_count)
+            pos = mm(np.frombuffer(self._kernel.positions(), dtype=np.int64).reshape(-1, 3))
+            table = np.frombuffer(self._kernel.contacts(), dtype=np.int32).reshape(-1, 5)
+            ids = np.frombuffer(ids_raw, dtype=np.int32).astype(np.int64)
+            starts = np.frombuffer(starts_raw, dtype=np.int64)
+            takeup, done = self.takeup, self.done
+        yarns = tuple(
+            self._yarn_data(i, ids[starts[i] : starts[i + 1]], pos[ids[starts[i] : starts[i + 1]]])
+            for i in range(len(starts) - 1)
         )
+        contacts = tuple(ContactData(*row) for row in table.tolist())
+        return SkeletonData(self.machine, self.diameter, takeup, done, yarns, contacts, occupancy)
 
     def path_length(self, yarn: int) -> float:
-        """Length of a yarn's polyline, free segment included."""
-        self._settle()
-        st = self._state
-        return path_length(st, yarn) if yarn < st.n_warps else st.yarn_len[yarn]
+        """Length of a yarn's polyline (mm), a warp's free segment included."""
+        with self._lock:
+            lengths = np.frombuffer(self._kernel.lengths(), dtype=np.float64)
+        return float(lengths[yarn]) / SCALE
 
-    def _describe(self, index: int, instruction: Instruction, before: dict[int, float],
-                  contacts0: int, yarns0: int) -> Prediction:  # fmt: skip
-        st = self._state
-        rows = np.array(st.contacts[5 * contacts0 :], dtype=np.int64).reshape(-1, 5).tolist()
-        contacts = tuple(ContactData(*row) for row in rows)
-        owner = {c.moving_node: c.moving_yarn for c in contacts}
-        owner.update({c.hit_node: c.hit_yarn for c in contacts})
-        placed = []
-        for node, yarn in owner.items():
-            nodes = st.yarns[yarn]
-            at = index_from_end(nodes, node)
-            placed.append((yarn, at, NodeInsert(yarn, node, nodes[at - 1], st.xyz(node))))
-        # In yarn order, so that each node's predecessor is in place before it is inserted.
-        inserted = [ins for _, _, ins in sorted(placed, key=lambda p: (p[0], p[1]))]
-        free = {w: st.xyz(st.free_node[w]) for w in before}
-        cases = {w: st.warp_cell[w] for w in before}
-        change = {w: path_length(st, w) - length for w, length in before.items()}
-        return Prediction(
-            index,
-            instruction,
-            contacts,
-            tuple(inserted),
-            free,
-            cases,
-            np.array(st.occupancy, dtype=np.int64),
-            st.takeup,
-            tuple(range(yarns0, len(st.yarns))),
-            change,
-            self._token,
-        )
+
+def _load(snapshot: Snapshot) -> Any:
+    try:
+        return _kernel.Kernel.load(snapshot.kernel)
+    except ValueError as exc:
+        raise TwinError(str(exc)) from None
+
+
+def _refusal(args: tuple[int, ...], instruction: Instruction, index: int) -> TwinError:
+    """The error of a refused instruction, from the kernel's code and details."""
+    code, a, b, c, d = args
+    if code == _kernel.E_LINE:
+        axis = instruction.axis.upper() if isinstance(instruction, Shift) else "LINE"
+        return MoveError(f"{axis} {b} is outside the matrix", instruction=index)
+    if code == _kernel.E_MOVE_OUT:
+        return MoveError(f"case of yarn {a} would leave the matrix at cell ({b}, {c})",
+                         instruction=index)  # fmt: skip
+    if code == _kernel.E_MOVE_BUSY:
+        return MoveError(f"case of yarn {a} would land on cell ({b}, {c}), occupied by yarn {d}",
+                         instruction=index)  # fmt: skip
+    if code == _kernel.E_LIMIT:
+        return TwinError("a contact node would lie beyond the twin's range of 2^20 mm",
+                         instruction=index)  # fmt: skip
+    if code == _kernel.E_CONTACTS:
+        return TwinError(f"yarn {a}: more than 100000 contacts in one sweep", instruction=index)
+    return TwinError(f"the twin's kernel failed (code {code}): please report it",
+                     instruction=index)  # fmt: skip
 
 
 ProgressFn = Callable[[int, int], None]
@@ -271,7 +293,7 @@ def simulate(machine: Machine, program: Program, progress: ProgressFn | None = N
     twin = Twin.from_program(machine, program)
     total = len(program.instructions)
     for i, instruction in enumerate(program.instructions):
-        twin.apply(instruction)
+        twin.advance(instruction)
         if progress is not None:
             progress(i + 1, total)
     return twin
@@ -282,5 +304,5 @@ def replay(machine: Machine, program: Program, count: int | None = None) -> Twin
     sub = program.instructions if count is None else program.instructions[:count]
     twin = Twin.from_program(machine, program)
     for instruction in sub:
-        twin.apply(instruction)
+        twin.advance(instruction)
     return twin

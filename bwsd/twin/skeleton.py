@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -78,3 +78,11 @@ class SkeletonData:
             for nid, xyz in zip(yarn.node_ids.tolist(), yarn.nodes, strict=True):
                 out[int(nid)] = xyz
         return out
+
+
+def index_from_end(nodes: Any, node: int) -> int:
+    """Position of ``node`` in a yarn's node list, searched from the free end (where work happens)."""
+    for i in range(len(nodes) - 1, -1, -1):
+        if nodes[i] == node:
+            return i
+    raise ValueError(node)

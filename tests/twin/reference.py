@@ -1,226 +1,466 @@
-"""Exact reference of the whole twin (docs/twin.md), written independently of bwsd.twin.
+"""Exact reference of the whole twin (/work/shared/TWIN.md), the test oracle of the kernel.
 
-Brute force, no broad phase, no filter: every decision (sides, barycentric signs, the order
-of contacts) is taken in exact rational arithmetic on the float64 coordinates. Constructions
-(new node coordinates, the restart point) use the same float formulas, in the same operation
-order, as the documented contract of the kernel, so both produce identical floats wherever
-they take identical decisions.
+Written independently of ``bwsd.twin``: only the plain input data classes (``Machine``,
+``Shift``, ``TakeUp``, ``Weft``) are imported. Brute force by design: every decision and every
+number is exact, in Python ints and Fractions, with no float filter.
+
+Number conventions (decided for the project):
+
+- An input number is an ``int`` or a Python ``float``; a float stands for the decimal it prints
+  as (``exact(2.54) == Fraction(254, 100)``).
+- Coordinates live on a grid of 2^-32 mm and are held as ints q meaning q * 2^-32 mm. A real
+  value is rounded to the grid once, to the nearest grid point, ties to even.
+- Any coordinate of magnitude 2^20 mm or more (|q| >= 2^52) is an error (``ValueError``).
+
+Model conventions (where TWIN.md leaves the choice to the implementation):
+
+- Yarn ids: warps in fill order, then wefts in insertion order.
+- Node ids are global, allocated in this order: at fill, for each warp its fell node then its
+  free node; at each contact Y (the hit yarn's new node) then X (the moving yarn's); a weft its
+  start node then its end node. A warp's free node keeps its id and moves with its guide.
+- A contact is recorded as (instruction, moving yarn, X node, hit yarn, Y node), in the order
+  made; instructions count from 1.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from fractions import Fraction
 
 from bwsd.twin.instructions import Shift, TakeUp, Weft
+from bwsd.twin.machine import Machine
 
-Vec = tuple[float, float, float]
-PARALLEL = 1e-12
+SCALE = 1 << 32  # grid points per mm
+LIMIT = 1 << 52  # |q| >= LIMIT (2^20 mm) is refused
+MAX_CONTACTS_PER_SWEEP = 100_000  # a guard against a sweep that never ends (not a model rule)
+
+Point = tuple[int, int, int]
+FPoint = tuple[Fraction, Fraction, Fraction]
 
 
-def _fr(v: Vec) -> tuple[Fraction, Fraction, Fraction]:
-    return Fraction(v[0]), Fraction(v[1]), Fraction(v[2])
+class ShedClosed(ValueError):
+    """A weft would pass closer than the yarn diameter to another yarn: the shed is not open."""
 
 
-def orient_exact(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> Fraction:
-    o, a, b, c = _fr(p0), _fr(p1), _fr(p2), _fr(p3)
-    a = (a[0] - o[0], a[1] - o[1], a[2] - o[2])
-    b = (b[0] - o[0], b[1] - o[1], b[2] - o[2])
-    c = (c[0] - o[0], c[1] - o[1], c[2] - o[2])
+class MoveRefused(ValueError):
+    """A case would leave the matrix or land on an occupied cell (nothing has moved)."""
+
+
+# --- numbers ------------------------------------------------------------------------------
+
+
+def exact(x: int | float | Fraction) -> Fraction:
+    """The exact value of an input number: an int as is, a float as the decimal it prints as."""
+    if isinstance(x, Fraction):
+        return x
+    if isinstance(x, int):
+        return Fraction(x)
+    if isinstance(x, float):
+        return Fraction(repr(x))  # raises ValueError for nan and inf
+    raise TypeError(f"not a number: {x!r}")
+
+
+def _checked(q: int) -> int:
+    if abs(q) >= LIMIT:
+        raise ValueError(
+            f"coordinate {math.ldexp(q, -32)!r} mm is beyond the model's range (2^20 mm)"
+        )
+    return q
+
+
+def _round_units(v: Fraction) -> int:
+    """A value in grid units to the nearest grid point, ties to even, range-checked."""
+    return _checked(round(v))
+
+
+def round_grid(v: Fraction | int) -> int:
+    """A value in mm to the grid (units of 2^-32 mm): nearest, ties to even, range-checked."""
+    return _round_units(Fraction(v) * SCALE)
+
+
+def _sub(a: Sequence[int], b: Sequence[int]) -> Point:
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
+def _dot(a: Sequence[int | Fraction], b: Sequence[int | Fraction]) -> int | Fraction:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: Sequence[int], b: Sequence[int]) -> Point:
     return (
-        a[0] * (b[1] * c[2] - b[2] * c[1])
-        - a[1] * (b[0] * c[2] - b[2] * c[0])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
     )
 
 
-def orient_float(p0: Vec, p1: Vec, p2: Vec, p3: Vec) -> float:
-    """The kernel's float formula: minors of (p1-p0, p2-p0) dotted with p3-p0, in order."""
-    ax, ay, az = p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]
-    bx, by, bz = p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]
-    cx, cy, cz = p3[0] - p0[0], p3[1] - p0[1], p3[2] - p0[2]
-    n0, n1, n2 = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-    return cx * n0 + cy * n1 + cz * n2
-
-
-def edge_float(c: Vec, d: Vec, q: Vec, r: Vec) -> float:
-    """The kernel's float formula for orient(c, d, q, r) (same form as orient_float)."""
-    return orient_float(c, d, q, r)
-
-
-def _sign(v: Fraction) -> int:
+def _sign(v: int | Fraction) -> int:
     return (v > 0) - (v < 0)
 
 
-@dataclass
-class Contact:
-    instruction: int
-    moving_yarn: int
-    moving_node: int
-    hit_yarn: int
-    hit_node: int
+def _round_shifted(y: int, c: Fraction, n2: int) -> int:
+    """round(y - c / sqrt(n2)), ties to even, exactly; y an int, c rational, n2 a positive int.
+
+    With c = p / q (q > 0): |2c / sqrt(n2)| = A / sqrt(B), A = 2|p|, B = q^2 n2, whose floor
+    is isqrt(floor(A^2 / B)) and which is an integer j exactly when j^2 B == A^2.
+    """
+    a = 2 * abs(c.numerator)
+    b = c.denominator * c.denominator * n2
+    j = math.isqrt(a * a // b)
+    whole = j * j * b == a * a  # |2c / sqrt(n2)| == j exactly
+    # floor(2v), v = y - c / sqrt(n2) = y - s |c| / sqrt(n2), s the sign of c.
+    ceil = j if whole else j + 1  # ceil(|2c / sqrt(n2)|)
+    f = 2 * y - ceil if c >= 0 else 2 * y + j
+    if not whole:
+        return (f + 1) // 2  # 2v strictly between f and f + 1: no tie
+    if f % 2 == 0:
+        return f // 2  # v is an integer
+    lo, hi = (f - 1) // 2, (f + 1) // 2  # v is exactly halfway: ties to even
+    return lo if lo % 2 == 0 else hi
 
 
-@dataclass
+def rest_point(y: Sequence[int], m: Sequence[int], u: Sequence[int], d: Fraction) -> Point:
+    """X = round(Y - d n / |n|), n = m - (m.u / u.u) u; Y on the grid, m and u integer vectors.
+
+    ``d`` is in mm (exact); ``y`` in grid units. X = Y when d = 0 or n is the zero vector.
+    The direction of n is taken from the integer vector (u.u) m - (m.u) u (the same direction,
+    scaled by u.u > 0); with u = 0 there is nothing to remove and n = m.
+    """
+    y = tuple(int(v) for v in y)
+    uu = _dot(u, u)
+    if uu == 0:
+        n = tuple(int(v) for v in m)
+    else:
+        mu = _dot(m, u)
+        n = tuple(uu * m[k] - mu * u[k] for k in range(3))
+    n2 = _dot(n, n)
+    d = exact(d)
+    if d == 0 or n2 == 0:
+        return _checked(y[0]), _checked(y[1]), _checked(y[2])
+    dd = d * SCALE  # d in grid units
+    return tuple(_checked(_round_shifted(y[k], dd * n[k], n2)) for k in range(3))  # type: ignore[return-value]
+
+
+def restart_point(a1: Point, a2: Point, t: Fraction) -> Point:
+    """round(A1 + t (A2 - A1)): where the free node restarts after a contact at time t."""
+    if t == 1:
+        return a2
+    return (
+        _round_units(a1[0] + t * (a2[0] - a1[0])),
+        _round_units(a1[1] + t * (a2[1] - a1[1])),
+        _round_units(a1[2] + t * (a2[2] - a1[2])),
+    )
+
+
+# --- exact predicates ---------------------------------------------------------------------
+
+
+def crossing(b: Point, a1: Point, a2: Point, c: Point, d: Point) -> tuple[Fraction, FPoint] | None:
+    """The contact of segment C-D with the swept triangle (B, A1, A2): (t, P) or None.
+
+    Sides by the sign of det[A1-B, A2-B, X-B], zero counting as positive; C and D must lie on
+    opposite sides. P, the exact crossing of C-D with the triangle's plane, must have
+    barycentric weights (wB, wA1, wA2) with wB and wA2 nonzero of one sign and wA1 of that
+    sign or zero; then t = wA2 / (wA1 + wA2). All points on the grid (ints).
+    """
+    e1, e2 = _sub(a1, b), _sub(a2, b)
+    normal = _cross(e1, e2)
+    sc = _dot(normal, _sub(c, b))
+    sd = _dot(normal, _sub(d, b))
+    if (sc >= 0) == (sd >= 0):
+        return None  # same side (a degenerate triangle puts every point on the zero side)
+    # sc and sd differ (one is negative, the other not): P = C + sc / (sc - sd) (D - C).
+    lam = Fraction(sc, sc - sd)
+    p = tuple(c[k] + lam * (d[k] - c[k]) for k in range(3))
+    # Barycentric weights: solve P - B = wA1 e1 + wA2 e2 in the coordinate plane where the
+    # triangle's projection is largest (drop the axis of the largest normal component).
+    drop = max(range(3), key=lambda k: abs(normal[k]))
+    i, j = [k for k in range(3) if k != drop]
+    det = e1[i] * e2[j] - e1[j] * e2[i]
+    pi, pj = p[i] - b[i], p[j] - b[j]
+    w_a1 = (pi * e2[j] - pj * e2[i]) / det
+    w_a2 = (e1[i] * pj - e1[j] * pi) / det
+    w_b = 1 - w_a1 - w_a2
+    sign = _sign(w_b)
+    if sign == 0 or _sign(w_a2) != sign or _sign(w_a1) not in (0, sign):
+        return None
+    return w_a2 / (w_a1 + w_a2), p  # type: ignore[return-value]
+
+
+def _point_segment_distance2(p: Sequence[int], q0: Sequence[int], q1: Sequence[int]) -> Fraction:
+    """Exact squared distance from point p to segment q0-q1 (clamped 1-D minimum)."""
+    v = _sub(q1, q0)
+    w = _sub(p, q0)
+    vv = _dot(v, v)
+    s = Fraction(0) if vv == 0 else min(Fraction(1), max(Fraction(0), Fraction(_dot(w, v), vv)))
+    r = tuple(w[k] - s * v[k] for k in range(3))
+    return Fraction(_dot(r, r))
+
+
+def segment_distance2(p0: Point, p1: Point, q0: Point, q1: Point) -> Fraction:
+    """Exact squared distance between segments p0-p1 and q0-q1 (grid units squared).
+
+    The minimum of the convex quadratic |p0 + s u - q0 - t v|^2 over [0, 1]^2: the interior
+    critical point when it exists and lies inside, else the least of the four edge minima.
+    """
+    u, v, w0 = _sub(p1, p0), _sub(q1, q0), _sub(p0, q0)
+    a, bb, c = _dot(u, u), _dot(u, v), _dot(v, v)
+    dd, e = _dot(u, w0), _dot(v, w0)
+    det = a * c - bb * bb
+    if det != 0:  # not parallel (nor degenerate): a unique critical point
+        s = Fraction(bb * e - c * dd, det)
+        t = Fraction(a * e - bb * dd, det)
+        if 0 <= s <= 1 and 0 <= t <= 1:
+            r = tuple(w0[k] + s * u[k] - t * v[k] for k in range(3))
+            return Fraction(_dot(r, r))
+    return min(
+        _point_segment_distance2(p0, q0, q1),
+        _point_segment_distance2(p1, q0, q1),
+        _point_segment_distance2(q0, p0, p1),
+        _point_segment_distance2(q1, p0, p1),
+    )
+
+
+def _direction(angle: int | float) -> tuple[Fraction, Fraction]:
+    """(cos a, sin a): exact for a multiple of 90 degrees, else float64 values taken as exact."""
+    a = exact(angle)
+    if a % 90 == 0:
+        return [
+            (Fraction(1), Fraction(0)),
+            (Fraction(0), Fraction(1)),
+            (Fraction(-1), Fraction(0)),
+            (Fraction(0), Fraction(-1)),
+        ][int(a // 90) % 4]
+    r = math.radians(float(angle))
+    return Fraction(math.cos(r)), Fraction(math.sin(r))
+
+
+# --- the twin -----------------------------------------------------------------------------
+
+
 class RefTwin:
-    rows: int
-    cols: int
-    pitch_x: float
-    pitch_y: float
-    d_mat: float
-    c_mat: float
-    diameter: float
-    nodes: list[Vec] = field(default_factory=list)
-    yarns: list[list[int]] = field(default_factory=list)
-    n_warps: int = 0
-    cell: dict[int, tuple[int, int]] = field(default_factory=dict)
-    takeup: float = 0.0
-    contacts: list[Contact] = field(default_factory=list)
-    done: int = 0
+    """The exact reference: one machine, its warps, and the instructions run one at a time."""
 
-    def fill(self, cells: list[tuple[int, int]]) -> None:
-        ox = (self.cols - 1) / 2 * self.pitch_x
-        oy = (self.rows - 1) / 2 * self.pitch_y
-        for r, c in cells:
-            gx, gy = c * self.pitch_x, r * self.pitch_y
-            fell = (ox + self.c_mat * (gx - ox), oy + self.c_mat * (gy - oy), self.takeup)
-            self.nodes.append(fell)
-            self.nodes.append((gx, gy, self.d_mat + self.takeup))
-            self.yarns.append([len(self.nodes) - 2, len(self.nodes) - 1])
-            self.cell[len(self.yarns) - 1] = (r, c)
-        self.n_warps = len(self.yarns)
+    def __init__(
+        self, machine: Machine, fill: Sequence[tuple[int, int]], diameter: float | int
+    ) -> None:
+        self.machine = machine
+        self.pitch_x = exact(machine.pitch_x)
+        self.pitch_y = exact(machine.pitch_y)
+        self.d_mat = exact(machine.d_mat)
+        self.c_mat = exact(machine.c_mat)
+        self.diameter = exact(diameter)
+        if self.diameter < 0:
+            raise ValueError("yarn diameter must not be negative")
+        self.origin = (
+            Fraction(machine.cols - 1, 2) * self.pitch_x,
+            Fraction(machine.rows - 1, 2) * self.pitch_y,
+        )
+        self.nodes: list[Point] = []
+        self.yarns: list[list[int]] = []
+        self.contacts: list[tuple[int, int, int, int, int]] = []
+        self.takeup = Fraction(0)
+        self.done = 0
+        self.cell_of: dict[int, tuple[int, int]] = {}  # warp yarn id -> its case's cell
+        self.case_at: dict[tuple[int, int], int] = {}  # cell -> warp yarn id
+        # Every guide must be on the model's grid range.
+        self._guide(machine.rows - 1, machine.cols - 1)
+        for r, c in fill:
+            if not (0 <= r < machine.rows and 0 <= c < machine.cols):
+                raise ValueError(f"fill cell ({r}, {c}) is outside the matrix")
+            if (r, c) in self.case_at:
+                raise ValueError(f"fill cell ({r}, {c}) is filled twice")
+            guide = self._guide(r, c)
+            fell = (
+                round_grid(
+                    self.origin[0] + self.c_mat * (Fraction(guide[0], SCALE) - self.origin[0])
+                ),
+                round_grid(
+                    self.origin[1] + self.c_mat * (Fraction(guide[1], SCALE) - self.origin[1])
+                ),
+                round_grid(self.takeup),
+            )
+            yarn = len(self.yarns)
+            self.yarns.append([self._new_node(fell), self._new_node(guide)])
+            self.cell_of[yarn] = (r, c)
+            self.case_at[(r, c)] = yarn
+        self.warps = len(self.yarns)
 
-    # ----- instructions -----
-    def run(self, instruction: Shift | TakeUp | Weft) -> None:
-        self.done += 1
-        if isinstance(instruction, Shift):
-            self._shift(instruction)
-        elif isinstance(instruction, TakeUp):
-            self.takeup = self.takeup + instruction.length
-            for w in range(self.n_warps):
-                a = self.nodes[self.yarns[w][-1]]
-                self.sweep(w, (a[0] + 0.0, a[1] + 0.0, a[2] + instruction.length))
-        else:
-            self._weft(instruction)
+    # -- helpers
 
-    def _shift(self, ins: Shift) -> None:
-        z = self.d_mat + self.takeup
-        for line, k in ins.moves:
-            on_line = [
-                (w, rc)
-                for w, rc in self.cell.items()
-                if (rc[0] if ins.axis == "row" else rc[1]) == line
-            ]
-            key = (lambda e: e[1][1]) if ins.axis == "row" else (lambda e: e[1][0])
-            on_line.sort(key=key, reverse=k > 0)
-            for w, (r, c) in on_line:
-                r2, c2 = (r, c + k) if ins.axis == "row" else (r + k, c)
-                assert 0 <= r2 < self.rows and 0 <= c2 < self.cols, "move out of the matrix"
-                assert (r2, c2) not in self.cell.values(), "move onto an occupied cell"
-                self.cell[w] = (r2, c2)
-                self.sweep(w, (c2 * self.pitch_x, r2 * self.pitch_y, z))
+    def _guide_z(self) -> int:
+        return round_grid(self.d_mat + self.takeup)
 
-    def _weft(self, ins: Weft) -> None:
-        rad = math.radians(ins.angle)
-        ax, ay = math.cos(rad), math.sin(rad)
-        half = ins.length / 2
-        cz = self.takeup + ins.z
-        self.nodes.append((ins.x - half * ax, ins.y - half * ay, cz - half * 0.0))
-        self.nodes.append((ins.x + half * ax, ins.y + half * ay, cz + half * 0.0))
-        self.yarns.append([len(self.nodes) - 2, len(self.nodes) - 1])
+    def _guide(self, r: int, c: int) -> Point:
+        return round_grid(c * self.pitch_x), round_grid(r * self.pitch_y), self._guide_z()
 
-    # ----- the sweep -----
-    def _segments(self, moving: int) -> list[tuple[int, int, int, int]]:
-        """(yarn, index along the yarn, node c, node d) of every other yarn."""
-        out = []
-        for y, ids in enumerate(self.yarns):
-            if y != moving:
-                out.extend((y, i, ids[i], ids[i + 1]) for i in range(len(ids) - 1))
-        return out
+    def _new_node(self, p: Point) -> int:
+        self.nodes.append(p)
+        return len(self.nodes) - 1
 
-    def _first(self, w: int, b: Vec, a1: Vec, a2: Vec, skip: set[tuple[int, int]]):  # type: ignore[no-untyped-def]
-        best = None
-        for y, i, c, d in self._segments(w):
-            if (c, d) in skip:
-                continue
-            pc, pd = self.nodes[c], self.nodes[d]
-            sc, sd = _sign(orient_exact(b, a1, a2, pc)), _sign(orient_exact(b, a1, a2, pd))
-            if (sc >= 0) == (sd >= 0):
-                continue
-            wb = orient_exact(pc, pd, a1, a2)
-            w1 = orient_exact(pc, pd, a2, b)
-            w2 = orient_exact(pc, pd, b, a1)
-            if wb == 0 or _sign(w2) != _sign(wb) or (w1 != 0 and _sign(w1) != _sign(wb)):
-                continue
-            key = (w2 / (w1 + w2), y, i)
-            if best is None or key < best[0]:
-                best = (key, y, c, d, sc, sd, w1 == 0)
-        return best
+    def mm(self, node: int) -> tuple[float, float, float]:
+        """Coordinates of a node in mm (exact floats: every grid value is a float64)."""
+        x, y, z = self.nodes[node]
+        return math.ldexp(x, -32), math.ldexp(y, -32), math.ldexp(z, -32)
 
-    def sweep(self, w: int, a2: Vec) -> None:
-        ids = self.yarns[w]
-        a1 = self.nodes[ids[-1]]
-        skip: set[tuple[int, int]] = set()
-        while True:
-            b = self.nodes[ids[-2]]
-            hit = self._first(w, b, a1, a2, skip)
-            if hit is None:
-                self.nodes[ids[-1]] = a2
-                return
-            _, y, c, d, sc, sd, t_is_one = hit
-            pc, pd = self.nodes[c], self.nodes[d]
-            p = self._crossing(pc, pd, b, a1, a2, sc, sd)
-            self.nodes.append(p)
-            yid = len(self.nodes) - 1
-            hit_ids = self.yarns[y]
-            hit_ids.insert(hit_ids.index(d), yid)
-            self.nodes.append(self._rest(p, pc, pd, a1, a2))
-            xid = len(self.nodes) - 1
-            ids.insert(len(ids) - 1, xid)
-            self.contacts.append(Contact(self.done, w, xid, y, yid))
-            skip = {(c, yid), (yid, d)}
-            if t_is_one:
-                a1 = a2
-            else:
-                v1, v2 = edge_float(pc, pd, a2, b), edge_float(pc, pd, b, a1)
-                exact = float(hit[0][0])
-                t = min(max(v2 / (v1 + v2), 0.0), 1.0) if v1 + v2 != 0 else exact
-                a1 = (
-                    a1[0] + t * (a2[0] - a1[0]),
-                    a1[1] + t * (a2[1] - a1[1]),
-                    a1[2] + t * (a2[2] - a1[2]),
-                )
-
-    @staticmethod
-    def _crossing(pc: Vec, pd: Vec, b: Vec, a1: Vec, a2: Vec, sc: int, sd: int) -> Vec:
-        if sc == 0:
-            return pc
-        if sd == 0:
-            return pd
-        oc, od = orient_float(b, a1, a2, pc), orient_float(b, a1, a2, pd)
-        if oc != od:
-            s = min(max(oc / (oc - od), 0.0), 1.0)
-        else:
-            ec, ed = orient_exact(b, a1, a2, pc), orient_exact(b, a1, a2, pd)
-            s = float(ec / (ec - ed))
+    def _state(self) -> tuple:
         return (
-            pc[0] + s * (pd[0] - pc[0]),
-            pc[1] + s * (pd[1] - pc[1]),
-            pc[2] + s * (pd[2] - pc[2]),
+            list(self.nodes),
+            [list(y) for y in self.yarns],
+            list(self.contacts),
+            self.takeup,
+            dict(self.cell_of),
+            dict(self.case_at),
         )
 
-    def _rest(self, p: Vec, pc: Vec, pd: Vec, a1: Vec, a2: Vec) -> Vec:
-        if self.diameter == 0:
-            return p
-        mx, my, mz = a2[0] - a1[0], a2[1] - a1[1], a2[2] - a1[2]
-        ax, ay, az = pd[0] - pc[0], pd[1] - pc[1], pd[2] - pc[2]
-        norm = math.sqrt(ax * ax + ay * ay + az * az)
-        ax, ay, az = ax / norm, ay / norm, az / norm
-        along = mx * ax + my * ay + mz * az
-        nx, ny, nz = mx - along * ax, my - along * ay, mz - along * az
-        size = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if size <= PARALLEL * math.sqrt(mx * mx + my * my + mz * mz):
-            return p
-        k = self.diameter / size
-        return (p[0] - k * nx, p[1] - k * ny, p[2] - k * nz)
+    def _restore(self, state: tuple) -> None:
+        (
+            self.nodes,
+            self.yarns,
+            self.contacts,
+            self.takeup,
+            self.cell_of,
+            self.case_at,
+        ) = state
+
+    # -- instructions
+
+    def run(self, instruction: Shift | TakeUp | Weft) -> None:
+        """Run one instruction; on any error the reference is left exactly as it was."""
+        index = self.done + 1
+        saved = self._state()
+        try:
+            if isinstance(instruction, Shift):
+                self._shift(instruction, index)
+            elif isinstance(instruction, TakeUp):
+                self._take_up(instruction, index)
+            elif isinstance(instruction, Weft):
+                self._weft(instruction)
+            else:
+                raise TypeError(f"not an instruction: {instruction!r}")
+        except BaseException:
+            self._restore(saved)
+            raise
+        self.done = index
+
+    def _shift(self, shift: Shift, index: int) -> None:
+        rows, cols = self.machine.rows, self.machine.cols
+        if shift.axis not in ("row", "col"):
+            raise MoveRefused(f"unknown axis {shift.axis!r}")
+        # Resolve every move first, on a copy of the occupancy.
+        occupied = dict(self.case_at)
+        moves: list[tuple[int, tuple[int, int], tuple[int, int]]] = []
+        for line, k in shift.moves:
+            size = rows if shift.axis == "row" else cols
+            if not 0 <= line < size:
+                raise MoveRefused(f"{shift.axis} {line} is outside the matrix")
+            if shift.axis == "row":
+                cells = sorted((cell for cell in occupied if cell[0] == line), key=lambda c: c[1])
+            else:
+                cells = sorted((cell for cell in occupied if cell[1] == line), key=lambda c: c[0])
+            if k > 0:
+                cells.reverse()  # the leading case first
+            for cell in cells:
+                r, c = cell
+                target = (r, c + k) if shift.axis == "row" else (r + k, c)
+                if not (0 <= target[0] < rows and 0 <= target[1] < cols):
+                    raise MoveRefused(
+                        f"{shift.axis} {line}:{k:+d}: the case in cell {cell} would leave "
+                        "the matrix"
+                    )
+                yarn = occupied.pop(cell)
+                if target in occupied:  # unreachable with the leading case first; kept as a guard
+                    raise MoveRefused(
+                        f"{shift.axis} {line}:{k:+d}: the case in cell {cell} would land on the "
+                        f"occupied cell {target}"
+                    )
+                occupied[target] = yarn
+                moves.append((yarn, cell, target))
+        for yarn, cell, target in moves:
+            del self.case_at[cell]
+            self.case_at[target] = yarn
+            self.cell_of[yarn] = target
+            self._sweep(yarn, self._guide(*target), index)
+
+    def _take_up(self, take_up: TakeUp, index: int) -> None:
+        self.takeup += exact(take_up.length)
+        z = self._guide_z()
+        for yarn in range(self.warps):
+            x, y, _ = self.nodes[self.yarns[yarn][-1]]
+            self._sweep(yarn, (x, y, z), index)
+
+    def _weft(self, weft: Weft) -> None:
+        cx, cy = exact(weft.x), exact(weft.y)
+        cz = self.takeup + exact(weft.z)
+        half = exact(weft.length) / 2
+        cos, sin = _direction(weft.angle)
+        start = (round_grid(cx - half * cos), round_grid(cy - half * sin), round_grid(cz))
+        end = (round_grid(cx + half * cos), round_grid(cy + half * sin), round_grid(cz))
+        dd = self.diameter * SCALE
+        limit = dd * dd
+        for yarn, ids in enumerate(self.yarns):
+            best = min(
+                segment_distance2(start, end, self.nodes[ids[i]], self.nodes[ids[i + 1]])
+                for i in range(len(ids) - 1)
+            )
+            if best < limit:
+                distance = math.sqrt(best) / SCALE
+                raise ShedClosed(
+                    f"shed closed: the weft would pass {distance:.12g} mm from yarn {yarn}, "
+                    f"closer than the yarn diameter {float(self.diameter):g} mm"
+                )
+        ids = [self._new_node(start), self._new_node(end)]
+        self.yarns.append(ids)
+
+    # -- the sweep
+
+    def _first_contact(
+        self, moving: int, b: Point, a1: Point, a2: Point, skip: tuple[int, int]
+    ) -> tuple[Fraction, FPoint, int, int] | None:
+        """The first contact of triangle (B, A1, A2): (t, P, hit yarn, segment index) or None."""
+        lo = tuple(min(b[k], a1[k], a2[k]) for k in range(3))
+        hi = tuple(max(b[k], a1[k], a2[k]) for k in range(3))
+        best: tuple[Fraction, FPoint, int, int] | None = None
+        for yarn, ids in enumerate(self.yarns):
+            if yarn == moving:
+                continue
+            for i in range(len(ids) - 1):
+                if yarn == skip[0] and skip[1] in (ids[i], ids[i + 1]):
+                    continue
+                c, d = self.nodes[ids[i]], self.nodes[ids[i + 1]]
+                if any(max(c[k], d[k]) < lo[k] or min(c[k], d[k]) > hi[k] for k in range(3)):
+                    continue  # boxes apart: P would lie in both
+                hit = crossing(b, a1, a2, c, d)
+                if hit is not None and (best is None or hit[0] < best[0]):
+                    best = (hit[0], hit[1], yarn, i)
+        return best
+
+    def _sweep(self, moving: int, a2: Point, index: int) -> None:
+        """Sweep the free node of warp ``moving`` from where it is to A2, recording contacts."""
+        ids = self.yarns[moving]
+        free = ids[-1]
+        a1 = self.nodes[free]
+        b = self.nodes[ids[-2]]
+        skip = (-1, -1)  # (hit yarn, Y node): segments of that yarn ending at Y are skipped
+        for _ in range(MAX_CONTACTS_PER_SWEEP):
+            hit = self._first_contact(moving, b, a1, a2, skip)
+            if hit is None:
+                self.nodes[free] = a2
+                return
+            t, p, yarn, i = hit
+            hit_ids = self.yarns[yarn]
+            c, d = self.nodes[hit_ids[i]], self.nodes[hit_ids[i + 1]]
+            y = (_round_units(p[0]), _round_units(p[1]), _round_units(p[2]))
+            x = rest_point(y, _sub(a2, a1), _sub(d, c), self.diameter)
+            y_id = self._new_node(y)
+            hit_ids.insert(i + 1, y_id)
+            x_id = self._new_node(x)
+            ids.insert(len(ids) - 1, x_id)
+            self.contacts.append((index, moving, x_id, yarn, y_id))
+            skip = (yarn, y_id)
+            b = x
+            a1 = restart_point(a1, a2, t)
+        raise RuntimeError(
+            f"instruction {index}: more than {MAX_CONTACTS_PER_SWEEP} contacts in one sweep"
+        )

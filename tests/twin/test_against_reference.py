@@ -7,8 +7,10 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from bwsd.errors import ShedClosedError
 from bwsd.twin import Machine, Shift, TakeUp, Weft
 from tests.twin.conftest import assert_same, run_both
+from tests.twin.reference import ShedClosed
 
 SETTINGS = settings(
     max_examples=60,
@@ -54,7 +56,7 @@ def programs(draw, degenerate: bool):
         machine = Machine(
             rows, cols, draw(f), draw(f), draw(st.floats(5.0, 200.0)), draw(st.floats(0.0, 1.0))
         )
-        diameter = draw(st.floats(0.0, 2.0))
+        diameter = draw(st.one_of(st.just(0.0), st.floats(1e-3, 2.0)))
     cells = [(r, c) for r in range(rows) for c in range(cols)]
     fill = sorted(
         draw(
@@ -102,22 +104,17 @@ def programs(draw, degenerate: bool):
 
 
 def _compare(case) -> None:
-    from bwsd.errors import ShedClosedError
-
+    """Kernel and reference side by side: the same refusals, then the same skeleton."""
     machine, fill, diameter, instructions = case
-    # Wefts that close the shed are refused by the kernel; the reference has no such check,
-    # so keep only the wefts the kernel accepts (decided on the kernel before comparing).
-    from bwsd.twin import Twin
-
-    probe = Twin(machine, fill, diameter)
-    kept = []
+    twin, ref = run_both(machine, fill, diameter, [])
     for ins in instructions:
         try:
-            probe.apply(ins)
+            twin.apply(ins)
         except ShedClosedError:
+            with pytest.raises(ShedClosed):
+                ref.run(ins)
             continue
-        kept.append(ins)
-    twin, ref = run_both(machine, fill, diameter, kept)
+        ref.run(ins)
     assert_same(twin, ref)
 
 
@@ -178,7 +175,7 @@ def braids(draw):
         machine = Machine(
             4, 4, draw(f), draw(f), draw(st.floats(20.0, 200.0)), draw(st.floats(0.05, 0.95))
         )
-        diameter = draw(st.floats(0.0, 1.5))
+        diameter = draw(st.one_of(st.just(0.0), st.floats(1e-3, 1.5)))
         takeup = st.floats(0.1, 5.0)
     instructions = []
     for _ in range(draw(st.integers(1, 3))):
@@ -203,19 +200,29 @@ def test_braids_match_reference(case):
     _compare(case)
 
 
-@pytest.mark.parametrize("path", ["grid-join", "per-sweep"])
+@pytest.fixture
+def kernel_path(request, monkeypatch):
+    """Force one of the kernel's paths: every float filter deferring to the exact computation,
+    the whole machine in one broad-phase cell, or cells of a quarter millimetre."""
+    from bwsd.twin import _kernel
+    from bwsd.twin.geometry import Geometry
+
+    if request.param == "exact-only":
+        _kernel.set_exact_only(True)
+        request.addfinalizer(lambda: _kernel.set_exact_only(False))
+    elif request.param == "one-cell":
+        monkeypatch.setattr(Geometry, "cell_shift", lambda self: 60)
+    else:
+        monkeypatch.setattr(Geometry, "cell_shift", lambda self: 30)
+    return request.param
+
+
+@pytest.mark.parametrize("kernel_path", ["exact-only", "one-cell", "fine-cells"], indirect=True)
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow,
           HealthCheck.function_scoped_fixture])  # fmt: skip
 @given(braids())
 @example(FLAT_CROSSING)
-def test_every_broad_phase_path_matches_reference(monkeypatch, path, case):
-    """The grid join with the plane filter (used on large instructions) and the per-sweep
-    queries (used when an instruction moves a line twice), forced on small braids."""
-    import bwsd.twin.batch as batch
-
-    if path == "grid-join":
-        monkeypatch.setattr(batch, "DENSE_LIMIT", 0)
-        monkeypatch.setattr(batch, "SLAB_FROM", 0)
-    else:
-        monkeypatch.setattr(batch.Batch, "plan", classmethod(lambda cls, state, cases: None))
+def test_every_kernel_path_matches_reference(kernel_path, case):
+    """The float filters are only a shortcut and the broad phase only a filter: forcing the
+    exact computation everywhere, or another cell size, changes nothing."""
     _compare(case)

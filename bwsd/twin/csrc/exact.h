@@ -1,0 +1,77 @@
+/* Exact predicates and correctly rounded constructions on the 2^-32 mm grid.
+ *
+ * Coordinates are integers q (q * 2^-32 mm) with |q| < 2^52, so every coordinate and every
+ * difference of two is a float64 exactly. Each predicate is a float evaluation with a proven
+ * error bound; where the bound cannot decide, the value is recomputed exactly in integers.
+ * Each construction is rounded to the grid (nearest, ties to even) from a float value with
+ * a proven error bound, or from the exact rational value where that value lies too close
+ * to a midpoint between grid points.
+ */
+#ifndef BWSD_EXACT_H
+#define BWSD_EXACT_H
+
+#include <stdint.h>
+
+#include "bigint.h"
+
+#define GRID_LIMIT ((int64_t)1 << 52) /* 2^20 mm: coordinates must stay strictly below */
+
+/* Error codes shared by the kernel (0 is success). */
+enum {
+    E_OK = 0,
+    E_LIMIT = 1,    /* a coordinate at or beyond 2^20 mm */
+    E_ARITH = 2,    /* an exact fallback ran out of its capacity (a bug) */
+    E_NOMEM = 3,
+    E_CONTACTS = 4, /* too many contacts in one sweep */
+    E_MOVE_OUT = 5,
+    E_MOVE_BUSY = 6,
+    E_LINE = 7,     /* a line index outside the matrix */
+};
+
+/* A signed value as the filter saw it: float value, its error bound, the exact sign, and
+ * whether the float value decided that sign (|v| > e). */
+typedef struct {
+    double v, e;
+    int s;
+    int filtered;
+} Sgn;
+
+/* The plane of a sweep triangle (b, a1, a2): float normal with its permanent, exact normal. */
+typedef struct {
+    int64_t b[3];
+    double n[3], p[3];
+    i128 N[3];
+    int flat; /* the exact normal is zero: every point lies on it */
+} Plane;
+
+/* The yarn diameter in grid units: num / den exactly, f as a float. */
+typedef struct {
+    double f;
+    big num, den;
+    int zero;
+} Diam;
+
+/* Test hook: when set, every filter defers to the exact computation (results are the same). */
+extern int exact_only;
+
+void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
+                Sgn *out);
+int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
+               big *out);
+void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2);
+void plane_side(const Plane *pl, const int64_t *x, Sgn *out);
+int plane_big(const Plane *pl, const int64_t *x, big *out);
+
+/* round(p + A / (A + B) * (q - p)) per coordinate, A = |a|, B = |b| (a, b nonzero, or
+ * one of them zero); exact values are recomputed by the callbacks only when needed. */
+typedef int (*ExactPair)(const void *ctx, big *a, big *b);
+int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b,
+               ExactPair exact, const void *ctx, int64_t *out);
+/* X = round(y - d n / |n|), n = m with its component along u removed. */
+int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d,
+               int64_t *out);
+/* Compare the ratios |a1| / (|a1| + |b1|) and |a2| / (|a2| + |b2|) exactly: -1, 0, 1. */
+int ratio_cmp_exact(const big *a1, const big *b1, const big *a2, const big *b2, int *out);
+int round_ratio(const big *num, const big *den, int64_t *out);
+
+#endif

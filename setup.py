@@ -1,0 +1,56 @@
+"""Builds the twin's compiled kernel (bwsd/twin/csrc) with the package: `pip install .`.
+
+Everything else about the package is in pyproject.toml. The kernel is C11 with GNU
+extensions (128-bit integers), built with floating-point contraction off: a fused
+multiply-add would change the float filters' error bounds (docs/twin.md, "Exactness").
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+from setuptools.errors import CCompilerError, CompileError, ExecError, PlatformError
+
+SOURCES = sorted(str(p) for p in Path("bwsd/twin/csrc").glob("*.c"))
+FLAGS = ["-std=gnu11", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fvisibility=hidden"]
+
+NO_COMPILER = """
+bwsd: cannot build its twin kernel (bwsd/twin/csrc), a C extension.
+It needs a C compiler (gcc or clang) and the Python headers. On Debian or Ubuntu:
+    sudo apt-get install gcc python3-dev
+then run the install again. ({error})
+"""
+
+
+class BuildKernel(build_ext):
+    """build_ext that turns a missing compiler into one clear message."""
+
+    def run(self) -> None:
+        try:
+            super().run()
+        except (CCompilerError, CompileError, ExecError, PlatformError, OSError) as exc:
+            sys.stderr.write(NO_COMPILER.format(error=exc))
+            raise SystemExit(1) from exc
+
+    def build_extension(self, ext: Extension) -> None:
+        try:
+            super().build_extension(ext)
+        except (CCompilerError, CompileError, ExecError, PlatformError, OSError) as exc:
+            sys.stderr.write(NO_COMPILER.format(error=exc))
+            raise SystemExit(1) from exc
+
+
+setup(
+    ext_modules=[
+        Extension(
+            "bwsd.twin._kernel",
+            sources=SOURCES,
+            depends=sorted(str(p) for p in Path("bwsd/twin/csrc").glob("*.h")),
+            extra_compile_args=FLAGS,
+        )
+    ],
+    cmdclass={"build_ext": BuildKernel},
+)
