@@ -10,10 +10,12 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from decimal import Decimal
 from pathlib import Path
 from typing import Any
 
-from bwsd.errors import ConfigError
+from bwsd.errors import ConfigError, TwinError
+from bwsd.twin.exact import MIN_LENGTH, decimal_float
 from bwsd.twin.machine import Machine
 
 
@@ -137,6 +139,8 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
             raise ConfigError(f"must be one of {', '.join(spec.choices)}, got {value!r}",
                               path=path, table=table, key=key)  # fmt: skip
         return value
+    if isinstance(value, Decimal | float):
+        value = _exact_number(where, value)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(f"must be a number, got {value!r}", path=path, table=table, key=key)
     if spec.kind is int and not isinstance(value, int):
@@ -145,6 +149,15 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
         raise ConfigError(f"must lie in [{spec.low:g}, {spec.high:g}], got {value!r}",
                           path=path, table=table, key=key)  # fmt: skip
     return spec.kind(value)
+
+
+def _exact_number(where: tuple[str, str, str], value: Decimal | float) -> float:
+    """A number read as the exact decimal written (docs/twin.md): carried by a float."""
+    path, table, key = where
+    try:
+        return decimal_float(str(value))
+    except ValueError as exc:
+        raise ConfigError(str(exc), path=path, table=table, key=key) from None
 
 
 def _table(raw: Any, name: str, path: str) -> dict[str, Any]:
@@ -188,6 +201,7 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
             raise ConfigError("missing table", path=path, table=name)
     tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
     machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+    _check_geometry(machine, path)
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)
     elif machine.rows * machine.cols > MODBUS_MAX_CELLS:
@@ -195,6 +209,19 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
                           f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
                           key="backend")  # fmt: skip
     return Config(machine=machine, path=path, tables=tables)
+
+
+def _check_geometry(machine: Machine, path: str) -> None:
+    """The twin's grid has a range (2^20 mm) and a finest pitch and diameter (docs/twin.md)."""
+    from bwsd.twin.geometry import Geometry
+
+    try:
+        Geometry(machine)
+    except TwinError as exc:
+        raise ConfigError(str(exc), path=path, table="machine") from None
+    if 0 < machine.yarn_diameter < float(MIN_LENGTH):
+        raise ConfigError(f"must be 0 or at least {float(MIN_LENGTH):g} mm", path=path,
+                          table="yarn", key="diameter")  # fmt: skip
 
 
 def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:
@@ -213,7 +240,7 @@ def load_config(path: str | Path) -> Config:
     text_path = str(path)
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            data = tomllib.load(fh, parse_float=Decimal)
     except OSError as exc:
         raise ConfigError(f"cannot read: {exc.strerror}", path=text_path) from exc
     except tomllib.TOMLDecodeError as exc:

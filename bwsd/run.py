@@ -10,6 +10,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+import numpy as np
+
 from bwsd.config import load_config
 from bwsd.errors import ProgramError, TwinError
 from bwsd.twin import Machine, Program, Twin, simulate
@@ -34,7 +36,10 @@ def configure(sub: Any) -> None:
 
 
 def load_and_simulate(
-    program_path: str, config_path: str, progress: ProgressFn | None = None
+    program_path: str,
+    config_path: str,
+    progress: ProgressFn | None = None,
+    timings: list[float] | None = None,
 ) -> tuple[Machine, Program, Twin]:
     """Load config and program, run the program; a refused instruction names its line."""
     from bwsd.program.validate import load_program
@@ -42,7 +47,7 @@ def load_and_simulate(
     machine = load_config(config_path).machine
     program = load_program(program_path, machine)
     try:
-        twin = simulate(machine, program, progress)
+        twin = simulate(machine, program, progress, timings)
     except TwinError as exc:
         line = (
             program.lines[exc.instruction - 1] if 0 < exc.instruction <= len(program.lines) else 0
@@ -70,7 +75,7 @@ def _progress(enabled: bool) -> Iterator[ProgressFn | None]:
         yield report
 
 
-def _summary(twin: Twin, seconds: float) -> dict[str, Any]:
+def _summary(twin: Twin, seconds: float, timings: list[float]) -> dict[str, Any]:
     return {
         "yarns": twin.yarn_count,
         "nodes": twin.node_count,
@@ -78,6 +83,20 @@ def _summary(twin: Twin, seconds: float) -> dict[str, Any]:
         "instructions": twin.done,
         "takeup": twin.takeup,
         "seconds": round(seconds, 6),
+        "predict_ms": _percentiles(timings),
+    }
+
+
+def _percentiles(seconds: list[float]) -> dict[str, float]:
+    """p50, p99 and max of per-instruction times, in milliseconds (all 0 for none)."""
+    if not seconds:
+        return {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    ms = 1e3 * np.array(seconds)
+    p50, p99 = np.percentile(ms, [50, 99])
+    return {
+        "p50": round(float(p50), 4),
+        "p99": round(float(p99), 4),
+        "max": round(float(ms.max()), 4),
     }
 
 
@@ -94,13 +113,16 @@ def _write_exports(twin: Twin, skeleton: str | None, exports: list[str]) -> None
 
 def _simulate_cmd(args: argparse.Namespace) -> int:
     start = time.perf_counter()
+    timings: list[float] = []
     with _progress(sys.stderr.isatty() and not args.json) as progress:
-        _, _, twin = load_and_simulate(args.program, args.config, progress)
+        _, _, twin = load_and_simulate(args.program, args.config, progress, timings)
     seconds = time.perf_counter() - start
     _write_exports(twin, args.skeleton, args.export)
-    summary = _summary(twin, seconds)
+    summary = _summary(twin, seconds, timings)
     if args.json:
         print(json.dumps(summary))
     else:
-        print(", ".join(f"{k} {v}" for k, v in summary.items()))
+        ms = summary.pop("predict_ms")
+        print(", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "
+              f"{ms['p50']} p99 {ms['p99']} max {ms['max']}")  # fmt: skip
     return 0

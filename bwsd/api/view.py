@@ -1,11 +1,12 @@
 """What the API reads of the controller without ever racing its run loop.
 
-The run loop predicts in a worker thread, and a read of the twin rolls a pending prediction
-back; so the API keeps its own copy of the skeleton. It takes a whole copy only when nothing
-else works on the twin (while the machine rests in a PackML waiting state, or when it has
-no copy yet), and otherwise keeps its copy in step by applying each instruction's delta,
-built from the instruction's prediction inside the controller's "instruction done" event.
-A delta costs what the instruction changed, never the size of the preform.
+The run loop predicts in a worker thread, holding the twin's lock while the kernel runs, and
+a whole copy of the skeleton costs the size of the preform; so the API keeps its own copy. It
+takes a whole copy only when nothing else works on the twin (while the machine rests in a
+PackML waiting state, or when it has no copy yet), and otherwise keeps its copy in step by
+applying each instruction's delta, built from the instruction's prediction inside the
+controller's "instruction done" event. A delta costs what the instruction changed, never the
+size of the preform.
 """
 
 from __future__ import annotations
@@ -23,8 +24,7 @@ from bwsd.export.skeleton_json import contact_to_dict, yarn_to_dict
 from bwsd.fieldbus import FieldbusConnectionError, FieldbusError, FieldbusTimeout
 from bwsd.twin import Prediction, SkeletonData, Twin, replay
 from bwsd.twin.instructions import Instruction
-from bwsd.twin.skeleton import ContactData, YarnData
-from bwsd.twin.sweep import index_from_end
+from bwsd.twin.skeleton import ContactData, YarnData, index_from_end
 
 from .models import BusHealth
 

@@ -283,7 +283,7 @@ class Controller:
         program = parse_program(text, record.name)
         twin = Twin.from_program(self.machine, program)
         for instruction in program.instructions[: record.done]:
-            await asyncio.to_thread(twin.apply, instruction)
+            await asyncio.to_thread(twin.advance, instruction)
         self.program, self.program_id, self.twin = program, record.id, twin
         first = await asyncio.to_thread(self.journal.instructions, record.id, 0, 1)
         self._origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None

@@ -6,6 +6,7 @@ import re
 from dataclasses import dataclass
 
 from bwsd.errors import ProgramError
+from bwsd.twin.exact import decimal_float
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _INDEX = re.compile(r"\d+")
@@ -44,10 +45,14 @@ def tokenize(line: str) -> list[Token]:
 
 
 def number(text: str, column: int, where: Where, what: str) -> float:
-    """A decimal number (integer, fraction or exponent form); nan and inf are refused."""
-    if not _NUMBER.fullmatch(text):
+    """A decimal number (integer, fraction or exponent form), kept exactly (docs/twin.md):
+    nan, inf and a decimal no float carries exactly are refused."""
+    if not _NUMBER.fullmatch(text, 0) or not text.isascii():
         raise where.error(f"{what}: expected a number, got {text!r}", column)
-    return float(text)
+    try:
+        return decimal_float(text)
+    except ValueError as exc:
+        raise where.error(f"{what}: {exc}", column) from None
 
 
 def integer(text: str, column: int, where: Where, what: str) -> int:

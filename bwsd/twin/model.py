@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from array import array
 from collections.abc import Callable, Iterable
 from fractions import Fraction
@@ -21,7 +22,7 @@ from bwsd.errors import MoveError, ShedClosedError, TwinError
 from bwsd.twin import _kernel
 from bwsd.twin.exact import MAX_DIAMETER, MIN_LENGTH, SCALE, as_bytes, exact
 from bwsd.twin.geometry import Geometry, Point, weft_ends
-from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp, Weft
+from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp
 from bwsd.twin.machine import Machine
 from bwsd.twin.prediction import NodeInsert, Prediction, Snapshot, mm
 from bwsd.twin.shed import closest
@@ -123,7 +124,8 @@ class Twin:
 
     def _run(self, instruction: Instruction, index: int,
              predict: bool) -> tuple[Any, Fraction, tuple[float, ...]]:  # fmt: skip
-        takeup, angles = self._takeup, ()
+        takeup = self._takeup
+        angles: tuple[float, ...] = ()
         try:
             if isinstance(instruction, Shift):
                 axis = 0 if instruction.axis == "row" else 1
@@ -160,8 +162,9 @@ class Twin:
         found = closest(p0, p1, segments, limit)
         if found is not None:
             yarn, gap2 = found
-            raise ShedClosedError(f"shed closed: the weft passes {math.sqrt(gap2) / SCALE:.6g} mm "
-                                  f"from yarn {yarn} (yarn diameter {self.diameter:g} mm)")  # fmt: skip
+            gap = math.sqrt(gap2) / SCALE
+            raise ShedClosedError(f"shed closed: the weft passes {gap:.6g} mm from yarn {yarn} "
+                                  f"(yarn diameter {self.diameter:g} mm)")  # fmt: skip
 
     # ----- snapshots -----
     def snapshot(self) -> Snapshot:
@@ -176,7 +179,7 @@ class Twin:
         kernel = _load(snapshot)
         with self._lock:
             self._kernel = kernel
-            self._fill = [tuple(cell) for cell in snapshot.header["fill"]]  # type: ignore[misc]
+            self._fill = [tuple(cell) for cell in snapshot.header["fill"]]
             self._angles = [None if a is None else float(a) for a in snapshot.header["angles"]]
             self._takeup = Fraction(snapshot.header["takeup"])
             self.done = snapshot.done
@@ -288,12 +291,23 @@ def _refusal(args: tuple[int, ...], instruction: Instruction, index: int) -> Twi
 ProgressFn = Callable[[int, int], None]
 
 
-def simulate(machine: Machine, program: Program, progress: ProgressFn | None = None) -> Twin:
-    """Run every instruction of ``program``; TwinError carries the failing instruction."""
+def simulate(machine: Machine, program: Program, progress: ProgressFn | None = None,
+             timings: list[float] | None = None) -> Twin:  # fmt: skip
+    """Run every instruction of ``program``; TwinError carries the failing instruction.
+
+    With ``timings``, each instruction is predicted and committed as the daemon does, and the
+    seconds of each ``predict`` are appended to it.
+    """
     twin = Twin.from_program(machine, program)
     total = len(program.instructions)
     for i, instruction in enumerate(program.instructions):
-        twin.advance(instruction)
+        if timings is None:
+            twin.advance(instruction)
+        else:
+            start = time.perf_counter()
+            prediction = twin.predict(instruction)
+            timings.append(time.perf_counter() - start)
+            twin.commit(prediction)
         if progress is not None:
             progress(i + 1, total)
     return twin

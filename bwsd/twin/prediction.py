@@ -65,7 +65,8 @@ class Prediction:
 
     @classmethod
     def build(cls, index: int, instruction: Instruction, result: Any, takeup: Fraction,
-              angles: tuple[float, ...], state: object, machine: Machine) -> Prediction:  # fmt: skip
+              angles: tuple[float, ...], state: object,
+              machine: Machine) -> Prediction:  # fmt: skip
         """From the kernel's description of a predicted instruction."""
         record, contacts, nodes, (moved, change), occupancy, first_new, yarns = result
         return cls(
@@ -96,7 +97,7 @@ class Prediction:
         first_new = self.new_yarns[0] if self.new_yarns else None
         xyz = mm(self.node_table[:, 3:]).tolist()
         return tuple(
-            NodeInsert(yarn, node, after, tuple(p))  # type: ignore[arg-type]
+            NodeInsert(yarn, node, after, tuple(p))
             for (node, yarn, after), p in zip(self.node_table[:, :3].tolist(), xyz, strict=True)
             if first_new is None or yarn < first_new
         )
@@ -105,7 +106,7 @@ class Prediction:
     def free_nodes(self) -> dict[int, Xyz]:
         """Moved warp -> its free node's new position."""
         xyz = mm(self.moved_table[:, 1:4]).tolist()
-        return {w: tuple(p) for w, p in zip(self.moved_table[:, 0].tolist(), xyz, strict=True)}  # type: ignore[misc]
+        return {w: tuple(p) for w, p in zip(self.moved_table[:, 0].tolist(), xyz, strict=True)}
 
     @cached_property
     def cases(self) -> dict[int, tuple[int, int]]:

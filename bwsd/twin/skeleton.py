@@ -81,7 +81,7 @@ class SkeletonData:
 
 
 def index_from_end(nodes: Any, node: int) -> int:
-    """Position of ``node`` in a yarn's node list, searched from the free end (where work happens)."""
+    """Position of ``node`` in a yarn's node list, searched from the free end."""
     for i in range(len(nodes) - 1, -1, -1):
         if nodes[i] == node:
             return i

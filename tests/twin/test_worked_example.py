@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from tests.twin.conftest import WORKED_CYCLE, WORKED_FILL, WORKED_MACHINE, assert_same, run_both
+
+GRID = 2.0**-32
 
 
 def test_worked_example_counts_and_first_contact():
@@ -16,7 +20,8 @@ def test_worked_example_counts_and_first_contact():
     first = sk.contacts[0]
     assert (first.instruction, first.moving_yarn, first.hit_yarn) == (2, 1, 0)
     y = sk.node_positions()[first.hit_node]
-    assert np.allclose(y, (5.0, 5.0, 100 / 3), rtol=0, atol=1e-12)
+    # (5, 5, 100/3) rounded once to the 2^-32 mm grid
+    assert y.tolist() == [5.0, 5.0, 143165576533 * GRID]
     assert_same(twin, ref)
 
 
@@ -29,9 +34,11 @@ def test_first_contact_is_at_the_end_of_the_move():
     nodes = sk.node_positions()
     x, y = nodes[sk.contacts[0].moving_node], nodes[sk.contacts[0].hit_node]
     # Yarn 1 moves along -y (COL 0:-1) and hits yarn 0's segment from its fell (2.5, 2.5, 0)
-    # to its new guide (10, 10, 100): X = Y - d n, n the move without its part along C-D.
+    # to its new guide (10, 10, 100): X = round(Y - d n / |n|), n the move without its part
+    # along C-D; each coordinate is within half a grid step of the exact value.
     move = np.array((0.0, -10.0, 0.0))
     axis = np.array((7.5, 7.5, 100.0)) / np.linalg.norm((7.5, 7.5, 100.0))
     n = move - (move @ axis) * axis
-    assert np.allclose(x, y - n / np.linalg.norm(n), atol=1e-12)
+    assert np.abs(x - (y - n / np.linalg.norm(n))).max() <= GRID / 2 + 1e-13
+    assert all(math.ldexp(v, 32).is_integer() for v in x)
     assert moving.nodes[-1].tolist() == [0.0, 0.0, 100.0]
