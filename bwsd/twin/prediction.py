@@ -55,7 +55,7 @@ class Prediction:
     new_yarns: tuple[int, ...]
     occupancy: IntArray  # after the instruction
     contact_table: IntArray  # (k, 5): instruction, moving yarn, X, hit yarn, Y
-    node_table: IntArray  # (n, 6): node, yarn, after, x, y, z (grid); predecessors first
+    node_table: IntArray  # (n, 6): node, yarn, after, x, y, z (grid), in yarn order
     moved_table: IntArray  # (m, 6): warp, x, y, z (grid) of its free node, row, col
     length_table: FloatArray  # (m,): change of each moved warp's path length (mm)
     record: bytes = field(repr=False)
@@ -93,7 +93,7 @@ class Prediction:
 
     @cached_property
     def inserted(self) -> tuple[NodeInsert, ...]:
-        """Nodes added to existing yarns, each after its predecessor (new yarns left out)."""
+        """Nodes added to existing yarns, in yarn order (new yarns left out)."""
         first_new = self.new_yarns[0] if self.new_yarns else None
         xyz = mm(self.node_table[:, 3:]).tolist()
         return tuple(

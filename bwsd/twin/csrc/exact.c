@@ -14,7 +14,7 @@
 #define ERRBOUND 8.0e-16
 
 int exact_only = 0;
-
+extern 
 static inline double fabs_(double x) { return x < 0 ? -x : x; }
 
 /* The float value of det[a, b, c] = c . (a x b) with its error bound (exact differences). */
@@ -93,6 +93,47 @@ int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const in
     dot_parts(ic, n, &hi, &lo);
     big_from_parts(out, hi, lo);
     return 0;
+}
+
+void cross_init(Cross *x, const int64_t *a, const int64_t *c) {
+    double af[3] = {(double)a[0], (double)a[1], (double)a[2]};
+    double cf[3] = {(double)c[0], (double)c[1], (double)c[2]};
+    for (int k = 0; k < 3; k++) {
+        x->a[k] = a[k];
+        x->c[k] = c[k];
+    }
+    x->m[0] = af[1] * cf[2];
+    x->m[1] = af[2] * cf[1];
+    x->m[2] = af[2] * cf[0];
+    x->m[3] = af[0] * cf[2];
+    x->m[4] = af[0] * cf[1];
+    x->m[5] = af[1] * cf[0];
+    x->exact_ready = 0;
+}
+
+/* u . (a x c): the form of det_float (minors of a and c, dotted with u), same bound */
+void cross_side(Cross *x, const int64_t *u, Sgn *out) {
+    const double *m = x->m;
+    double u0 = (double)u[0], u1 = (double)u[1], u2 = (double)u[2];
+    double det = u0 * (m[0] - m[1]) + u1 * (m[2] - m[3]) + u2 * (m[4] - m[5]);
+    double perm = fabs_(u0) * (fabs_(m[0]) + fabs_(m[1])) + fabs_(u1) * (fabs_(m[2]) + fabs_(m[3]));
+    perm = perm + fabs_(u2) * (fabs_(m[4]) + fabs_(m[5]));
+    out->v = det;
+    out->e = ERRBOUND * perm;
+    if (!exact_only && (det > out->e || -det > out->e)) {
+        out->s = det > 0 ? 1 : -1;
+        out->filtered = 1;
+        return;
+    }
+    if (!x->exact_ready) {
+        cross_i128(x->a, x->c, x->N);
+        x->exact_ready = 1;
+    }
+    i128 hi;
+    uint64_t lo;
+    dot_parts(u, x->N, &hi, &lo);
+    out->s = parts_sign(hi, lo);
+    out->filtered = 0;
 }
 
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2) {

@@ -44,6 +44,15 @@ typedef struct {
     int flat; /* the exact normal is zero: every point lies on it */
 } Plane;
 
+/* The cross product a x c of two exact vectors, to take u . (a x c) = det[u, a, c] for many
+ * u: float minors with their permanents, the exact product when first needed. */
+typedef struct {
+    int64_t a[3], c[3];
+    double m[6];
+    i128 N[3];
+    int exact_ready;
+} Cross;
+
 /* The yarn diameter in grid units: num / den exactly, f as a float. */
 typedef struct {
     double f;
@@ -58,6 +67,8 @@ void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const i
                 Sgn *out);
 int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                big *out);
+void cross_init(Cross *x, const int64_t *a, const int64_t *c);
+void cross_side(Cross *x, const int64_t *u, Sgn *out); /* the sign of u . (a x c) */
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2);
 void plane_side(const Plane *pl, const int64_t *x, Sgn *out);
 int plane_big(const Plane *pl, const int64_t *x, big *out);

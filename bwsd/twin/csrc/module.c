@@ -125,24 +125,42 @@ static PyObject *Kernel_add_warp(Kernel *k, PyObject *args) {
     return PyLong_FromLong(s->nw - 1);
 }
 
-/* New nodes in chain order: each one's predecessor is old or comes before it. Six int64 per
- * node: id, yarn, predecessor, x, y, z. */
+static const State *sort_state;
+
+static int by_yarn(const void *a, const void *b) {
+    int32_t ya = sort_state->nyarn[*(const int32_t *)a], yb = sort_state->nyarn[*(const int32_t *)b];
+    return ya < yb ? -1 : ya > yb;
+}
+
+/* New nodes in yarn order (yarns ascending, each yarn's from its start), so each one's
+ * predecessor is old or comes before it. Six int64 per node: id, yarn, predecessor, x, y, z.
+ * Each yarn is walked back from its end only as far as its deepest new node. */
 static PyObject *new_nodes(const State *s, int32_t nn0) {
-    int64_t count = s->nn - nn0, at = 0;
+    int64_t count = s->nn - nn0;
     int64_t *out = malloc(sizeof(int64_t) * 6 * (size_t)(count ? count : 1));
-    if (!out) return PyErr_NoMemory();
-    for (int32_t n = nn0; n < s->nn; n++) {
-        if (s->prev[n] >= nn0) continue;
-        for (int32_t m = n; m >= nn0 && m != -1; m = s->next[m]) {
-            int64_t *o = out + 6 * at++;
-            o[0] = m;
-            o[1] = s->nyarn[m];
-            o[2] = s->prev[m];
-            memcpy(o + 3, P(s, m), 3 * sizeof(int64_t));
+    int32_t *ids = malloc(sizeof(int32_t) * (size_t)(count ? count : 1));
+    if (!out || !ids) return free(out), free(ids), PyErr_NoMemory();
+    for (int64_t i = 0; i < count; i++) ids[i] = nn0 + (int32_t)i;
+    sort_state = s; /* under the interpreter lock: one caller at a time */
+    qsort(ids, (size_t)count, sizeof(int32_t), by_yarn);
+    for (int64_t g = 0; g < count;) {
+        int32_t y = s->nyarn[ids[g]];
+        int64_t end = g;
+        while (end < count && s->nyarn[ids[end]] == y) end++;
+        int64_t at = end; /* fill this yarn's rows from the back */
+        for (int32_t n = s->tail[y]; n != -1 && at > g; n = s->prev[n]) {
+            if (n < nn0) continue;
+            int64_t *o = out + 6 * --at;
+            o[0] = n;
+            o[1] = y;
+            o[2] = s->prev[n];
+            memcpy(o + 3, P(s, n), 3 * sizeof(int64_t));
         }
+        g = end;
     }
-    PyObject *b = bytes_of(out, sizeof(int64_t) * 6 * (size_t)at);
+    PyObject *b = bytes_of(out, sizeof(int64_t) * 6 * (size_t)count);
     free(out);
+    free(ids);
     return b;
 }
 
@@ -452,7 +470,7 @@ static PyObject *set_exact_only(PyObject *mod, PyObject *arg) {
     Py_RETURN_NONE;
 }
 
-static PyMethodDef module_methods[] = {
+extern static PyMethodDef module_methods[] = {
     {"set_exact_only", set_exact_only, METH_O,
      "Test hook: every float filter defers to the exact computation (same results, slower)."},
     {NULL, NULL, 0, NULL},

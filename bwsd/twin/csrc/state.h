@@ -19,7 +19,7 @@
 
 #include "exact.h"
 
-#define BLOCK 32
+#define BLOCK 8
 
 typedef struct {
     int32_t seg;

@@ -24,6 +24,7 @@ typedef struct {
     State *s;
     int32_t w, skip0, skip1;
     const int64_t *b, *a1, *a2;
+    int64_t e1[3], e2[3]; /* a1 - b, a2 - b */
     Plane pl;
     QBox box;
     Hit best;
@@ -88,13 +89,20 @@ static void try_segment(Search *q, int32_t seg, int32_t end, int32_t yarn) {
     plane_side(&q->pl, C, &h.sc);
     plane_side(&q->pl, D, &h.sd);
     if ((h.sc.s >= 0) == (h.sd.s >= 0)) return;
+    /* with B as origin and C' = C - B: w2 = -A1'.(a x C'), w1 = A2'.(a x C'), a = D - C */
+    int64_t a[3] = {D[0] - C[0], D[1] - C[1], D[2] - C[2]};
+    int64_t c[3] = {C[0] - q->b[0], C[1] - q->b[1], C[2] - q->b[2]};
+    Cross x;
+    cross_init(&x, a, c);
+    cross_side(&x, q->e1, &h.w2);
+    h.w2.v = -h.w2.v;
+    h.w2.s = -h.w2.s;
+    if (h.w2.s == 0) return;
+    cross_side(&x, q->e2, &h.w1);
+    if (h.w1.s != 0 && h.w1.s != h.w2.s) return;
     Sgn wb;
     orient_sgn(C, D, q->a1, q->a2, &wb);
-    if (wb.s == 0) return;
-    orient_sgn(C, D, q->b, q->a1, &h.w2);
-    if (h.w2.s != wb.s) return;
-    orient_sgn(C, D, q->a2, q->b, &h.w1);
-    if (h.w1.s != 0 && h.w1.s != wb.s) return;
+    if (wb.s != h.w2.s) return;
     h.seg = seg;
     h.end = end;
     h.yarn = yarn;
@@ -123,7 +131,8 @@ static void scan_cell(Search *q, int64_t ci, uint32_t st) {
         int32_t end = c->n < (b + 1) * BLOCK ? c->n : (b + 1) * BLOCK;
         for (int32_t i = b * BLOCK; i < end; i++) {
             const Entry *e = &c->e[i];
-            if (!box_meets(&e->xlo, &e->xhi, &q->box)) continue;
+            if (!box_meets(&e->xlo, &e->xhi, &q->box))
+                continue;
             int32_t seg = e->seg;
             if (s->stamp[seg] == st) continue;
             s->stamp[seg] = st;
@@ -148,6 +157,10 @@ static void search(Search *q) {
     State *s = q->s;
     plane_init(&q->pl, q->b, q->a1, q->a2);
     if (q->pl.flat) return; /* every point lies on the plane: nothing crosses it */
+    for (int k = 0; k < 3; k++) {
+        q->e1[k] = q->a1[k] - q->b[k];
+        q->e2[k] = q->a2[k] - q->b[k];
+    }
     const int64_t *pts[3] = {q->b, q->a1, q->a2};
     qbox_of(&q->box, pts, 3);
     int32_t iy0, iy1;
