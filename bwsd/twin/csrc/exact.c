@@ -14,7 +14,7 @@
 #define ERRBOUND 8.0e-16
 
 int exact_only = 0;
-extern 
+
 static inline double fabs_(double x) { return x < 0 ? -x : x; }
 
 /* The float value of det[a, b, c] = c . (a x b) with its error bound (exact differences). */
