@@ -470,7 +470,7 @@ static PyObject *set_exact_only(PyObject *mod, PyObject *arg) {
     Py_RETURN_NONE;
 }
 
-extern static PyMethodDef module_methods[] = {
+static PyMethodDef module_methods[] = {
     {"set_exact_only", set_exact_only, METH_O,
      "Test hook: every float filter defers to the exact computation (same results, slower)."},
     {NULL, NULL, 0, NULL},
