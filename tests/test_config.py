@@ -110,3 +110,39 @@ def test_daemon_tables_defaults_and_flags():
     assert cfg.table("controller") == {"max_contacts": 0, "tensioner_stroke": 0.0}
     with pytest.raises(ConfigError, match=r"\[api.open_reads\]: must be true or false"):
         parse_config({**GOOD, "api": {"open_reads": 1}})
+
+
+def test_numbers_are_the_exact_decimals_written(tmp_path):
+    """A pitch of 1.0000180559 is that decimal: its guide lies on the grid point of the decimal,
+    not of the nearest float (docs/twin.md)."""
+    from bwsd.twin.geometry import Geometry
+
+    path = tmp_path / "m.toml"
+    path.write_text("[machine]\nrows = 1\ncols = 2\npitch_x = 1.0000180559\npitch_y = 1\n"
+                    "d_mat = 10\nc_mat = 0.5\n")  # fmt: skip
+    assert Geometry(load_config(path).machine).gx[1] == 4295044845
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("pitch_x = 2.54000000000000000001", r"\[machine.pitch_x\]: .* cannot be kept exactly"),
+        ("d_mat = 1e999", r"\[machine.d_mat\]: .* cannot be kept exactly"),
+        ("d_mat = inf", r"\[machine.d_mat\]: .*not a finite number"),
+        ("pitch_x = 5000", r"\[machine\]: a guide of .* beyond the twin's range of 2\^20 mm"),
+    ],
+)
+def test_numbers_the_twin_cannot_keep_are_refused_with_their_key(tmp_path, line, message):
+    base = {"rows": "300", "cols": "300", "pitch_x": "1", "pitch_y": "1", "d_mat": "10",
+            "c_mat": "0.5"}  # fmt: skip
+    key = line.split(" = ")[0]
+    body = "".join(f"{k} = {v}\n" for k, v in base.items() if k != key)
+    path = tmp_path / "m.toml"
+    path.write_text(f'[machine]\n{body}{line}\n[fieldbus]\nbackend = "canopen"\n')
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def test_a_yarn_diameter_too_fine_for_the_grid_is_refused():
+    with pytest.raises(ConfigError, match=r"\[yarn.diameter\]: must be 0 or at least 1e-06 mm"):
+        parse_config(_with("yarn", "diameter", 1e-9))

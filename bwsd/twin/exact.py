@@ -48,7 +48,7 @@ def decimal_float(text: str) -> float:
     if not math.isfinite(result) or Decimal(repr(result)) != value:
         raise ValueError(
             f"{text!r} cannot be kept exactly: use at most 15 significant digits "
-            "and a magnitude between 1e-300 and 1e300"
+            "and a magnitude below 1e300"
         )
     return result + 0.0  # -0 is 0
 

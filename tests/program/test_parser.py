@@ -201,3 +201,28 @@ def test_crlf_and_form_feed_keep_line_numbers():
     with pytest.raises(ProgramError) as info:
         parse_program("TAKEUP 1\r\n\r\nBAD\r\n")
     assert (info.value.line, info.value.column) == (3, 1)
+
+
+@pytest.mark.parametrize(
+    ("text", "column", "message"),
+    [
+        ("TAKEUP 0.30000000000000001", 8, "take-up: '0.30000000000000001' cannot be kept exactly"),
+        ("TAKEUP 1e999", 8, "take-up: '1e999' cannot be kept exactly"),
+        ("TAKEUP \u0661", 8, "take-up: expected a number"),
+        ("WEFT x=1 y=2 z=3 angle=1e-400 length=5", 24, "angle: '1e-400' cannot be kept"),
+        ("YARN diameter=2.000000000000000001", 15, "diameter: '2.000000000000000001' cannot"),
+    ],
+)
+def test_numbers_are_exact_decimals_or_refused(text, column, message):
+    with pytest.raises(ProgramError, match=message) as info:
+        parse_program(text)
+    assert (info.value.line, info.value.column) == (1, column)
+
+
+def test_a_number_is_the_decimal_written():
+    from fractions import Fraction
+
+    from bwsd.twin.exact import exact
+
+    (takeup,) = parse_program("TAKEUP 2.54").instructions
+    assert isinstance(takeup, TakeUp) and exact(takeup.length) == Fraction(254, 100)

@@ -226,3 +226,31 @@ def test_every_kernel_path_matches_reference(kernel_path, case):
     """The float filters are only a shortcut and the broad phase only a filter: forcing the
     exact computation everywhere, or another cell size, changes nothing."""
     _compare(case)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("stem", "count"),
+    [
+        ("twist", None),
+        ("braid-2x2", None),
+        ("weave-plain", None),
+        ("braid-L", None),
+        ("weave-U", None),
+        ("braid-24x24", 5),
+    ],
+)
+def test_every_example_matches_the_reference_node_for_node(stem, count):
+    """The shipped examples, whole; the 24x24 braid for its first cycle (the brute-force
+    reference would take hours for all ten)."""
+    from pathlib import Path
+
+    from bwsd.config import load_config
+    from bwsd.program import load_program
+
+    root = Path(__file__).resolve().parents[2]
+    machine = load_config(root / "config" / f"{stem}.toml").machine
+    program = load_program(root / "examples" / f"{stem}.bws", machine)
+    diameter = machine.yarn_diameter if program.diameter is None else program.diameter
+    twin, ref = run_both(machine, program.fill, diameter, program.instructions[:count])
+    assert_same(twin, ref)
