@@ -22,6 +22,9 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+# numpy's OpenBLAS threads would spin on the other core; the twin uses no BLAS
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -178,13 +181,15 @@ def responsiveness_table(seconds: float) -> list[str]:
     twin = Twin.from_program(machine, program)
     for ins in program.instructions[:50]:
         twin.advance(ins)
+    start = twin.snapshot()
     stop = threading.Event()
     predicts = [0]
 
     def predict_forever() -> None:
         while not stop.is_set():
-            ins = program.instructions[twin.done]
-            twin.commit(twin.predict(ins))
+            if twin.done == len(program.instructions):
+                twin.restore(start)
+            twin.commit(twin.predict(program.instructions[twin.done]))
             predicts[0] += 1
 
     idle = asyncio.run(_lateness(seconds))

@@ -1,4 +1,4 @@
-"""Exact reference of the whole twin (/work/shared/TWIN.md), the test oracle of the kernel.
+"""Exact reference of the whole twin (docs/twin.md), the test oracle of the kernel.
 
 Written independently of ``bwsd.twin``: only the plain input data classes (``Machine``,
 ``Shift``, ``TakeUp``, ``Weft``) are imported. Brute force by design: every decision and every
@@ -12,7 +12,7 @@ Number conventions (decided for the project):
   value is rounded to the grid once, to the nearest grid point, ties to even.
 - Any coordinate of magnitude 2^20 mm or more (|q| >= 2^52) is an error (``ValueError``).
 
-Model conventions (where TWIN.md leaves the choice to the implementation):
+Model conventions (where docs/twin.md leaves the choice to the implementation):
 
 - Yarn ids: warps in fill order, then wefts in insertion order.
 - Node ids are global, allocated in this order: at fill, for each warp its fell node then its

@@ -448,7 +448,7 @@ def test_braid_of_eight_carriers_is_deterministic_and_consistent():
         runs.append(ref)
     a, b = runs
     assert (a.nodes, a.yarns, a.contacts) == (b.nodes, b.yarns, b.contacts)
-    # Pinned from this reference (a regression value, not a figure of TWIN.md).
+    # Pinned from this reference (a regression value, not a figure of docs/twin.md).
     assert (len(a.contacts), len(a.nodes)) == (73, 162)
     assert len(a.nodes) == 2 * len(BRAID_FILL) + 2 * len(a.contacts)
     assert a.takeup == 30
