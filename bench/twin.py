@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 from bwsd.config import load_config  # noqa: E402
 from bwsd.program import load_program, parse_program  # noqa: E402
 from bwsd.program.generators import braid4  # noqa: E402
-from bwsd.twin import Machine, Program, Twin, simulate  # noqa: E402
+from bwsd.twin import Machine, Program, Snapshot, Twin, simulate  # noqa: E402
 from tests.twin.reference import RefTwin  # noqa: E402
 
 EXAMPLES = ["twist", "braid-2x2", "weave-plain", "braid-L", "weave-U", "braid-24x24"]
@@ -144,7 +144,8 @@ def latency_table(checkpoints: list[int], samples: int) -> list[str]:
     per_cycle = program.cycle_length or 1
     twin = Twin.from_program(machine, program)
     rows = ["| cycle | p50 ms | p99 ms | max ms | p99 / p99 at first | contacts | nodes "
-            "| RSS MB |", "|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+            "| RSS MB | snapshot MB | snapshot ms | restore ms |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
     first = 0.0
     for cycle in checkpoints:
         while twin.done < cycle * per_cycle:
@@ -157,9 +158,17 @@ def latency_table(checkpoints: list[int], samples: int) -> list[str]:
             lat.append(1e3 * (time.perf_counter() - start))
             twin.commit(pred)
         first = first or p99(lat)
+        rss = rss_mb()
+        start = time.perf_counter()
+        data = twin.snapshot().to_bytes()
+        taken = time.perf_counter() - start
+        start = time.perf_counter()
+        Twin.from_snapshot(machine, Snapshot.from_bytes(data))
+        restored = time.perf_counter() - start
         rows.append(f"| {cycle} | {statistics.median(lat):.2f} | {p99(lat):.2f} | {max(lat):.2f} "
                     f"| {p99(lat) / first:.2f} | {twin.contact_count} | {twin.node_count} "
-                    f"| {rss_mb():.0f} |")  # fmt: skip
+                    f"| {rss:.0f} | {len(data) / 2**20:.1f} | {1e3 * taken:.0f} "
+                    f"| {1e3 * restored:.0f} |")  # fmt: skip
         print(rows[-1], file=sys.stderr)
     return rows
 

@@ -9,9 +9,6 @@
 #endif
 
 #define EPS 1.1102230246251565e-16 /* 2^-53 */
-/* Shewchuk's bound for this form of the 3x3 determinant is (7 + 56 eps) eps times the
- * permanent (differences rounded); ours are exact, so the bound holds with room. */
-#define ERRBOUND 8.0e-16
 
 int exact_only = 0;
 
@@ -95,47 +92,6 @@ int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const in
     return 0;
 }
 
-void cross_init(Cross *x, const int64_t *a, const int64_t *c) {
-    double af[3] = {(double)a[0], (double)a[1], (double)a[2]};
-    double cf[3] = {(double)c[0], (double)c[1], (double)c[2]};
-    for (int k = 0; k < 3; k++) {
-        x->a[k] = a[k];
-        x->c[k] = c[k];
-    }
-    x->m[0] = af[1] * cf[2];
-    x->m[1] = af[2] * cf[1];
-    x->m[2] = af[2] * cf[0];
-    x->m[3] = af[0] * cf[2];
-    x->m[4] = af[0] * cf[1];
-    x->m[5] = af[1] * cf[0];
-    x->exact_ready = 0;
-}
-
-/* u . (a x c): the form of det_float (minors of a and c, dotted with u), same bound */
-void cross_side(Cross *x, const int64_t *u, Sgn *out) {
-    const double *m = x->m;
-    double u0 = (double)u[0], u1 = (double)u[1], u2 = (double)u[2];
-    double det = u0 * (m[0] - m[1]) + u1 * (m[2] - m[3]) + u2 * (m[4] - m[5]);
-    double perm = fabs_(u0) * (fabs_(m[0]) + fabs_(m[1])) + fabs_(u1) * (fabs_(m[2]) + fabs_(m[3]));
-    perm = perm + fabs_(u2) * (fabs_(m[4]) + fabs_(m[5]));
-    out->v = det;
-    out->e = ERRBOUND * perm;
-    if (!exact_only && (det > out->e || -det > out->e)) {
-        out->s = det > 0 ? 1 : -1;
-        out->filtered = 1;
-        return;
-    }
-    if (!x->exact_ready) {
-        cross_i128(x->a, x->c, x->N);
-        x->exact_ready = 1;
-    }
-    i128 hi;
-    uint64_t lo;
-    dot_parts(u, x->N, &hi, &lo);
-    out->s = parts_sign(hi, lo);
-    out->filtered = 0;
-}
-
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2) {
     int64_t ia[3], ic[3];
     diff3(a1, b, ia);
@@ -154,25 +110,16 @@ void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a
     pl->flat = pl->N[0] == 0 && pl->N[1] == 0 && pl->N[2] == 0;
 }
 
-/* The side of x: the sign of det[a1 - b, a2 - b, x - b] (same float form as orient_sgn). */
-void plane_side(const Plane *pl, const int64_t *x, Sgn *out) {
-    int64_t ic[3];
-    diff3(x, pl->b, ic);
-    double cx = (double)ic[0], cy = (double)ic[1], cz = (double)ic[2];
-    double det = cx * pl->n[0] + cy * pl->n[1] + cz * pl->n[2];
-    double perm = fabs_(cx) * pl->p[0] + fabs_(cy) * pl->p[1] + fabs_(cz) * pl->p[2];
-    out->v = det;
-    out->e = ERRBOUND * perm;
-    if (!exact_only && (det > out->e || -det > out->e)) {
-        out->s = det > 0 ? 1 : -1;
-        out->filtered = 1;
-        return;
-    }
+int dot_sign(const int64_t *u, const i128 *n) {
     i128 hi;
     uint64_t lo;
-    dot_parts(ic, pl->N, &hi, &lo);
-    out->s = parts_sign(hi, lo);
-    out->filtered = 0;
+    dot_parts(u, n, &hi, &lo);
+    return parts_sign(hi, lo);
+}
+
+void cross_exact(Cross *x) {
+    cross_i128(x->a, x->c, x->N);
+    x->exact_ready = 1;
 }
 
 int plane_big(const Plane *pl, const int64_t *x, big *out) {

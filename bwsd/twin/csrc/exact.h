@@ -12,6 +12,8 @@
 
 #include <stdint.h>
 
+#include <math.h>
+
 #include "bigint.h"
 
 #define GRID_LIMIT ((int64_t)1 << 52) /* 2^20 mm: coordinates must stay strictly below */
@@ -67,10 +69,7 @@ void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const i
                 Sgn *out);
 int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                big *out);
-void cross_init(Cross *x, const int64_t *a, const int64_t *c);
-void cross_side(Cross *x, const int64_t *u, Sgn *out); /* the sign of u . (a x c) */
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2);
-void plane_side(const Plane *pl, const int64_t *x, Sgn *out);
 int plane_big(const Plane *pl, const int64_t *x, big *out);
 
 /* round(p + A / (A + B) * (q - p)) per coordinate, A = |a|, B = |b| (a, b nonzero, or
@@ -84,5 +83,64 @@ int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam 
 /* Compare the ratios |a1| / (|a1| + |b1|) and |a2| / (|a2| + |b2|) exactly: -1, 0, 1. */
 int ratio_cmp_exact(const big *a1, const big *b1, const big *a2, const big *b2, int *out);
 int round_ratio(const big *num, const big *den, int64_t *out);
+
+/* Shewchuk's bound for the float form of the 3x3 determinant used here is (7 + 56 eps) eps
+ * times the permanent (differences rounded); ours are exact, so the bound holds with room. */
+#define ERRBOUND 8.0e-16
+
+int dot_sign(const int64_t *u, const i128 *n); /* the exact sign of u . n */
+void cross_exact(Cross *x);                    /* the exact a x c */
+
+static inline void cross_init(Cross *x, const int64_t *a, const int64_t *c) {
+    double af[3] = {(double)a[0], (double)a[1], (double)a[2]};
+    double cf[3] = {(double)c[0], (double)c[1], (double)c[2]};
+    for (int k = 0; k < 3; k++) {
+        x->a[k] = a[k];
+        x->c[k] = c[k];
+    }
+    x->m[0] = af[1] * cf[2];
+    x->m[1] = af[2] * cf[1];
+    x->m[2] = af[2] * cf[0];
+    x->m[3] = af[0] * cf[2];
+    x->m[4] = af[0] * cf[1];
+    x->m[5] = af[1] * cf[0];
+    x->exact_ready = 0;
+}
+
+/* u . (a x c): the form of det_float (minors of a and c, dotted with u), same bound */
+static inline void cross_side(Cross *x, const int64_t *u, Sgn *out) {
+    const double *m = x->m;
+    double u0 = (double)u[0], u1 = (double)u[1], u2 = (double)u[2];
+    double det = u0 * (m[0] - m[1]) + u1 * (m[2] - m[3]) + u2 * (m[4] - m[5]);
+    double perm = fabs(u0) * (fabs(m[0]) + fabs(m[1])) + fabs(u1) * (fabs(m[2]) + fabs(m[3]));
+    perm = perm + fabs(u2) * (fabs(m[4]) + fabs(m[5]));
+    out->v = det;
+    out->e = ERRBOUND * perm;
+    if (!exact_only && (det > out->e || -det > out->e)) {
+        out->s = det > 0 ? 1 : -1;
+        out->filtered = 1;
+        return;
+    }
+    if (!x->exact_ready) cross_exact(x);
+    out->s = dot_sign(u, x->N);
+    out->filtered = 0;
+}
+
+/* The side of x: the sign of det[a1 - b, a2 - b, x - b] (same float form as orient_sgn). */
+static inline void plane_side(const Plane *pl, const int64_t *x, Sgn *out) {
+    int64_t ic[3] = {x[0] - pl->b[0], x[1] - pl->b[1], x[2] - pl->b[2]};
+    double cx = (double)ic[0], cy = (double)ic[1], cz = (double)ic[2];
+    double det = cx * pl->n[0] + cy * pl->n[1] + cz * pl->n[2];
+    double perm = fabs(cx) * pl->p[0] + fabs(cy) * pl->p[1] + fabs(cz) * pl->p[2];
+    out->v = det;
+    out->e = ERRBOUND * perm;
+    if (!exact_only && (det > out->e || -det > out->e)) {
+        out->s = det > 0 ? 1 : -1;
+        out->filtered = 1;
+        return;
+    }
+    out->s = dot_sign(ic, pl->N);
+    out->filtered = 0;
+}
 
 #endif
