@@ -206,13 +206,16 @@ class Twin:
     def _warp_table(self) -> tuple[IntArray, IntArray]:
         """Per warp (row, col, free node, last fixed node), and the occupancy."""
         with self._lock:
-            if self._warps is None:
-                table, occupancy = self._kernel.warps()
-                m = self.machine
-                self._warps = (np.frombuffer(table, dtype=np.int32).reshape(-1, 4).astype(np.int64),
-                               np.frombuffer(occupancy, dtype=np.int32).reshape(m.rows, m.cols)
-                               .astype(np.int64))  # fmt: skip
-            return self._warps
+            return self._warp_table_locked()
+
+    def _warp_table_locked(self) -> tuple[IntArray, IntArray]:
+        if self._warps is None:
+            table, occupancy = self._kernel.warps()
+            m = self.machine
+            self._warps = (np.frombuffer(table, dtype=np.int32).reshape(-1, 4).astype(np.int64),
+                           np.frombuffer(occupancy, dtype=np.int32).reshape(m.rows, m.cols)
+                           .astype(np.int64))  # fmt: skip
+        return self._warps
 
     @property
     def occupancy(self) -> IntArray:
@@ -238,8 +241,8 @@ class Twin:
 
     def skeleton(self) -> SkeletonData:
         """A read-only copy of the whole skeleton."""
-        occupancy = self.occupancy
         with self._lock:
+            occupancy = self._warp_table_locked()[1].copy()
             ids_raw, starts_raw = self._kernel.chains(0, self.yarn_count)
             pos = mm(np.frombuffer(self._kernel.positions(), dtype=np.int64).reshape(-1, 3))
             table = np.frombuffer(self._kernel.contacts(), dtype=np.int32).reshape(-1, 5)

@@ -14,20 +14,6 @@ int exact_only = 0;
 
 static inline double fabs_(double x) { return x < 0 ? -x : x; }
 
-/* The float value of det[a, b, c] = c . (a x b) with its error bound (exact differences). */
-static inline void det_float(const double *a, const double *b, const double *c, Sgn *out) {
-    double m0 = a[1] * b[2], m1 = a[2] * b[1];
-    double m2 = a[2] * b[0], m3 = a[0] * b[2];
-    double m4 = a[0] * b[1], m5 = a[1] * b[0];
-    double det = c[0] * (m0 - m1) + c[1] * (m2 - m3) + c[2] * (m4 - m5);
-    double perm = fabs_(c[0]) * (fabs_(m0) + fabs_(m1)) + fabs_(c[1]) * (fabs_(m2) + fabs_(m3));
-    perm = perm + fabs_(c[2]) * (fabs_(m4) + fabs_(m5));
-    out->v = det;
-    out->e = ERRBOUND * perm;
-    out->filtered = !exact_only && (det > out->e || -det > out->e);
-    out->s = !out->filtered ? 0 : (det > 0 ? 1 : -1);
-}
-
 static inline void cross_i128(const int64_t *a, const int64_t *b, i128 *n) {
     n[0] = (i128)a[1] * b[2] - (i128)a[2] * b[1];
     n[1] = (i128)a[2] * b[0] - (i128)a[0] * b[2];
@@ -58,38 +44,24 @@ static inline void diff3(const int64_t *p, const int64_t *o, int64_t *out) {
 
 void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                 Sgn *out) {
-    double a[3], b[3], c[3];
-    for (int k = 0; k < 3; k++) {
-        a[k] = (double)(p1[k] - p0[k]);
-        b[k] = (double)(p2[k] - p0[k]);
-        c[k] = (double)(p3[k] - p0[k]);
-    }
-    det_float(a, b, c, out);
-    if (!out->filtered) {
-        int64_t ia[3], ib[3], ic[3];
-        i128 n[3], hi;
-        uint64_t lo;
-        diff3(p1, p0, ia);
-        diff3(p2, p0, ib);
-        diff3(p3, p0, ic);
-        cross_i128(ia, ib, n);
-        dot_parts(ic, n, &hi, &lo);
-        out->s = parts_sign(hi, lo);
-    }
+    int64_t a[3], b[3], u[3];
+    diff3(p1, p0, a);
+    diff3(p2, p0, b);
+    diff3(p3, p0, u);
+    Cross x;
+    cross_init(&x, a, b);
+    cross_side(&x, u, out);
 }
 
 int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                big *out) {
-    int64_t ia[3], ib[3], ic[3];
-    i128 n[3], hi;
-    uint64_t lo;
-    diff3(p1, p0, ia);
-    diff3(p2, p0, ib);
-    diff3(p3, p0, ic);
-    cross_i128(ia, ib, n);
-    dot_parts(ic, n, &hi, &lo);
-    big_from_parts(out, hi, lo);
-    return 0;
+    int64_t a[3], b[3], u[3];
+    diff3(p1, p0, a);
+    diff3(p2, p0, b);
+    diff3(p3, p0, u);
+    Cross x;
+    cross_init(&x, a, b);
+    return cross_big(&x, u, out);
 }
 
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2) {
@@ -97,17 +69,10 @@ void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a
     diff3(a1, b, ia);
     diff3(a2, b, ic);
     for (int k = 0; k < 3; k++) pl->b[k] = b[k];
-    double ax = (double)ia[0], ay = (double)ia[1], az = (double)ia[2];
-    double cx = (double)ic[0], cy = (double)ic[1], cz = (double)ic[2];
-    double m0 = ay * cz, m1 = az * cy, m2 = az * cx, m3 = ax * cz, m4 = ax * cy, m5 = ay * cx;
-    pl->n[0] = m0 - m1;
-    pl->n[1] = m2 - m3;
-    pl->n[2] = m4 - m5;
-    pl->p[0] = fabs_(m0) + fabs_(m1);
-    pl->p[1] = fabs_(m2) + fabs_(m3);
-    pl->p[2] = fabs_(m4) + fabs_(m5);
-    cross_i128(ia, ic, pl->N);
-    pl->flat = pl->N[0] == 0 && pl->N[1] == 0 && pl->N[2] == 0;
+    cross_init(&pl->x, ia, ic);
+    cross_exact(&pl->x);
+    const i128 *n = pl->x.N;
+    pl->flat = n[0] == 0 && n[1] == 0 && n[2] == 0;
 }
 
 int dot_sign(const int64_t *u, const i128 *n) {
@@ -122,14 +87,19 @@ void cross_exact(Cross *x) {
     x->exact_ready = 1;
 }
 
-int plane_big(const Plane *pl, const int64_t *x, big *out) {
-    int64_t ic[3];
+int cross_big(Cross *x, const int64_t *u, big *out) {
     i128 hi;
     uint64_t lo;
-    diff3(x, pl->b, ic);
-    dot_parts(ic, pl->N, &hi, &lo);
+    if (!x->exact_ready) cross_exact(x);
+    dot_parts(u, x->N, &hi, &lo);
     big_from_parts(out, hi, lo);
     return 0;
+}
+
+int plane_big(Plane *pl, const int64_t *x, big *out) {
+    int64_t u[3];
+    diff3(x, pl->b, u);
+    return cross_big(&pl->x, u, out);
 }
 
 /* Round a float value known to lie within err of the exact one; 0 when it cannot decide. */

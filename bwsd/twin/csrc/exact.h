@@ -38,22 +38,22 @@ typedef struct {
     int filtered;
 } Sgn;
 
-/* The plane of a sweep triangle (b, a1, a2): float normal with its permanent, exact normal. */
-typedef struct {
-    int64_t b[3];
-    double n[3], p[3];
-    i128 N[3];
-    int flat; /* the exact normal is zero: every point lies on it */
-} Plane;
-
 /* The cross product a x c of two exact vectors, to take u . (a x c) = det[u, a, c] for many
- * u: float minors with their permanents, the exact product when first needed. */
+ * u: float minors with their permanents, the exact product when first needed. Every
+ * orientation of the kernel is one such determinant. */
 typedef struct {
     int64_t a[3], c[3];
     double m[6];
     i128 N[3];
     int exact_ready;
 } Cross;
+
+/* The plane of a sweep triangle (b, a1, a2): sides are u . ((a1 - b) x (a2 - b)), u = x - b. */
+typedef struct {
+    int64_t b[3];
+    Cross x;
+    int flat; /* the exact normal is zero: every point lies on it */
+} Plane;
 
 /* The yarn diameter in grid units: num / den exactly, f as a float. */
 typedef struct {
@@ -70,7 +70,7 @@ void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const i
 int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                big *out);
 void plane_init(Plane *pl, const int64_t *b, const int64_t *a1, const int64_t *a2);
-int plane_big(const Plane *pl, const int64_t *x, big *out);
+int plane_big(Plane *pl, const int64_t *x, big *out);
 
 /* round(p + A / (A + B) * (q - p)) per coordinate, A = |a|, B = |b| (a, b nonzero, or
  * one of them zero); exact values are recomputed by the callbacks only when needed. */
@@ -90,6 +90,7 @@ int round_ratio(const big *num, const big *den, int64_t *out);
 
 int dot_sign(const int64_t *u, const i128 *n); /* the exact sign of u . n */
 void cross_exact(Cross *x);                    /* the exact a x c */
+int cross_big(Cross *x, const int64_t *u, big *out); /* the exact u . (a x c) */
 
 static inline void cross_init(Cross *x, const int64_t *a, const int64_t *c) {
     double af[3] = {(double)a[0], (double)a[1], (double)a[2]};
@@ -107,7 +108,8 @@ static inline void cross_init(Cross *x, const int64_t *a, const int64_t *c) {
     x->exact_ready = 0;
 }
 
-/* u . (a x c): the form of det_float (minors of a and c, dotted with u), same bound */
+/* u . (a x c): the minors of a and c dotted with u, summed left to right; the sign from the
+ * float value where it exceeds the bound, else exactly. */
 static inline void cross_side(Cross *x, const int64_t *u, Sgn *out) {
     const double *m = x->m;
     double u0 = (double)u[0], u1 = (double)u[1], u2 = (double)u[2];
@@ -126,21 +128,10 @@ static inline void cross_side(Cross *x, const int64_t *u, Sgn *out) {
     out->filtered = 0;
 }
 
-/* The side of x: the sign of det[a1 - b, a2 - b, x - b] (same float form as orient_sgn). */
-static inline void plane_side(const Plane *pl, const int64_t *x, Sgn *out) {
-    int64_t ic[3] = {x[0] - pl->b[0], x[1] - pl->b[1], x[2] - pl->b[2]};
-    double cx = (double)ic[0], cy = (double)ic[1], cz = (double)ic[2];
-    double det = cx * pl->n[0] + cy * pl->n[1] + cz * pl->n[2];
-    double perm = fabs(cx) * pl->p[0] + fabs(cy) * pl->p[1] + fabs(cz) * pl->p[2];
-    out->v = det;
-    out->e = ERRBOUND * perm;
-    if (!exact_only && (det > out->e || -det > out->e)) {
-        out->s = det > 0 ? 1 : -1;
-        out->filtered = 1;
-        return;
-    }
-    out->s = dot_sign(ic, pl->N);
-    out->filtered = 0;
+/* The side of x: the sign of det[a1 - b, a2 - b, x - b]. */
+static inline void plane_side(Plane *pl, const int64_t *x, Sgn *out) {
+    int64_t u[3] = {x[0] - pl->b[0], x[1] - pl->b[1], x[2] - pl->b[2]};
+    cross_side(&pl->x, u, out);
 }
 
 #endif

@@ -32,7 +32,7 @@ typedef struct {
 } Search;
 
 typedef struct {
-    const Plane *pl;
+    Plane *pl;
     const int64_t *b, *a1, *a2, *c, *d;
 } Exact;
 
