@@ -17,6 +17,15 @@ WORKED_CYCLE: list[Instruction] = [
     Shift("col", ((0, -1), (1, 1))),
 ]
 
+# The 8-carrier 4-step braid (2x2 body) on a 4x4 machine: its fill and the four steps.
+BRAID_FILL = [(0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2), (2, 3), (3, 2)]
+BRAID_CYCLE: list[Instruction] = [
+    Shift("row", ((1, 1), (2, -1))),
+    Shift("col", ((1, 1), (2, -1))),
+    Shift("row", ((1, -1), (2, 1))),
+    Shift("col", ((1, -1), (2, 1))),
+]
+
 
 def run_both(machine: Machine, fill, diameter: float, instructions) -> tuple[Twin, RefTwin]:
     twin = Twin(machine, fill, diameter)

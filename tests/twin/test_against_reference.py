@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from bwsd.errors import ShedClosedError
 from bwsd.twin import Machine, Shift, TakeUp, Weft
-from tests.twin.conftest import assert_same, run_both
+from tests.twin.conftest import BRAID_CYCLE, BRAID_FILL, assert_same, run_both
 from tests.twin.reference import ShedClosed
 
 SETTINGS = settings(
@@ -143,15 +143,6 @@ def test_kernel_and_reference_agree_on_a_dense_twist():
     assert len(ref.contacts) > 10
     assert_same(twin, ref)
     assert np.isfinite(twin.skeleton().yarns[0].nodes).all()
-
-
-BRAID_FILL = [(0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2), (2, 3), (3, 2)]
-BRAID_CYCLE = [
-    Shift("row", ((1, 1), (2, -1))),
-    Shift("col", ((1, 1), (2, -1))),
-    Shift("row", ((1, -1), (2, 1))),
-    Shift("col", ((1, -1), (2, 1))),
-]
 
 
 @st.composite

@@ -13,6 +13,8 @@ import pytest
 
 from bwsd.twin.instructions import Shift, TakeUp, Weft
 from bwsd.twin.machine import Machine
+from tests.twin.conftest import BRAID_CYCLE as BRAID_SHIFTS
+from tests.twin.conftest import BRAID_FILL
 from tests.twin.reference import (
     LIMIT,
     SCALE,
@@ -429,14 +431,7 @@ def test_worked_example_first_contact_in_detail():
 
 
 BRAID = Machine(rows=4, cols=4, pitch_x=10, pitch_y=10, d_mat=150, c_mat=0.4)
-BRAID_FILL = [(0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2), (2, 3), (3, 2)]
-BRAID_CYCLE = [
-    Shift("row", ((1, 1), (2, -1))),
-    Shift("col", ((1, 1), (2, -1))),
-    Shift("row", ((1, -1), (2, 1))),
-    Shift("col", ((1, -1), (2, 1))),
-    TakeUp(3.0),
-]
+BRAID_CYCLE = [*BRAID_SHIFTS, TakeUp(3.0)]
 
 
 def test_braid_of_eight_carriers_is_deterministic_and_consistent():
