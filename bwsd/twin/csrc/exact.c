@@ -42,25 +42,29 @@ static inline void diff3(const int64_t *p, const int64_t *o, int64_t *out) {
     out[2] = p[2] - o[2];
 }
 
-void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
-                Sgn *out) {
-    int64_t a[3], b[3], u[3];
+/* det[p1 - p0, p2 - p0, p3 - p0] as u . (a x b): a, b, u the differences */
+static void orient_setup(const int64_t *p0, const int64_t *p1, const int64_t *p2,
+                         const int64_t *p3, Cross *x, int64_t *u) {
+    int64_t a[3], b[3];
     diff3(p1, p0, a);
     diff3(p2, p0, b);
     diff3(p3, p0, u);
+    cross_init(x, a, b);
+}
+
+void orient_sgn(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
+                Sgn *out) {
     Cross x;
-    cross_init(&x, a, b);
+    int64_t u[3];
+    orient_setup(p0, p1, p2, p3, &x, u);
     cross_side(&x, u, out);
 }
 
 int orient_big(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
                big *out) {
-    int64_t a[3], b[3], u[3];
-    diff3(p1, p0, a);
-    diff3(p2, p0, b);
-    diff3(p3, p0, u);
     Cross x;
-    cross_init(&x, a, b);
+    int64_t u[3];
+    orient_setup(p0, p1, p2, p3, &x, u);
     return cross_big(&x, u, out);
 }
 
