@@ -296,13 +296,18 @@ static PyObject *Kernel_counts(Kernel *k, PyObject *noargs) {
     return Py_BuildValue("(iiiLL)", s->nn, s->ny, s->nw, (long long)s->nc, (long long)s->gz);
 }
 
+/* A copy of one of the state's arrays, taken while no other caller is inside. */
+static PyObject *array_copy(Kernel *k, const void *p, size_t n) {
+    if (enter(k)) return NULL;
+    PyObject *b = bytes_of(p, n);
+    k->busy = 0;
+    return b;
+}
+
 /* positions(): int64 x, y, z of every node */
 static PyObject *Kernel_positions(Kernel *k, PyObject *noargs) {
     (void)noargs;
-    if (enter(k)) return NULL;
-    PyObject *b = bytes_of(k->s.pos, sizeof(int64_t) * 3 * (size_t)k->s.nn);
-    k->busy = 0;
-    return b;
+    return array_copy(k, k->s.pos, sizeof(int64_t) * 3 * (size_t)k->s.nn);
 }
 
 /* points(ids): int64 x, y, z of the given node ids (int32 bytes) */
@@ -360,12 +365,10 @@ static PyObject *Kernel_chains(Kernel *k, PyObject *args) {
     return res;
 }
 
+/* contacts(): int32 (instruction, moving yarn, X, hit yarn, Y) per contact */
 static PyObject *Kernel_contacts(Kernel *k, PyObject *noargs) {
     (void)noargs;
-    if (enter(k)) return NULL;
-    PyObject *b = bytes_of(k->s.contacts, sizeof(int32_t) * 5 * (size_t)k->s.nc);
-    k->busy = 0;
-    return b;
+    return array_copy(k, k->s.contacts, sizeof(int32_t) * 5 * (size_t)k->s.nc);
 }
 
 /* warps(): int32 (row, col, free node, last fixed node) per warp, and the occupancy */
