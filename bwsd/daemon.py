@@ -1,21 +1,22 @@
 """`bwsd serve`: the daemon. Journal, bus, controller, REST/WebSocket API, PLC tags, systemd.
 
 Start-up is in phases: the config is validated before anything opens; the journal opens
-(refusing a second daemon on the same file); the bus connects (an unreachable loom is
-reported, not fatal: the daemon serves its state and retries on the next command); the
-controller rebuilds the twin from the journal; then the API and the PLC tags listen and
-systemd hears READY=1. SIGTERM holds a running program after its current instruction, so
-a restart resumes it with Unhold.
+(refusing a second daemon on the same file) and is checked; the controller holds a program
+the journal says was active and rebuilds its twin in the background (from the last
+snapshot); the API and the PLC tags listen at once, so the daemon answers (in a recovering
+state) within a second of start; systemd hears READY=1. The bus is connected and the
+machine read by the controller's watch task, which retries until the loom answers. SIGTERM
+holds a running program after its current instruction, so a restart resumes it with Unhold.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import os
 import signal
 import socket
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,16 +27,13 @@ import uvicorn
 from bwsd.config import Config
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
-from bwsd.controller.runner import Controller
+from bwsd.controller.runner import Controller, Settings
 from bwsd.errors import ConfigError
-from bwsd.fieldbus import FieldbusError, open_bus
+from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.notify import notify, watchdog_interval
 
 log = logging.getLogger("bwsd")
-# The twin predicts in a worker thread; a short interpreter switch interval lets the event
-# loop (HTTP, WebSocket, bus) take the interpreter lock back sooner (default 5 ms).
-SWITCH_INTERVAL = 0.0005
 
 
 @dataclass
@@ -60,31 +58,29 @@ def state_folder(override: str | None = None) -> Path:
 
 async def start(config: Config, state_dir: Path) -> Daemon:
     """Open everything and start listening; the caller stops it with ``stop``."""
-    sys.setswitchinterval(SWITCH_INTERVAL)
     journal = Journal.open(state_dir / config.table("journal")["path"])
+    try:
+        await asyncio.to_thread(journal.check)
+    except BaseException:
+        journal.close()
+        raise
     bus = open_bus(config)
-    try:
-        await bus.connect()
-    except FieldbusError as exc:
-        log.warning("bus not reachable at start: %s", exc)
-    limits = Limits(**config.table("controller"))
-    controller = Controller(config.machine, bus, journal, limits)
+    table = config.table("controller")
+    limits = Limits(table["max_contacts"], table["tensioner_stroke"])
+    settings = Settings(table["max_instructions"], table["snapshot_every"])
+    controller = Controller(config.machine, bus, journal, limits, settings=settings)
     daemon = Daemon(config, state_dir, controller, journal)
-    log.info("%s", await _recover(controller))
     try:
+        log.info("%s", controller.begin_recovery())
         await _serve_api(daemon)
         await _serve_plc(daemon)
+        watch = asyncio.create_task(controller.watch(), name="bwsd-watch")
+        daemon._tasks.append(watch)
+        daemon._closers.append(watch.cancel)
     except BaseException:
         await stop(daemon)  # what did start is closed again
         raise
     return daemon
-
-
-async def _recover(controller: Controller) -> str:
-    try:
-        return await controller.recover()
-    except FieldbusError as exc:
-        return f"recovery waits for the bus: {exc}"
 
 
 async def _serve_api(daemon: Daemon) -> None:
@@ -138,7 +134,9 @@ async def stop(daemon: Daemon) -> None:
         if asyncio.iscoroutine(result):
             await result
     for task in daemon._tasks:
-        await task
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    await ctl.close()
     await ctl.bus.close()
     daemon.journal.close()
 

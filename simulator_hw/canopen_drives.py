@@ -288,7 +288,7 @@ class CanopenLoom:
 
     def _io_read(self, index: int, subindex: int, od: ODVariable) -> bytes | int | None:
         if index == OCCUPANCY:
-            return self.call(lambda: occupancy_bytes(self.loom.occupied))
+            return self.call(lambda: occupancy_bytes(self.loom.sensed()))
         if index == ESTOP:
             return self.call(lambda: int(self.loom.estop))
         return None

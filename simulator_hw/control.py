@@ -6,6 +6,8 @@ One JSON object a line in, one a line out. Requests (``axis`` is an axis name su
 - ``{"cmd": "fault", "kind": "stall" | "wrong_position" | "drive", "axis": NAME}``
 - ``{"cmd": "fault", "kind": "mute"}``: the buses stop answering
 - ``{"cmd": "fault", "kind": "drop"}``: the buses drop every connection (once)
+- ``{"cmd": "fault", "kind": "sensor", "cell": [ROW, COL]}``: that occupancy sensor reads the
+  opposite of the truth (a dirty or broken sensor)
 - ``{"cmd": "estop", "pressed": true | false}``
 - ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
 - ``{"cmd": "state"}``: occupancy, e-stop, and each axis's position, busy flag and fault
@@ -44,6 +46,7 @@ def handle(loom: Loom, request: Any) -> dict[str, Any]:
         faults.stall.clear()
         faults.wrong_position.clear()
         faults.drive.clear()
+        faults.sensors.clear()
         return {"ok": True}
     if cmd == "state":
         return {"ok": True, **state(loom)}
@@ -58,14 +61,27 @@ def _fault(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:
     if kind == "drop":
         loom.faults.drops += 1
         return {"ok": True}
+    if kind == "sensor":
+        return _sensor(loom, request.get("cell"))
     if kind not in AXIS_FAULTS:
         return {"ok": False, "error": f"unknown fault kind {kind!r} ({', '.join(AXIS_FAULTS)}, "
-                "mute, drop)"}  # fmt: skip
+                "mute, drop, sensor)"}  # fmt: skip
     names = {sim.axis.name for sim in loom.axes}
     axis = request.get("axis")
     if axis not in names:
         return {"ok": False, "error": f"unknown axis {axis!r}"}
     getattr(loom.faults, kind).add(axis)
+    return {"ok": True}
+
+
+def _sensor(loom: Loom, cell: Any) -> dict[str, Any]:
+    m = loom.machine
+    if (not isinstance(cell, list) or len(cell) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in cell)
+            or not (0 <= cell[0] < m.rows and 0 <= cell[1] < m.cols)):  # fmt: skip
+        return {"ok": False, "error": f'"cell" must be [row, col] inside the {m.rows}x{m.cols} '
+                "matrix"}  # fmt: skip
+    loom.faults.sensors.add((cell[0], cell[1]))
     return {"ok": True}
 
 

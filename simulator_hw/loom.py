@@ -59,6 +59,7 @@ class Faults:
     stall: set[str] = field(default_factory=set)  # axes that stop mid-stroke
     wrong_position: set[str] = field(default_factory=set)  # axes that end off target
     drive: set[str] = field(default_factory=set)  # axes whose drive faults on the next command
+    sensors: set[tuple[int, int]] = field(default_factory=set)  # cells whose sensor reads wrong
 
 
 class Loom:
@@ -94,6 +95,15 @@ class Loom:
         else:
             sim.legs = [(now, sim.position, target)]
         self.tick(now)
+
+    def sensor(self, row: int, col: int) -> bool:
+        """What the occupancy sensor of a cell reports (inverted where a sensor fault is)."""
+        return self.occupied[row][col] != ((row, col) in self.faults.sensors)
+
+    def sensed(self) -> list[list[bool]]:
+        """Every occupancy sensor, row by row."""
+        return [[self.sensor(r, c) for c in range(self.machine.cols)]
+                for r in range(self.machine.rows)]  # fmt: skip
 
     def quick_stop(self, now: float) -> None:
         """Stop every axis where it is; moving axes are left faulted (stall)."""

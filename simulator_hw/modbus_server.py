@@ -77,7 +77,7 @@ def input_words(loom: Loom, first: int, count: int) -> list[int]:
     cols, cells = loom.machine.cols, loom.machine.rows * loom.machine.cols
 
     def bit(i: int) -> bool:
-        return loom.occupied[i // cols][i % cols] if i < cells else i == cells and loom.estop
+        return loom.sensor(i // cols, i % cols) if i < cells else i == cells and loom.estop
 
     return [
         sum(1 << j for j in range(16) if bit(16 * word + j)) for word in range(first, first + count)

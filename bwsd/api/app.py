@@ -29,7 +29,7 @@ from .events import QUEUE_SIZE, EventHub, Subscriber
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer
 from .models import MAX_BODY_BYTES, Error, Health
 from .problems import ApiError, error_body
-from .view import HealthTracker, SkeletonView
+from .view import SkeletonView
 
 PREFIX = "/api/v1"
 DESCRIPTION = """Control and state of a braiding-weaving machine (see docs/api.md).
@@ -45,12 +45,12 @@ def create_app(
 ) -> FastAPI:  # fmt: skip
     """The API of ``controller`` and the page at ``/`` (from ``web_root``).
 
-    Installs a forwarder behind ``controller.publish``.
+    Subscribes to the controller's event stream (until the app's lifespan ends).
     """
     metrics = Metrics(controller)
     hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
     metrics.clients.set_function(lambda: float(hub.clients))
-    ctx = Context(controller, SkeletonView(controller), HealthTracker(), metrics, hub)
+    ctx = Context(controller, SkeletonView(controller), metrics, hub)
     app = FastAPI(title="bwsd", version=__version__, description=DESCRIPTION,
                   lifespan=_lifespan(ctx))  # fmt: skip
     app.state.ctx = ctx

@@ -2,28 +2,25 @@
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Iterable
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import Depends
 
-from bwsd.controller.packml import WAITING, Command, InvalidCommand, PackML, State
-from bwsd.controller.plan import Limits, RefusedMove, check_limits
-from bwsd.controller.runner import ControllerError
-from bwsd.errors import TwinError
-from bwsd.fieldbus import FieldbusError
+from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
+from bwsd.controller.runner import Controller, ControllerError
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
-from bwsd.twin import Machine, Prediction, Program, replay
+from bwsd.twin import Prediction
 
-from .auth import require
+from .auth import Principal, require
 from .context import Ctx
 from .models import (
     AUTH_ERRORS,
     BODY_ERRORS,
     INVALID,
     AxisOut,
+    BusHealth,
     CommandErrorOut,
     CommandIn,
     CommandName,
@@ -33,6 +30,8 @@ from .models import (
     FreeNodeOut,
     LengthOut,
     MachineOut,
+    ModeIn,
+    ModeOut,
     NextOut,
     NodeOut,
     PreviewOut,
@@ -40,12 +39,12 @@ from .models import (
 )
 from .problems import ApiError, describe
 from .routing import RouteTable
-from .view import instruction_dict, next_step
+from .view import instruction_dict, wire_step
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]
 WRITE = [Depends(require("operator"))]
-_RUNS = frozenset({Command.START, Command.UNHOLD, Command.UNSUSPEND})
+Operator = Annotated[Principal, Depends(require("operator"))]
 
 
 def _next_out(step: dict[str, Any] | None) -> NextOut | None:
@@ -58,25 +57,32 @@ def command_names(commands: Iterable[Command]) -> list[str]:
 
 @router.get("/state", response_model=StateOut, dependencies=READ, responses=AUTH_ERRORS)
 async def get_state(ctx: Ctx) -> StateOut:
-    """PackML state and mode, the loaded program and how far it is, the bus's health."""
-    ctl = ctx.controller
-    name = await ctx.program_name(ctl.program_id)
-    name = await ctx.program_name(ctl.program_id)  # the same, unless a load came meanwhile
-    pk, program = ctl.packml, ctl.program
+    """PackML state and mode, the loaded program and how far it is, the machine as last read."""
+    st = ctx.controller.status()
+    bus = st.bus
     return StateOut(
-        state=int(pk.state),
-        name=pk.state.label,
-        mode=int(pk.mode),
-        mode_name=pk.mode.label,
-        program_id=ctl.program_id,
-        program_name=name,
-        index=ctl.index,
-        count=len(program.instructions) if program is not None else 0,
-        reason=pk.reason,
-        allowed=command_names(pk.allowed()),
-        bus=ctx.health.out(),
+        state=int(st.state),
+        name=st.state.label,
+        mode=int(st.mode),
+        mode_name=st.mode.label,
+        program_id=st.program_id,
+        program_name=st.program_name,
+        index=st.index,
+        count=st.count,
+        reason=st.reason,
+        stop_cause=st.stop_cause.label,
+        allowed=command_names(st.allowed),
+        recovering=st.recovering,
+        bus=BusHealth(
+            connected=bus.connected,
+            last_error=bus.last_error,
+            checked=bus.checked,
+            estop=bus.estop,
+            faulted=list(bus.faulted),
+            differs=list(bus.differs),
+        ),
         last_fault=ctx.last_fault,
-        next=_next_out(next_step(ctl)),
+        next=_next_out(wire_step(st.next)),
     )
 
 
@@ -84,13 +90,12 @@ async def get_state(ctx: Ctx) -> StateOut:
             responses={**AUTH_ERRORS, 503: {"model": Error}})  # fmt: skip
 async def get_machine(ctx: Ctx) -> MachineOut:
     """The axes, occupancy sensors and e-stop as the bus reports them now."""
-    bus = ctx.controller.bus
+    ctl = ctx.controller
+    bus = ctl.bus
     try:
-        state = await bus.state()
-    except FieldbusError as exc:
-        ctx.health.failed(exc)
-        raise ApiError(503, f"the bus cannot be read: {exc}") from None
-    ctx.health.ok()
+        state = await ctl.read_machine()
+    except ControllerError as exc:
+        raise ApiError(503, str(exc)) from None
     axes = [
         AxisOut(
             index=axis.index,
@@ -112,65 +117,60 @@ async def get_machine(ctx: Ctx) -> MachineOut:
     )
 
 
-@router.post("/commands/{name}", response_model=CommandOut, dependencies=WRITE,
+@router.post("/commands/{name}", response_model=CommandOut,
              responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS,
                         409: {"model": CommandErrorOut}})  # fmt: skip
-async def post_command(name: CommandName, ctx: Ctx, body: CommandIn | None = None) -> CommandOut:
+async def post_command(name: CommandName, ctx: Ctx, who: Operator,
+                       body: CommandIn | None = None) -> CommandOut:  # fmt: skip
     """Send a PackML command; answers once the acting state it enters has done its work."""
     ctl = ctx.controller
     command = Command[name.upper()]
-    if command in _RUNS and ctl.packml.state in WAITING:
-        await ctx.view.current()  # a fresh copy, so the run's first event is a small delta
     try:
-        await ctl.command(command, body.reason if body is not None else "")
+        await ctl.command(command, body.reason if body is not None else "", who.name)
     except InvalidCommand as exc:
-        raise _refused(str(exc), exc.state, exc.allowed) from None
+        raise _refused(str(exc), exc.state, ctl.allowed()) from None
     except (ControllerError, JournalError) as exc:
-        raise _refused(describe(exc), ctl.packml.state, ctl.packml.allowed()) from None
-    return _command_out(ctl.packml)
+        raise _refused(describe(exc), ctl.packml.state, ctl.allowed()) from None
+    return _command_out(ctl)
+
+
+@router.put("/mode", response_model=ModeOut,
+            responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS, 409: {"model": Error}})  # fmt: skip
+async def put_mode(body: ModeIn, ctx: Ctx, who: Operator) -> ModeOut:
+    """Change the unit mode (PackML allows it in Stopped, Idle and Aborted)."""
+    ctl = ctx.controller
+    try:
+        await ctl.set_mode(UnitMode[body.mode.upper()], who.name)
+    except PackMLError as exc:
+        raise ApiError(409, str(exc)) from None
+    return ModeOut(mode=int(ctl.packml.mode), mode_name=ctl.packml.mode.label)
 
 
 def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError:
     return ApiError(409, message, state=state.label, allowed=command_names(allowed))
 
 
-def _command_out(pk: PackML) -> CommandOut:
+def _command_out(ctl: Controller) -> CommandOut:
+    pk = ctl.packml
     return CommandOut(state=int(pk.state), name=pk.state.label, reason=pk.reason,
-                      allowed=command_names(pk.allowed()))  # fmt: skip
+                      allowed=command_names(ctl.allowed()))  # fmt: skip
 
 
 @router.post("/preview", response_model=PreviewOut, dependencies=WRITE,
              responses={**AUTH_ERRORS, 409: {"model": Error}})  # fmt: skip
 async def post_preview(ctx: Ctx) -> PreviewOut:
-    """Dry-run the next instruction on a copy of the twin (the controller's is not touched)."""
-    ctl = ctx.controller
-    program, twin = ctl.program, ctl.twin
-    if program is None or twin is None:
-        raise ApiError(409, "no program is loaded")
-    done = twin.done
-    if done >= len(program.instructions):
-        raise ApiError(409, f"all {len(program.instructions)} instructions are done")
-    return await asyncio.to_thread(preview, ctl.machine, program, done, ctl.limits)
-
-
-def preview(machine: Machine, program: Program, done: int, limits: Limits) -> PreviewOut:
-    """Instruction ``done + 1`` predicted on a twin replayed aside, checked against ``limits``."""
-    instruction = program.instructions[done]
-    line = program.lines[done] if done < len(program.lines) else 0
-    twin = replay(machine, program, done)
+    """Predict the next instruction on the twin without committing it (nothing changes)."""
     try:
-        pred = twin.predict(instruction)
-    except TwinError as exc:
-        return PreviewOut(index=done + 1, line=line, instruction=instruction_dict(instruction),
-                          refused=str(exc), contacts=[], inserted=[], free_nodes=[],
-                          occupancy=twin.occupancy.tolist(), takeup=twin.takeup, new_yarns=[],
+        found = await ctx.controller.preview()
+    except ControllerError as exc:
+        raise ApiError(409, str(exc)) from None
+    if found.prediction is None:
+        return PreviewOut(index=found.index, line=found.line,
+                          instruction=instruction_dict(found.instruction), refused=found.refused,
+                          contacts=[], inserted=[], free_nodes=[],
+                          occupancy=found.occupancy.tolist(), takeup=found.takeup, new_yarns=[],
                           length_change=[])  # fmt: skip
-    try:
-        check_limits(pred, limits)
-        refused = None
-    except RefusedMove as exc:
-        refused = str(exc)
-    return _preview_out(pred, line, refused)
+    return _preview_out(found.prediction, found.line, found.refused)
 
 
 def _preview_out(pred: Prediction, line: int, refused: str | None) -> PreviewOut:

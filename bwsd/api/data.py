@@ -5,23 +5,25 @@ from __future__ import annotations
 import asyncio
 import shutil
 import tempfile
+import threading
+from collections.abc import Awaitable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, TypeVar
 
-from fastapi import Depends, Query
+from fastapi import Depends, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse, Response
 from starlette.background import BackgroundTask
 
-from bwsd.controller.runner import ControllerError
+from bwsd.controller.runner import Busy, ControllerError
 from bwsd.errors import ProgramError, TwinError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program_with_positions, validate
 from bwsd.twin import Machine
 
-from .auth import require
+from .auth import Principal, require
 from .context import Ctx
 from .models import (
     AUTH_ERRORS,
@@ -43,7 +45,8 @@ from .routing import RouteTable
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]
-WRITE = [Depends(require("operator"))]
+Operator = Annotated[Principal, Depends(require("operator"))]
+T = TypeVar("T")
 MAX_ID = 2**62  # ids are SQLite integers; keeps ``id + 1`` in range
 Limit = Annotated[int, Query(ge=1, le=1000)]
 After = Annotated[int, Query(ge=0, le=MAX_ID)]
@@ -51,43 +54,66 @@ MEDIA = {"tg3": "application/xml", "vtp": "application/xml"}
 SKELETON_CONTENT: dict[str, dict[str, str]] = {"application/json": {}, "application/xml": {}}
 
 
-@router.post("/programs", status_code=201, response_model=LoadedOut, dependencies=WRITE,
+@router.post("/programs", status_code=201, response_model=LoadedOut,
              responses={200: {"model": LoadedOut, "description": "a dry run (nothing loaded)"},
                         **AUTH_ERRORS, **BODY_ERRORS, 409: {"model": Error},
-                        422: {"model": ProgramErrorOut | InvalidOut}})  # fmt: skip
+                        422: {"model": ProgramErrorOut | InvalidOut},
+                        429: {"model": Error}})  # fmt: skip
 async def post_program(
-    body: ProgramIn, ctx: Ctx, response: Response,
+    body: ProgramIn, ctx: Ctx, response: Response, request: Request, who: Operator,
     dry_run: Annotated[bool, Query(description="only check the program: load nothing")] = False,
 ) -> LoadedOut:  # fmt: skip
-    """Parse, validate and dry-run a program, and (unless ``dry_run``) make it the one to run."""
+    """Parse, validate and dry-run a program, and (unless ``dry_run``) make it the one to run.
+
+    The check runs off the event loop, one at a time (429 while another runs), and stops when
+    the client goes away.
+    """
     ctl = ctx.controller
+    cancel = threading.Event()
     try:
         if dry_run:
-            _, totals = await ctl.check(body.name, body.text)
+            _, totals = await _until_gone(request, cancel, ctl.check(body.name, body.text, cancel))
             pid = None
             response.status_code = 200
         else:
-            pid = await ctl.load(body.name, body.text)
-            ctx.remember(pid, body.name)
+            pid = await _until_gone(request, cancel,
+                                    ctl.load(body.name, body.text, who.name, cancel))  # fmt: skip
             assert ctl.dry_run is not None
             totals = ctl.dry_run
     except ProgramError as exc:
-        raise _program_error(_located(exc, body, ctl.machine)) from None
+        raise _program_error(await _located(exc, body, ctl.machine)) from None
+    except Busy as exc:
+        raise ApiError(429, str(exc), headers={"Retry-After": "1"}) from None
     except ControllerError as exc:
         if isinstance(exc.__cause__, TwinError):
-            raise _program_error(_refused_at(exc.__cause__, body)) from None
+            raise _program_error(await _refused_at(exc.__cause__, body)) from None
         raise ApiError(409, str(exc)) from None
     return LoadedOut(id=pid, name=body.name, **asdict(totals))
+
+
+async def _until_gone(request: Request, cancel: threading.Event, work: Awaitable[T]) -> T:
+    """Await ``work``; if the client disconnects meanwhile, set ``cancel`` (the check stops)."""
+    task = asyncio.ensure_future(work)
+    while True:
+        done, _ = await asyncio.wait({task}, timeout=0.25)
+        if done:
+            return task.result()
+        if await request.is_disconnected():
+            cancel.set()
 
 
 def _program_error(exc: ProgramError) -> ApiError:
     return ApiError(422, exc.reason, line=exc.line, column=exc.column)
 
 
-def _located(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramError:
-    """The same error with its column, when only the line was known."""
+async def _located(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramError:
+    """The same error with its column, when only the line was known (found off the loop)."""
     if exc.column or not exc.line:
         return exc
+    return await asyncio.to_thread(_locate, exc, body, machine)
+
+
+def _locate(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramError:
     try:
         program, positions = parse_program_with_positions(body.text, body.name)
         validate(program, machine, body.name, positions)
@@ -96,8 +122,12 @@ def _located(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramErr
     return exc
 
 
-def _refused_at(exc: TwinError, body: ProgramIn) -> ProgramError:
+async def _refused_at(exc: TwinError, body: ProgramIn) -> ProgramError:
     """A dry-run refusal as a program error at the refused instruction's keyword."""
+    return await asyncio.to_thread(_refusal_at, exc, body)
+
+
+def _refusal_at(exc: TwinError, body: ProgramIn) -> ProgramError:
     program, positions = parse_program_with_positions(body.text, body.name)
     i = exc.instruction - 1
     line = program.lines[i] if 0 <= i < len(program.lines) else 0

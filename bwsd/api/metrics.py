@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import time
-from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from bwsd.controller.runner import Controller
+from bwsd.controller.status import Event, Fault, InstructionDone
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 _METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
@@ -39,13 +39,12 @@ class Metrics:
             registry=r,
         )
 
-    def observe(self, event: dict[str, Any]) -> None:
+    def observe(self, event: Event) -> None:
         """Count one controller event."""
-        kind = event.get("event")
-        if kind == "instruction":
+        if isinstance(event, InstructionDone):
             self.instructions.inc()
-            self.contacts.inc(max(0, int(event.get("contacts", 0))))
-        elif kind == "fault":
+            self.contacts.inc(event.contacts)
+        elif isinstance(event, Fault):
             self.faults.inc()
 
     def render(self) -> bytes:

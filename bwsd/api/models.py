@@ -41,12 +41,20 @@ class CommandErrorOut(Error):
     allowed: list[str]
 
 
+ModeName = Literal["production", "maintenance", "manual"]
+
+
 class BusHealth(BaseModel):
-    """What the daemon last saw of the actuator bus (None: not seen yet)."""
+    """What the daemon last saw of the machine over the bus (None: not seen yet)."""
 
     connected: bool | None = None
-    last_error: str | None = None
+    last_error: str | None = Field(None, description="the last failure; cleared by a good read")
     checked: float | None = Field(None, description="Unix time of the last observation")
+    estop: bool | None = Field(None, description="the emergency stop is pressed")
+    faulted: list[str] = Field([], description="axes reporting a fault")
+    differs: list[tuple[int, int]] = Field(
+        [], description="cells where the occupancy sensors differ from the twin (at rest)"
+    )
 
 
 class NextOut(BaseModel):
@@ -66,8 +74,11 @@ class StateOut(BaseModel):
     program_name: str | None
     index: int = Field(description="instructions done of the loaded program")
     count: int = Field(description="instructions in the loaded program")
-    reason: str = Field(description="why the machine last stopped, held or aborted")
-    allowed: list[str] = Field(description="the commands accepted now")
+    reason: str = Field(description="why the machine stopped, held, suspended or aborted")
+    stop_cause: str = Field(description="the cause of the last stop: none, refused_move, "
+                            "drive_fault, estop, bus, mismatch, operator, restart, internal")
+    allowed: list[str] = Field(description="exactly the commands that will be accepted now")
+    recovering: str = Field(description="why commands wait after a restart ('' if they do not)")
     bus: BusHealth
     last_fault: str | None = Field(description="the controller's last fault report, if any")
     next: NextOut | None = Field(description="the instruction to run next; null if none")
@@ -128,6 +139,15 @@ class ProgramDetailOut(ProgramOut):
 
 class CommandIn(BaseModel):
     reason: str = Field("", max_length=MAX_REASON_CHARS)
+
+
+class ModeIn(BaseModel):
+    mode: ModeName
+
+
+class ModeOut(BaseModel):
+    mode: int
+    mode_name: str
 
 
 class CommandOut(BaseModel):

@@ -14,7 +14,7 @@ Register = Callable[[Endpoint], Endpoint]
 
 @dataclass
 class RouteTable:
-    """Collects ``@table.get(path, ...)`` and ``@table.post(path, ...)`` for ``install``."""
+    """Collects ``@table.get(path, ...)``, ``.post`` and ``.put`` for ``install``."""
 
     routes: list[tuple[str, str, Endpoint, dict[str, Any]]] = field(default_factory=list)
 
@@ -23,6 +23,9 @@ class RouteTable:
 
     def post(self, path: str, **options: Any) -> Register:
         return self._add("POST", path, options)
+
+    def put(self, path: str, **options: Any) -> Register:
+        return self._add("PUT", path, options)
 
     def _add(self, method: str, path: str, options: dict[str, Any]) -> Register:
         def register(endpoint: Endpoint) -> Endpoint:

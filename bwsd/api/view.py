@@ -1,32 +1,26 @@
 """What the API reads of the controller without ever racing its run loop.
 
-The run loop predicts in a worker thread, holding the twin's lock while the kernel runs, and
-a whole copy of the skeleton costs the size of the preform; so the API keeps its own copy. It
-takes a whole copy only when nothing else works on the twin (while the machine rests in a
-PackML waiting state, or when it has no copy yet), and otherwise keeps its copy in step by
-applying each instruction's delta, built from the instruction's prediction inside the
-controller's "instruction done" event. A delta costs what the instruction changed, never the
-size of the preform.
+A whole copy of the skeleton costs the size of the preform, so the API keeps its own copy.
+It takes a whole copy in a worker thread (the twin's readers hold its lock, so the copy is
+consistent even while the run loop predicts), and otherwise keeps it in step by applying
+each instruction's delta, built from the instruction's prediction inside the controller's
+"instruction done" event. A delta costs what the instruction changed, never the size of the
+preform, and is the only skeleton work done on the event loop.
 """
 
 from __future__ import annotations
 
 import asyncio
-import time
 from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 
-from bwsd.controller.packml import WAITING
 from bwsd.controller.runner import Controller
 from bwsd.export.skeleton_json import contact_to_dict, yarn_to_dict
-from bwsd.fieldbus import FieldbusConnectionError, FieldbusError, FieldbusTimeout
-from bwsd.twin import Prediction, SkeletonData, Twin, replay
+from bwsd.twin import Prediction, SkeletonData, Twin
 from bwsd.twin.instructions import Instruction
 from bwsd.twin.skeleton import ContactData, YarnData, index_from_end
-
-from .models import BusHealth
 
 
 class LiveSkeleton:
@@ -82,19 +76,16 @@ class LiveSkeleton:
 
 
 class SkeletonView:
-    """A read-only copy of the controller's skeleton."""
+    """A read-only copy of the controller's skeleton, kept in step by the instruction events.
+
+    A whole copy is taken in a worker thread (the twin's readers take its lock, so a copy is
+    consistent even while the run loop predicts); the event loop only applies deltas.
+    """
 
     def __init__(self, controller: Controller) -> None:
         self._ctl = controller
         self._twin: Twin | None = None
         self._live: LiveSkeleton | None = None
-
-    def refresh(self) -> SkeletonData | None:
-        """Copy the skeleton now: only where no prediction can be running (see module)."""
-        twin = self._ctl.twin
-        self._twin = twin
-        self._live = LiveSkeleton(twin.skeleton()) if twin is not None else None
-        return self._live.data() if self._live is not None else None
 
     async def current(self) -> SkeletonData | None:
         """The skeleton after the last instruction done; None when no program is loaded."""
@@ -102,21 +93,20 @@ class SkeletonView:
         if twin is None:
             return None
         live = self._live if self._twin is twin else None
-        if live is not None and live.instructions == twin.done:
-            return live.data()
-        if self._ctl.packml.state in WAITING:
-            return self.refresh()
-        if live is not None:
-            return live.data()  # a run is between "committed" and "done": the copy is one behind
-        program, done = self._ctl.program, twin.done
-        assert program is not None
-        aside = await asyncio.to_thread(replay, self._ctl.machine, program, done)
-        return aside.skeleton()
+        if live is not None and live.instructions >= twin.done - 1:
+            return live.data()  # one behind only between "committed" and its event
+        sk = await asyncio.to_thread(twin.skeleton)
+        live = self._live if self._twin is twin else None
+        if live is None or live.instructions < sk.instructions:
+            self._twin, self._live = twin, LiveSkeleton(sk)
+            return self._live.data()
+        return live.data()
 
     def after_instruction(self) -> dict[str, Any]:
         """The change the instruction just done made (called in its "instruction done" event).
 
-        The copy follows by the same delta, or is taken whole when it is not one behind.
+        The copy follows by the same delta; a copy not one behind is dropped (the next read
+        takes a whole one in a worker thread).
         """
         twin, pred = self._ctl.twin, self._ctl.last
         assert twin is not None and pred is not None and pred.index == twin.done
@@ -124,8 +114,8 @@ class SkeletonView:
         live = self._live if self._twin is twin else None
         if live is not None and live.instructions == delta["since"]:
             live.apply(delta)
-        else:
-            self.refresh()
+        elif live is None or live.instructions < twin.done:
+            self._live = None
         return delta
 
 
@@ -159,46 +149,12 @@ def instruction_dict(instruction: Instruction) -> dict[str, Any]:
     return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
 
 
-def next_step(controller: Controller) -> dict[str, Any] | None:
-    """The instruction the loaded program runs next, with its line; None when none is left."""
-    program, done = controller.program, controller.index
-    if program is None or done >= len(program.instructions):
+def wire_step(step: dict[str, Any] | None) -> dict[str, Any] | None:
+    """``Controller.next_step()`` as JSON: the instruction as a dict."""
+    if step is None:
         return None
-    line = program.lines[done] if done < len(program.lines) else 0
-    return {"index": done + 1, "line": line,
-            "instruction": instruction_dict(program.instructions[done])}  # fmt: skip
+    return {**step, "instruction": instruction_dict(step["instruction"])}
 
 
 def _xyz(xyz: Any) -> list[float]:
     return [float(v) for v in xyz]
-
-
-_LOST = frozenset({"FieldbusConnectionError", "FieldbusTimeout"})
-_ANSWERED = frozenset({"FieldbusError", "DriveFault", "EStopError"})  # the bus did answer
-
-
-class HealthTracker:
-    """What the API has seen of the bus: its own reads and the instructions done."""
-
-    def __init__(self) -> None:
-        self.connected: bool | None = None
-        self.last_error: str | None = None
-        self.checked: float | None = None
-
-    def ok(self) -> None:
-        self.connected, self.checked = True, time.time()
-
-    def failed(self, exc: FieldbusError) -> None:
-        lost = isinstance(exc, FieldbusConnectionError | FieldbusTimeout)
-        self.connected, self.last_error, self.checked = not lost, str(exc), time.time()
-
-    def fault(self, cause: str, reason: str) -> None:
-        """A fault the controller reported, by the name of its error class."""
-        if cause in _LOST:
-            self.connected, self.last_error, self.checked = False, reason, time.time()
-        elif cause in _ANSWERED:
-            self.connected, self.last_error, self.checked = True, reason, time.time()
-
-    def out(self) -> BusHealth:
-        return BusHealth(connected=self.connected, last_error=self.last_error,
-                         checked=self.checked)  # fmt: skip

@@ -115,8 +115,9 @@ _COMMANDS: dict[State, dict[Command, State]] = {
     State.ABORTED: {Command.CLEAR: State.CLEARING},
 }
 
-# Commands whose reason is kept in ``PackML.reason``.
-_REASONED = frozenset({Command.STOP, Command.ABORT, Command.HOLD})
+# Commands whose reason is kept in ``PackML.reason``; every other command clears it (what
+# stopped the machine is no longer true once it is reset, cleared or resumed).
+_REASONED = frozenset({Command.STOP, Command.ABORT, Command.HOLD, Command.SUSPEND})
 
 
 def _labels(items: Iterable[_Labelled]) -> str:
@@ -206,10 +207,7 @@ class PackML:
         target = transitions(self._state).get(command)
         if target is None:
             raise InvalidCommand(command, self._state)
-        if command in _REASONED:
-            self.reason = reason
-        elif command is Command.RESET:
-            self.reason = ""
+        self.reason = reason if command in _REASONED else ""
         cause = f"{command.label}: {reason}" if reason else command.label
         return self._enter(target, cause)
 

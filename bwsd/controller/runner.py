@@ -1,48 +1,91 @@
-"""The run loop: every instruction predicted, checked, journaled, moved, verified, committed.
+"""The controller: PackML commands, the loaded program, the twin, the run loop, recovery.
 
 One instruction (docs/packml.md, the project's DESIGN):
-1. the twin predicts it, off the event loop; a limit refuses it (Abort with the reason);
+1. the twin predicts it in a worker thread (the kernel runs without the interpreter lock);
+   the twin or a limit refuses it: Abort with the reason, nothing moved;
 2. the journal records "started" (on disk before anything moves);
 3. the bus moves the actuators and waits for them; a drive fault or the e-stop aborts,
-   a timeout or a lost connection holds;
-4. the read-back is compared with the prediction (a mismatch holds, nothing committed);
-5. the twin commits, the journal records "done", an event is published.
+   a timeout, a lost connection or a read-back mismatch holds;
+4. the twin commits, the journal records "done" (and every ``snapshot_every`` instructions
+   a snapshot of the twin), an ``InstructionDone`` event is published.
 
-On start ``recover`` rebuilds the twin from the journal: the done instructions are replayed;
-an instruction started and not done is completed if the machine shows its predicted result,
-and otherwise reported (Held, with the reason), never guessed.
+Every step ends as Done, Held(cause) or Aborted(cause); anything unexpected aborts with the
+error as the reason, logged, counted and published. Nothing runs before the machine has been
+read: Start, Unhold and Unsuspend refuse while the e-stop is pressed, an axis reports a fault
+or the occupancy sensors differ from the twin; Reset refuses while the e-stop is pressed.
+
+An instruction journaled as started and not done (after a fault hold or a restart) is
+settled from a fresh read-back (bwsd.controller.recovery) before the run resumes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
+import threading
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, replace
 from typing import Any
 
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
-from bwsd.errors import BwsdError, TwinError
+from bwsd.controller.recovery import Before, Settle, differing_cells, settle
+from bwsd.controller.status import (
+    BusChanged,
+    BusStatus,
+    EventStream,
+    Fault,
+    InstructionDone,
+    ModeChanged,
+    ProgramLoaded,
+    StateChanged,
+    StatusSnapshot,
+    StopCause,
+    cause_of,
+)
+from bwsd.errors import BwsdError, ProgramError, TwinError
 from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
-    BoolGrid,
     DriveFault,
     EStopError,
     Fieldbus,
+    FieldbusConnectionError,
     FieldbusError,
     MachineState,
 )
-from bwsd.journal import ABORTED, COMPLETE, FINAL, HELD, RUNNING, STOPPED, Journal
+from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, Journal
+from bwsd.journal.writer import JournalWriter
 from bwsd.program import parse_program, validate
-from bwsd.twin import Machine, Prediction, Program, Shift, Twin
+from bwsd.twin import Machine, Prediction, Program, Shift, Snapshot, Twin
 from bwsd.twin.instructions import Instruction
 
+log = logging.getLogger("bwsd.controller")
 Publish = Callable[[dict[str, Any]], None]
+_RUNS = frozenset({Command.START, Command.UNHOLD, Command.UNSUSPEND})
+_READS_FIRST = _RUNS | {Command.RESET}
+_LOADABLE = frozenset({State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED})
 
 
 class ControllerError(BwsdError):
-    """A request the controller cannot take in its present state."""
+    """A request the controller cannot take in its present state (names why)."""
+
+
+class Busy(ControllerError):
+    """Another program check is running: one at a time."""
+
+
+class Cancelled(ControllerError):
+    """A program check was cancelled (its client went away)."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The ``[controller]`` table's run settings (the limits are in ``Limits``)."""
+
+    max_instructions: int = 1_000_000  # a program may expand to at most this many
+    snapshot_every: int = 200  # instructions between twin snapshots in the journal
+    poll_interval: float = 0.5  # s between reads of the machine at rest
 
 
 @dataclass(frozen=True)
@@ -56,140 +99,353 @@ class DryRun:
     takeup: float  # mm
 
 
+# ----- how one step ends -----
+@dataclass(frozen=True)
+class Done:
+    index: int
+
+
+@dataclass(frozen=True)
+class Held:
+    cause: StopCause
+    reason: str
+
+
+@dataclass(frozen=True)
+class Aborted:
+    cause: StopCause
+    reason: str
+
+
+Outcome = Done | Held | Aborted
+
+
+@dataclass(frozen=True)
+class Preview:
+    """The next instruction predicted on the controller's twin (nothing committed)."""
+
+    index: int
+    line: int
+    instruction: Instruction
+    prediction: Prediction | None  # None when the twin refuses it
+    refused: str | None
+    occupancy: Any
+    takeup: float
+
+
 class Controller:
-    """The one place that decides: PackML state, the loaded program, the twin, the run."""
+    """The one place that decides: PackML state, the loaded program, the twin, the run.
+
+    Its doors (REST, the PLC tags, the page) call ``command``, ``set_mode``, ``check``,
+    ``load``, ``preview`` and ``status``, and follow ``events``.
+    """
 
     def __init__(self, machine: Machine, bus: Fieldbus, journal: Journal,
-                 limits: Limits | None = None, publish: Publish | None = None) -> None:  # fmt: skip
+                 limits: Limits | None = None, publish: Publish | None = None,
+                 settings: Settings | None = None) -> None:  # fmt: skip
         self.machine = machine
         self.bus = bus
         self.journal = journal
         self.limits = limits or Limits()
-        self.publish = publish or (lambda event: None)
+        self.settings = settings or Settings()
+        self.events = EventStream()
+        if publish is not None:
+            self.events.subscribe(lambda event: publish(event.wire()))
         self.packml = PackML()
         self.packml.on_change.append(self._on_state)
         self.program: Program | None = None
         self.program_id: int | None = None
+        self.program_name: str | None = None
         self.twin: Twin | None = None
-        self.dry_run: DryRun | None = None  # the loaded program's
+        self.dry_run: DryRun | None = None  # the loaded program's (None after a restart)
         self.last: Prediction | None = None  # the instruction done last (read in its event)
-        self.stop_cause: str = ""  # class of the error that last stopped a run ("" operator)
+        self.faults = 0  # runs ended by an unexpected error
+        self._writer = JournalWriter(journal)
+        self._stop_cause = StopCause.NONE
+        self._bus = BusStatus()
         self._task: asyncio.Task[None] | None = None
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
-        self._resume: int | None = None  # a journaled instruction the machine never ran
-        self._remaining: Shift | None = None  # the lines of that instruction still to move
+        self._checking = asyncio.Lock()  # one program check at a time
+        self._journaled: int | None = None  # an instruction started and not done
+        self._pending: Prediction | None = None  # its prediction
+        self._rest: Shift | None = None  # the lines of it still to move
         self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
+        self._recovering = ""  # why commands wait (a restart is being recovered)
         self._timing: dict[str, float] = {}  # seconds of the running instruction, published
         self._finished = False  # the loaded program reached complete, aborted or stopped
         self._origin: int | None = None  # take-up position (um) where the program started
+        self._snapped = 0  # instructions done at the last snapshot
+        self._background: set[asyncio.Task[Any]] = set()
+        self._recovery: asyncio.Task[None] | None = None
 
-    # ----- programs -----
-    async def load(self, name: str, text: str) -> int:
-        """Parse, validate and dry-run a program, then make it the one to run."""
-        async with self._lock:
-            return await self._load(name, text)
-
-    async def check(self, name: str, text: str) -> tuple[Program, DryRun]:
-        """Parse, validate and dry-run a program without loading it (any state)."""
-        program = parse_program(text, name)
-        validate(program, self.machine, name)
-        return program, await asyncio.to_thread(_dry_run, self.machine, program, name)
-
-    async def _load(self, name: str, text: str) -> int:
-        if self.packml.state not in (State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED):
-            raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
-        program, totals = await self.check(name, text)
-        pid = await asyncio.to_thread(self.journal.add_program, name, text,
-                                      len(program.instructions))  # fmt: skip
-        self.program, self.program_id, self.dry_run = program, pid, totals
-        self.twin = Twin.from_program(self.machine, program)
-        self._resume, self._blocked, self._finished = None, "", False
-        self._origin = None
-        self.publish({"event": "program", "program_id": pid, "name": name,
-                      "count": len(program.instructions), "at": time.time()})  # fmt: skip
-        return pid
-
+    # ----- what the doors read -----
     @property
     def index(self) -> int:
         """Instructions done of the loaded program."""
         return self.twin.done if self.twin else 0
 
+    @property
+    def stop_cause(self) -> StopCause:
+        return self._stop_cause
+
+    @property
+    def recovering(self) -> str:
+        return self._recovering
+
+    def allowed(self) -> list[Command]:
+        """Exactly the commands that will be accepted now (as far as the last read knows)."""
+        return [c for c in self.packml.allowed() if self._refusal(c) is None]
+
+    def status(self) -> StatusSnapshot:
+        """The controller as it stands, in one value."""
+        program = self.program
+        return StatusSnapshot(
+            state=self.packml.state, mode=self.packml.mode, reason=self.packml.reason,
+            stop_cause=self._stop_cause, program_id=self.program_id,
+            program_name=self.program_name, index=self.index,
+            count=len(program.instructions) if program is not None else 0,
+            allowed=tuple(self.allowed()), bus=self._bus, recovering=self._recovering,
+            next=self.next_step(),
+        )  # fmt: skip
+
+    def next_step(self) -> dict[str, Any] | None:
+        """The instruction the loaded program runs next, with its line; None when none is left."""
+        program, done = self.program, self.index
+        if program is None or done >= len(program.instructions):
+            return None
+        line = program.lines[done] if done < len(program.lines) else 0
+        return {"index": done + 1, "line": line, "instruction": program.instructions[done]}
+
+    # ----- programs -----
+    async def check(self, name: str, text: str,
+                    cancel: threading.Event | None = None) -> tuple[Program, DryRun]:  # fmt: skip
+        """Parse, validate and dry-run a program without loading it (any state).
+
+        Runs in a worker thread, one check at a time (``Busy`` otherwise); setting ``cancel``
+        stops it (``Cancelled``). The configured limits are checked on every instruction.
+        """
+        if self._checking.locked():
+            raise Busy("another program is being checked: try again when it has finished")
+        async with self._checking:
+            return await asyncio.to_thread(_check, self.machine, self.limits,
+                                           self.settings.max_instructions, name, text,
+                                           cancel)  # fmt: skip
+
+    async def load(self, name: str, text: str, who: str = "",
+                   cancel: threading.Event | None = None) -> int:  # fmt: skip
+        """Check a program, then make it the one to run (in Stopped, Idle, Complete, Aborted)."""
+        self._refuse_load()
+        program, totals = await self.check(name, text, cancel)
+        twin = await asyncio.to_thread(Twin.from_program, self.machine, program)
+        async with self._lock:
+            self._refuse_load()
+            pid = await self._writer.run(self.journal.add_program, name, text,
+                                         len(program.instructions))  # fmt: skip
+            self.program, self.program_id, self.program_name = program, pid, name
+            self.dry_run, self.twin, self.last = totals, twin, None
+            self._forget_pending()
+            self._finished, self._origin, self._snapped = False, None, 0
+            log.info("program %d %r loaded by %s: %d instructions", pid, name, who or "?",
+                     len(program.instructions))  # fmt: skip
+            self.events.publish(ProgramLoaded(pid, name, len(program.instructions)))
+            self._observe_twin()
+        return pid
+
+    def _refuse_load(self) -> None:
+        if self._recovering:
+            raise ControllerError(f"recovering: {self._recovering}")
+        if self.packml.state not in _LOADABLE:
+            raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
+
+    def _forget_pending(self) -> None:
+        self._journaled, self._pending, self._rest, self._blocked = None, None, None, ""
+
+    async def preview(self) -> Preview:
+        """The next instruction predicted on the controller's twin; the twin is not changed."""
+        program, twin = self.program, self.twin
+        if program is None or twin is None:
+            raise ControllerError("no program is loaded")
+        while True:
+            done = twin.done
+            if done >= len(program.instructions):
+                raise ControllerError(f"all {len(program.instructions)} instructions are done")
+            instruction = program.instructions[done]
+            line = program.lines[done] if done < len(program.lines) else 0
+            try:
+                pred = await asyncio.to_thread(twin.predict, instruction)
+            except TwinError as exc:
+                return Preview(done + 1, line, instruction, None, str(exc), twin.occupancy,
+                               twin.takeup)  # fmt: skip
+            if pred.index == done + 1:  # else the run committed meanwhile: predict again
+                break
+        try:
+            check_limits(pred, self.limits)
+            refused = None
+        except RefusedMove as exc:
+            refused = str(exc)
+        return Preview(pred.index, line, instruction, pred, refused, pred.occupancy, pred.takeup)
+
     # ----- commands -----
-    async def command(self, command: Command, reason: str = "") -> State:
+    async def command(self, command: Command, reason: str = "", who: str = "") -> State:
         """Apply a PackML command and run the acting state it enters to its end."""
         async with self._lock:
-            if command is Command.START and self.program is None:
-                raise ControllerError("no program is loaded")
-            if command is Command.START and self._finished:
-                raise ControllerError("the loaded program has ended: load a program to start")
-            if command is Command.UNHOLD and self._blocked:
-                raise ControllerError(f"cannot resume: {self._blocked} (Abort ends the program)")
-            if command is Command.RESET:
-                self.stop_cause = ""
-            state = self.packml.command(command, reason)
+            said = f"{command.label} from {who or '?'}" + (f": {reason}" if reason else "")
+            log.info("command %s", said)
+            try:
+                if command in _READS_FIRST:
+                    await self._prepare(command)
+                refusal = self._refusal(command)
+                if refusal is not None:
+                    raise ControllerError(refusal)
+                state = self.packml.command(command, reason)
+            except BwsdError as exc:
+                log.warning("command %s refused: %s", said, exc)
+                raise
+            if command in (Command.STOP, Command.HOLD, Command.ABORT, Command.SUSPEND):
+                self._stop_cause = StopCause.OPERATOR
+            elif command is Command.RESET:
+                self._stop_cause = StopCause.NONE
             await self._act(state)
             return self.packml.state
 
-    def set_mode(self, mode: UnitMode) -> None:
+    async def set_mode(self, mode: UnitMode, who: str = "") -> None:
         """Change the unit mode (where PackML allows it), journaled and published."""
-        old = self.packml.mode
-        self.packml.set_mode(mode)
-        if mode is not old:
-            self.journal.log_event("mode", {"from": old.label, "to": mode.label})
-            self.publish({"event": "mode", "from": old.label, "to": mode.label})
+        async with self._lock:
+            old = self.packml.mode
+            try:
+                self.packml.set_mode(mode)
+            except BwsdError as exc:
+                log.warning("mode %s from %s refused: %s", mode.label, who or "?", exc)
+                raise
+            if mode is not old:
+                log.info("mode %s -> %s by %s", old.label, mode.label, who or "?")
+                self._journal_later(self.journal.log_event, "mode",
+                                    {"from": old.label, "to": mode.label, "by": who})  # fmt: skip
+                self.events.publish(ModeChanged(old, mode))
+
+    def _refusal(self, command: Command) -> str | None:
+        """Why the controller refuses ``command`` beyond PackML's own table (None: it does not)."""
+        if self._recovering and command is not Command.ABORT:
+            return f"recovering: {self._recovering}"
+        if self._recovering and self.twin is None:
+            return f"recovering: {self._recovering}"
+        if command is Command.START:
+            if self.program is None:
+                return "no program is loaded"
+            if self._finished:
+                return "the loaded program has ended: load a program to start"
+        if command in _READS_FIRST and self._bus.estop:
+            return f"the emergency stop is pressed: release it before {command.label}"
+        if command in _RUNS and self.packml.accepts(command):
+            if self._blocked:
+                return f"cannot resume: {self._blocked} (Abort ends the program)"
+            if self._bus.connected is False:
+                return f"the machine cannot be read: {self._bus.last_error}"
+            if self._bus.faulted:
+                return f"axes {', '.join(self._bus.faulted)} report a fault"
+            if self._bus.differs and self._rest is None:
+                return ("the occupancy sensors differ from the twin at "
+                        f"{_cells(self._bus.differs)}: nothing is moved")  # fmt: skip
+        return None
+
+    async def _prepare(self, command: Command) -> None:
+        """Read the machine before a command that may lead to motion; settle a pending one."""
+        if not self.packml.accepts(command):
+            return  # PackML refuses it anyway, with what it accepts
+        if self._recovering and self.twin is None:
+            return
+        state = await self.read_machine()
+        if command in (Command.UNHOLD, Command.UNSUSPEND):
+            await self._settle_pending(state)
 
     async def _act(self, state: State) -> None:
+        """The work of the acting state just entered, then "state complete"."""
         if state is State.RESETTING:
             await self._guard(self.bus.reset_faults())
         elif state in (State.STARTING, State.UNHOLDING, State.UNSUSPENDING):
             self.packml.state_complete()
-            self._task = asyncio.create_task(self._run())
+            self._task = self._spawn(self._run(), "run")
             return
         elif state in (State.ABORTING, State.STOPPING):
-            await self._settle()
+            await self._wait_run()
             await self._guard(self.bus.quick_stop())
-            self._outcome(ABORTED if state is State.ABORTING else STOPPED)
+            await self._outcome(ABORTED if state is State.ABORTING else STOPPED)
         elif state in (State.HOLDING, State.SUSPENDING):
-            await self._settle()
-            self._outcome(HELD)
+            await self._wait_run()
+            await self._outcome(HELD if state is State.HOLDING else SUSPENDED)
         elif state is State.CLEARING:
             await self._guard(self.bus.reset_faults())
-        if self.packml.state in (State.RESETTING, State.ABORTING, State.STOPPING,
-                                 State.HOLDING, State.SUSPENDING, State.CLEARING):  # fmt: skip
+        if self.packml.state is state:  # unless a command took over meanwhile
             self.packml.state_complete()
 
-    async def _guard(self, action: Any) -> None:
+    async def _guard(self, action: Coroutine[Any, Any, None]) -> None:
         try:
             await action
         except FieldbusError as exc:
-            self.publish({"event": "fault", "reason": str(exc)})
+            self._bus_failed(exc)
+            self.events.publish(Fault(str(exc), cause_of(exc)))
 
-    async def _settle(self) -> None:
+    async def _wait_run(self) -> None:
         """Let the running instruction finish (never cut a move the twin has not seen)."""
         task, self._task = self._task, None
         if task is not None and task is not asyncio.current_task():
-            await task
+            await asyncio.wait({task})
 
     async def wait(self) -> None:
         """Until the run loop stops (the program completes, holds or aborts)."""
-        if self._task is not None:
-            await self._task
+        while (task := self._task) is not None:
+            await asyncio.wait({task})
+            if self._task is task:
+                break
+
+    @property
+    def running(self) -> bool:
+        """The run loop is moving the machine (or about to)."""
+        return self._task is not None and not self._task.done()
 
     # ----- the run loop -----
     async def _run(self) -> None:
+        """Run instructions while in Execute; every way out is logged and published."""
         assert self.program is not None and self.twin is not None
-        self._outcome(RUNNING)
-        while self.packml.state is State.EXECUTE:
-            if self.twin.done >= len(self.program.instructions):
-                self.packml.execute_done()
-                self._outcome(COMPLETE)
-                self.packml.state_complete()
-                return
-            if not await self._step():
-                return
+        try:
+            await self._outcome(RUNNING)
+            while self.packml.state is State.EXECUTE:
+                if self.twin.done >= len(self.program.instructions):
+                    self.packml.execute_done()
+                    await self._outcome(COMPLETE)
+                    self.packml.state_complete()
+                    log.info("program %s complete", self.program_id)
+                    return
+                outcome = await self._step()
+                if not isinstance(outcome, Done):
+                    await self._end(outcome)
+                    return
+        except Exception as exc:  # the catch-all: never a silent death
+            self.faults += 1
+            reason = f"internal error: {type(exc).__name__}: {exc}"
+            log.exception("the run loop failed: %s", reason)
+            await self._end(Aborted(StopCause.INTERNAL, reason))
+        finally:
+            if self._task is asyncio.current_task():
+                self._task = None
 
-    async def _step(self) -> bool:
-        """One instruction end to end; False when it stopped the run."""
+    async def _end(self, outcome: Held | Aborted) -> None:
+        """Hold or abort the run from inside it (unless a command already took over)."""
+        self._stop_cause = outcome.cause
+        self.events.publish(Fault(outcome.reason, outcome.cause))
+        command = Command.HOLD if isinstance(outcome, Held) else Command.ABORT
+        log.warning("%s: %s", "hold" if command is Command.HOLD else "abort", outcome.reason)
+        if self.packml.state is not State.EXECUTE:
+            return  # a command is acting on the run already; it decides what follows
+        if self._task is asyncio.current_task():
+            self._task = None
+        try:
+            await self._act(self.packml.command(command, outcome.reason))
+        except Exception:
+            log.exception("the %s after %r failed", command.label, outcome.reason)
+
+    async def _step(self) -> Outcome:
+        """One instruction end to end."""
         assert self.program is not None and self.twin is not None and self.program_id
         index = self.twin.done + 1
         instruction = self.program.instructions[index - 1]
@@ -199,32 +455,34 @@ class Controller:
             self._timing = {"predict_s": time.perf_counter() - begun}
             check_limits(pred, self.limits)
         except (TwinError, RefusedMove) as exc:
-            return await self._stop(Command.ABORT, str(exc), exc)
+            return Aborted(StopCause.REFUSED_MOVE, str(exc))
         try:
             origin = await self._takeup_origin()
         except FieldbusError as exc:
-            return await self._stop(Command.HOLD, _about(index, exc), exc)
-        doing = self._remaining if self._resume == index and self._remaining else instruction
-        self._remaining = None
+            return Held(cause_of(exc), _about(index, exc))
+        doing = self._rest if self._journaled == index and self._rest else instruction
+        self._rest = None
         steps = setpoints(self.machine, doing, self.twin.takeup, origin)
-        payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
-                   "contacts": len(pred.contacts), "takeup_origin": origin}  # fmt: skip
-        if self._resume == index:
-            self._resume = None  # journaled as started before the restart
-        else:
-            await asyncio.to_thread(self.journal.started, self.program_id, index, payload)
+        if self._journaled != index:
+            payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
+                       "contacts": len(pred.contacts), "takeup_origin": origin}  # fmt: skip
+            await self._writer.run(self.journal.started, self.program_id, index, payload)
+            self._journaled, self._pending = index, pred
         try:
             for step in steps:
                 await self.bus.execute(step)
             state = await self.bus.state()
             self._verify(pred, state)
         except (DriveFault, EStopError) as exc:
-            return await self._stop(Command.ABORT, _about(index, exc), exc)
+            self._bus_failed(exc)
+            return Aborted(cause_of(exc), _about(index, exc))
         except (FieldbusError, Mismatch) as exc:
-            return await self._stop(Command.HOLD, _about(index, exc), exc)
+            if isinstance(exc, FieldbusError):
+                self._bus_failed(exc)
+            return Held(cause_of(exc), _about(index, exc))
         self._timing["step_s"] = time.perf_counter() - begun
         await self._commit(pred, index)
-        return True
+        return Done(index)
 
     async def _takeup_origin(self) -> int:
         """Where the take-up stood when this program started (read once, journaled)."""
@@ -246,114 +504,269 @@ class Controller:
         assert self.twin is not None and self.program_id
         self.twin.commit(pred)
         self.last = pred
-        await asyncio.to_thread(self.journal.done, self.program_id, index,
-                                {"contacts": len(pred.contacts)})  # fmt: skip
-        self.publish({"event": "instruction", "index": index, "contacts": len(pred.contacts),
-                      "inserted": len(pred.inserted), "at": time.time(),
-                      **self._timing})  # fmt: skip
+        self._journaled, self._pending = None, None
+        begun = time.perf_counter()
+        await self._writer.run(self.journal.done, self.program_id, index,
+                               {"contacts": len(pred.contacts)})  # fmt: skip
+        if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
+            await self._snapshot()
+        self._timing["journal_s"] = time.perf_counter() - begun
+        self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
+        self.events.publish(InstructionDone(self.program_id, index, len(pred.contacts),
+                                            len(pred.inserted), self._timing))  # fmt: skip
         self._timing = {}
 
-    async def _stop(self, command: Command, reason: str, error: Exception) -> bool:
-        self.stop_cause = type(error).__name__
-        self.publish({"event": "fault", "reason": reason, "cause": self.stop_cause})
-        self._task = None
-        self.packml.command(command, reason)
-        await self._act(self.packml.state)
-        return False
+    async def _snapshot(self) -> None:
+        """Journal a snapshot of the twin (restart replays only what follows it)."""
+        assert self.twin is not None and self.program_id
+        twin, pid = self.twin, self.program_id
+        data = await asyncio.to_thread(lambda: twin.snapshot().to_bytes())
+        await self._writer.run(self.journal.save_snapshot, pid, twin.done, data)
+        self._snapped = twin.done
 
-    def _outcome(self, outcome: str) -> None:
-        """Journal the program's outcome; an ended program's outcome never changes again."""
+    async def _outcome(self, outcome: str) -> None:
+        """Journal the program's outcome; an ended program's outcome never changes again.
+
+        A journal that cannot write is logged and published; the state machine goes on.
+        """
         if self.program_id is None or self._finished:
             return
-        self.journal.set_outcome(self.program_id, outcome, self.packml.reason)
-        self._finished = outcome in FINAL
+        try:
+            await self._writer.run(self.journal.set_outcome, self.program_id, outcome,
+                                   self.packml.reason)  # fmt: skip
+        except Exception as exc:
+            if outcome == RUNNING:
+                raise
+            log.exception("the journal cannot record %s", outcome)
+            self.events.publish(Fault(f"the journal cannot record {outcome}: {exc}",
+                                      StopCause.INTERNAL))  # fmt: skip
+        self._finished = outcome in (COMPLETE, ABORTED, STOPPED)
 
     def _on_state(self, old: State, new: State, cause: str) -> None:
-        self.journal.log_state(int(new), new.label, self.packml.reason)
-        self.publish({"event": "state", "from": old.label, "to": new.label, "cause": cause,
-                      "at": time.time()})  # fmt: skip
+        reason = self.packml.reason
+        log.info("state %s -> %s (%s)", old.label, new.label, cause)
+        self._journal_later(self.journal.log_state, int(new), new.label, reason)
+        self.events.publish(StateChanged(old, new, cause, reason))
+        if new in (State.IDLE, State.HELD, State.SUSPENDED, State.STOPPED, State.COMPLETE,
+                   State.ABORTED):  # fmt: skip
+            self._observe_twin()
+
+    # ----- the machine at rest -----
+    async def read_machine(self) -> MachineState:
+        """Read the machine now (connecting if needed); ControllerError when it cannot."""
+        try:
+            if not self.bus.connected:
+                await self.bus.connect()
+            try:
+                state = await self.bus.state()
+            except FieldbusConnectionError:
+                await self.bus.connect()
+                state = await self.bus.state()
+        except FieldbusError as exc:
+            self._bus_failed(exc)
+            raise ControllerError(f"the machine cannot be read: {exc}") from exc
+        self._observe(state)
+        return state
+
+    def _bus_failed(self, exc: FieldbusError) -> None:
+        lost = not isinstance(exc, DriveFault | EStopError) and (
+            isinstance(exc, FieldbusConnectionError) or "did not complete" not in str(exc)
+        )
+        estop = True if isinstance(exc, EStopError) else self._bus.estop
+        self._set_bus(replace(self._bus, connected=not lost, last_error=str(exc),
+                              checked=time.time(), estop=estop))  # fmt: skip
+
+    def _observe(self, state: MachineState) -> None:
+        faulted = tuple(self.bus.axes[i].name for i, a in enumerate(state.axes) if a.fault)
+        self._machine = state
+        self._set_bus(BusStatus(connected=True, last_error=None, checked=time.time(),
+                                estop=bool(state.estop), faulted=faulted,
+                                differs=self._differs(state)))  # fmt: skip
+
+    def _observe_twin(self) -> None:
+        """The twin changed at rest: compare it again with the last read."""
+        machine = getattr(self, "_machine", None)
+        if machine is not None:
+            self._set_bus(replace(self._bus, differs=self._differs(machine)))
+
+    def _differs(self, state: MachineState) -> tuple[tuple[int, int], ...]:
+        twin = self.twin
+        if twin is None or self.running or self.packml.state is State.EXECUTE:
+            return ()
+        if state.occupancy.shape != twin.occupancy.shape:
+            return ((-1, -1),)
+        return tuple(differing_cells(state.occupancy, twin.occupancy >= 0))
+
+    def _set_bus(self, status: BusStatus) -> None:
+        old = self._bus
+        self._bus = status
+        if replace(old, checked=None) != replace(status, checked=None):
+            if status.estop != old.estop and None not in (status.estop, old.estop):
+                log.warning("emergency stop %s", "pressed" if status.estop else "released")
+            self.events.publish(BusChanged(status))
+
+    async def watch(self) -> None:
+        """Read the machine at rest every ``poll_interval``: e-stop, faults, occupancy; settle
+        a pending instruction once the machine can be read. Runs until cancelled."""
+        while True:
+            await asyncio.sleep(self.settings.poll_interval)
+            if self.running or self._lock.locked():
+                continue
+            async with self._lock:
+                if self._recovering and self.twin is None:
+                    continue
+                try:
+                    state = await self.read_machine()
+                except ControllerError:
+                    continue
+                if self._journaled is not None and self.packml.state in (State.HELD,
+                                                                         State.SUSPENDED):
+                    await self._settle_pending(state)
+
+    # ----- settling a pending instruction (after a fault hold or a restart) -----
+    async def _settle_pending(self, state: MachineState) -> Settle | None:
+        """Decide on the instruction started and not done, from ``state`` just read."""
+        index = self._journaled
+        if index is None or self.twin is None or self.program is None:
+            return None
+        instruction = self.program.instructions[index - 1]
+        pred = self._pending
+        if pred is None or pred.index != index:
+            pred = await asyncio.to_thread(self.twin.predict, instruction)
+            self._pending = pred
+        before = Before(self.twin.occupancy >= 0,
+                        (self._origin or 0) + round(self.twin.takeup * UM_PER_MM))  # fmt: skip
+        decision = settle(instruction, pred, state, self._takeup(state), before,
+                          self._origin or 0, self.bus.settings.position_tolerance)  # fmt: skip
+        self._blocked, self._rest = "", None
+        then = "resume with Unhold"
+        if decision.kind == "commit":
+            await self._commit(pred, index)
+            self._observe(state)
+        elif decision.kind == "rerun":
+            then = "Unhold runs it"
+        elif decision.kind == "finish":
+            assert decision.rest is not None
+            self._rest = decision.rest
+            then = f"Unhold moves the other {len(decision.rest.moves)}"
+        else:
+            self._blocked = decision.reason
+            then = "Abort ends the program"
+        if self.packml.state in (State.HELD, State.SUSPENDED):
+            restarted = "restarted: " if self._stop_cause is StopCause.RESTART else ""
+            self.packml.reason = f"{restarted}{decision.reason}: {then}"
+        if self._recovering:
+            self._recovering = ""
+        log.info("pending instruction %d: %s (%s)", index, decision.kind, decision.reason)
+        return decision
 
     # ----- restart -----
-    async def recover(self) -> str:
-        """Rebuild the twin from the journal; settle a pending instruction. Says what it did."""
-        record = await asyncio.to_thread(self.journal.active_program)
+    def begin_recovery(self) -> str:
+        """At start: if the journal has an active program, hold and rebuild it in the
+        background (commands wait, the API answers). Says what it found."""
+        record = self.journal.active_program()
         if record is None:
             return "nothing to recover"
-        text = await asyncio.to_thread(self.journal.program_text, record.id)
-        program = parse_program(text, record.name)
-        twin = Twin.from_program(self.machine, program)
-        for instruction in program.instructions[: record.done]:
-            await asyncio.to_thread(twin.advance, instruction)
-        self.program, self.program_id, self.twin = program, record.id, twin
-        first = await asyncio.to_thread(self.journal.instructions, record.id, 0, 1)
+        self.packml = _held_machine(self.packml, f"restarted at instruction {record.done}")
+        self._stop_cause = StopCause.RESTART
+        self._recovering = (f"rebuilding the twin of program {record.id} ({record.done} of "
+                            f"{record.instructions} instructions done)")  # fmt: skip
+        self._recovery = self._spawn(self._recover(record.id), "recovery")
+        return f"restarted with program {record.id} {record.name!r} {record.outcome}: recovering"
+
+    async def recover(self) -> str:
+        """Rebuild the twin from the journal and settle a pending instruction if the machine
+        can be read now. Says what it did."""
+        said = self.begin_recovery()
+        if said == "nothing to recover":
+            return said
+        assert self._recovery is not None
+        await asyncio.wait({self._recovery})
+        if self._journaled is not None and self._lock.locked() is False:
+            async with self._lock:
+                try:
+                    await self._settle_pending(await self.read_machine())
+                except ControllerError as exc:
+                    return f"{self.packml.reason}; {exc}"
+        return self.packml.reason
+
+    async def _recover(self, program_id: int) -> None:
+        run = self._writer.run
+        record = await run(self.journal.program, program_id)
+        text = await run(self.journal.program_text, program_id)
+        program = await asyncio.to_thread(parse_program, text, record.name)
+        snap = await run(self.journal.latest_snapshot, program_id)
+        twin = await asyncio.to_thread(_rebuild, self.machine, program, record.done, snap)
+        first = await run(self.journal.instructions, program_id, 0, 1)
+        pending = await run(self.journal.pending, program_id)
+        self.program, self.program_id, self.program_name = program, program_id, record.name
+        self.twin, self._snapped = twin, snap[0] if snap else 0
         self._origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None
-        self.packml = _held_machine(self.packml)
-        pending = await asyncio.to_thread(self.journal.pending, record.id)
+        self._journaled = pending.index if pending is not None else None
         if pending is None:
-            return self._hold(f"restarted at instruction {record.done}: resume with Unhold")
-        return await self._settle_pending(program, twin, pending.index)
+            self._recovering = ""
+            self.packml.reason = (f"restarted at instruction {record.done}: resume with Unhold")
+        else:
+            self._recovering = (f"instruction {pending.index} started and not done: reading "
+                                "the machine")  # fmt: skip
+            self.packml.reason = f"restarted: instruction {pending.index} pending"
+        log.info("program %d rebuilt at instruction %d%s", program_id, record.done,
+                 f" from the snapshot at {snap[0]}" if snap else "")  # fmt: skip
+        self._observe_twin()
 
-    def _hold(self, reason: str) -> str:
-        self.packml.command(Command.HOLD, reason)
-        self._outcome(HELD)
-        self.packml.state_complete()
-        return reason
+    # ----- tasks -----
+    def _spawn(self, coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]:
+        """A task whose end is always logged (and, if it failed, published)."""
+        task = asyncio.create_task(coro, name=f"bwsd-{name}")
+        self._background.add(task)
+        task.add_done_callback(self._ended)
+        return task
 
-    async def _settle_pending(self, program: Program, twin: Twin, index: int) -> str:
-        """Complete a started instruction from what the machine shows, or report it.
+    def _ended(self, task: asyncio.Task[Any]) -> None:
+        self._background.discard(task)
+        if task.cancelled():
+            log.info("task %s cancelled", task.get_name())
+            return
+        error = task.exception()
+        if error is None:
+            log.debug("task %s ended", task.get_name())
+            return
+        self.faults += 1
+        log.error("task %s failed: %s", task.get_name(), error, exc_info=error)
+        if task.get_name() == "bwsd-recovery":
+            self._recovering = f"recovery failed: {error} (see the log)"
+        self.events.publish(Fault(f"{task.get_name()} failed: {error}", StopCause.INTERNAL))
 
-        The machine shows the predicted result: the move happened, commit it. It shows the
-        state before the move: the move never started, and Unhold runs it. Anything else is
-        for the operator: Unhold is refused until the journal is settled (Abort ends it).
-        """
-        before = twin.occupancy >= 0, (self._origin or 0) + round(twin.takeup * UM_PER_MM)
-        pred = await asyncio.to_thread(twin.predict, program.instructions[index - 1])
-        state = await self.bus.state()
-        instruction = program.instructions[index - 1]
+    def _journal_later(self, fn: Callable[..., Any], *args: Any) -> None:
+        """A journal write nobody waits for (a state or event log), in order with the rest."""
+        async def write() -> None:
+            try:
+                await self._writer.run(fn, *args)
+            except Exception as exc:
+                log.error("the journal cannot record a %s: %s", getattr(fn, "__name__", fn), exc)
+
         try:
-            self._verify(pred, state)
-        except Mismatch as exc:
-            if self._shows(state, *before):
-                self._resume = index
-                return self._hold(f"restarted: instruction {index} started, the machine has "
-                                  "not moved: Unhold runs it")  # fmt: skip
-            rest = _lines_left(instruction, state.occupancy, before[0], pred.occupancy >= 0)
-            if rest is not None and self._shows(state, state.occupancy, before[1]):
-                self._resume, self._remaining = index, rest
-                left = len(rest.moves)
-                return self._hold(f"restarted: instruction {index} started, some of its lines "
-                                  f"moved: Unhold moves the other {left}")  # fmt: skip
-            self._blocked = f"instruction {index} started and not done: {exc}"
-            return self._hold(f"restarted: {self._blocked}")
-        await self._commit(pred, index)
-        return self._hold(f"restarted: instruction {index} completed from the read-back")
+            asyncio.get_running_loop()
+        except RuntimeError:
+            fn(*args)
+            return
+        self._spawn(write(), "journal")
 
-    def _shows(self, state: MachineState, occupancy: Any, takeup_um: int) -> bool:
-        """The machine shows this occupancy and take-up (within the position tolerance)."""
-        tolerance = self.bus.settings.position_tolerance
-        same_cells = bool((state.occupancy == occupancy).all())
-        return same_cells and abs(self._takeup(state) - takeup_um) <= tolerance
+    async def close(self) -> None:
+        """Stop the background tasks, finish the journal's queued writes and close it."""
+        for task in list(self._background):
+            if task.get_name() in ("bwsd-recovery",):
+                task.cancel()
+        pending = [t for t in self._background if t.get_name() == "bwsd-journal"]
+        if pending:
+            await asyncio.wait(pending)
+        await self._writer.close()
 
 
-def _lines_left(instruction: Instruction, machine: BoolGrid, before: BoolGrid,
-                after: BoolGrid) -> Shift | None:  # fmt: skip
-    """The entries of a shift whose line is still as before, when every other listed line
-    shows its predicted result and no other line moved; None otherwise (or for no shift)."""
-    if not isinstance(instruction, Shift):
-        return None
-    if instruction.axis == "col":  # work on columns as rows
-        machine, before, after = machine.T, before.T, after.T
-    rest = []
-    for line, k in instruction.moves:
-        if (machine[line] == before[line]).all():
-            rest.append((line, k))
-        elif not (machine[line] == after[line]).all():
-            return None
-    listed = {line for line, _ in instruction.moves}
-    untouched = [i for i in range(machine.shape[0]) if i not in listed]
-    if not (machine[untouched] == before[untouched]).all():
-        return None
-    return Shift(instruction.axis, tuple(rest)) if rest else None
+def _cells(cells: tuple[tuple[int, int], ...]) -> str:
+    if cells == ((-1, -1),):
+        return "every cell (the grids differ in shape)"
+    return ", ".join(f"({r}, {c})" for r, c in cells)
 
 
 def _about(index: int, error: Exception) -> str:
@@ -362,19 +775,55 @@ def _about(index: int, error: Exception) -> str:
     return text if text.startswith(f"instruction {index}:") else f"instruction {index}: {text}"
 
 
-def _held_machine(current: PackML) -> PackML:
-    """A state machine in Execute, ready to be held (a restarted run resumes by Unhold)."""
-    machine = PackML(State.EXECUTE, current.mode)
+def _held_machine(current: PackML, reason: str) -> PackML:
+    """A state machine in Held (a restarted run resumes by Unhold), with the same listeners."""
+    machine = PackML(State.HELD, current.mode)
+    machine.reason = reason
     machine.on_change.extend(current.on_change)
     return machine
 
 
-def _dry_run(machine: Machine, program: Program, name: str) -> DryRun:
-    from bwsd.twin import simulate
+def _rebuild(machine: Machine, program: Program, done: int,
+             snap: tuple[int, bytes] | None) -> Twin:  # fmt: skip
+    """The twin after ``done`` instructions: from the snapshot if there is one, then replay."""
+    twin = None
+    if snap is not None and snap[0] <= done:
+        try:
+            twin = Twin.from_snapshot(machine, Snapshot.from_bytes(snap[1]))
+        except (BwsdError, ValueError) as exc:
+            log.warning("snapshot at %d not usable (%s): replaying from the start", snap[0], exc)
+    if twin is None:
+        twin = Twin.from_program(machine, program)
+    for instruction in program.instructions[twin.done : done]:
+        twin.advance(instruction)
+    return twin
 
+
+def _check(machine: Machine, limits: Limits, most: int, name: str, text: str,
+           cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
+    """Parse, validate, bound and dry-run a program (in a worker thread)."""
+    program = parse_program(text, name)
+    count = len(program.instructions)
+    if count > most:
+        raise ProgramError(f"the program expands to {count} instructions, more than this "
+                           f"daemon's limit of {most} ([controller] max_instructions)",
+                           source=name)  # fmt: skip
+    validate(program, machine, name)
+    twin = Twin.from_program(machine, program)
+    predict = bool(limits.max_contacts or limits.tensioner_stroke)
     try:
-        twin = simulate(machine, program)
+        for instruction in program.instructions:
+            if cancel is not None and cancel.is_set():
+                raise Cancelled(f"{name}: the check was cancelled")
+            if predict:
+                pred = twin.predict(instruction)
+                check_limits(pred, limits)
+                twin.commit(pred)
+            else:
+                twin.advance(instruction)
     except TwinError as exc:
         raise ControllerError(f"{name}: {exc}") from exc
-    return DryRun(len(program.instructions), twin.contact_count, twin.yarn_count,
-                  twin.node_count, twin.takeup)  # fmt: skip
+    except RefusedMove as exc:
+        raise ControllerError(f"{name}: {exc}") from TwinError(str(exc), instruction=pred.index)
+    return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
+                           twin.takeup)  # fmt: skip

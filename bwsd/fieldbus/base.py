@@ -179,6 +179,11 @@ class Fieldbus(ABC):
             self._seq = [axis.done_seq for axis in state.axes]
             self._seeded = True
 
+    @property
+    def connected(self) -> bool:
+        """Connected at least once and not closed since (the link may still have dropped)."""
+        return self._connected
+
     async def close(self) -> None:
         self._connected = False
         await self._close()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bwsd.plc.reasons import StopReason, stop_reason
+from bwsd.plc.reasons import StopReason
 from bwsd.plc.registers import MAP_VERSION, REG_COUNT, Tags, decode, encode
 from bwsd.plc.tags import PlcError, PlcTags, plc_tags
 
@@ -16,5 +16,4 @@ __all__ = [
     "decode",
     "encode",
     "plc_tags",
-    "stop_reason",
 ]

@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import sys
 from typing import cast
 
 from pymodbus.constants import ExcCodes
@@ -21,8 +20,8 @@ from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
 from bwsd.config import Config
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.controller.runner import Controller
+from bwsd.controller.status import Event, StateChanged
 from bwsd.errors import BwsdError
-from bwsd.plc.reasons import StopReason, stop_reason
 from bwsd.plc.registers import (
     MAP_VERSION,
     REG_CMD_CHANGE_REQUEST,
@@ -44,7 +43,7 @@ log = logging.getLogger(__name__)
 HOLDING_FUNCTIONS = frozenset({3, 6, 16, 22, 23})  # every other function code is refused
 HEARTBEAT_PERIOD = 1.0  # s
 PLC_REASON = "by the PLC"  # the reason given with the PLC's Stop, Hold and Abort
-STOPS = frozenset({State.STOPPING, State.ABORTING, State.HOLDING})
+PLC_WHO = "plc"  # who gave a command, in the log
 
 Request = tuple[int, int]  # (request register, the number asked for)
 
@@ -87,7 +86,6 @@ class PlcTags:
         self._pending: set[int] = set()  # request registers whose request is not taken yet
         self._invalid = False
         self._good = 0
-        self._stop_reason = StopReason.NONE
         self._beat = 0
         self._closing = False
         self._queue: asyncio.Queue[Request | None] = asyncio.Queue()
@@ -100,9 +98,6 @@ class PlcTags:
         """Listen (the actual port is in ``port`` afterwards), then take requests."""
         if self._server is not None:
             raise RuntimeError(f"the PLC tags on port {self.port} are already served")
-        packml = self.controller.packml
-        if packml.reason:
-            self._stop_reason = stop_reason(None, packml.reason)
         server = ModbusTcpServer(build_device(self.device_id, self._action),
                                  address=(self.host, self.port))  # fmt: skip
         try:
@@ -113,7 +108,7 @@ class PlcTags:
         sockets = getattr(server.transport, "sockets", None)
         if sockets:
             self.port = sockets[0].getsockname()[1]
-        packml.on_change.append(self._on_state)
+        self.controller.events.subscribe(self._on_event)
         self._closing, self._queue = False, asyncio.Queue()
         self._pending.clear()
         self._worker = asyncio.create_task(self._work())
@@ -124,8 +119,7 @@ class PlcTags:
         server, self._server = self._server, None
         if server is not None:
             await server.shutdown()  # type: ignore[no-untyped-call]
-        with contextlib.suppress(ValueError):
-            self.controller.packml.on_change.remove(self._on_state)
+        self.controller.events.unsubscribe(self._on_event)
         beater, self._beater = self._beater, None
         if beater is not None:
             beater.cancel()
@@ -140,21 +134,21 @@ class PlcTags:
     # ----- what the PLC reads -----
     def tags(self) -> Tags:
         """Every tag as the controller stands now."""
-        ctl = self.controller
-        program = ctl.program
+        st = self.controller.status()
         return Tags(
             cntrl_cmd=self._cntrl_cmd,
             cmd_change_request=int(REG_CMD_CHANGE_REQUEST in self._pending),
             unit_mode=self._unit_mode,
             unit_mode_change_request=int(REG_UNIT_MODE_CHANGE_REQUEST in self._pending),
-            state_current=int(ctl.packml.state),
-            unit_mode_current=int(ctl.packml.mode),
+            state_current=int(st.state),
+            unit_mode_current=int(st.mode),
             cmd_invalid=int(self._invalid),
-            instruction_index=ctl.index,
-            instruction_count=len(program.instructions) if program is not None else 0,
+            instruction_index=st.index,
+            instruction_count=st.count,
             good_count=self._good,
-            stop_reason=int(self._stop_reason),
+            stop_reason=int(st.stop_cause),
             heartbeat=self._beat,
+            estop=int(bool(st.bus.estop)),
         )
 
     async def _action(
@@ -209,9 +203,9 @@ class PlcTags:
             return False
         try:
             if isinstance(wanted, Command):
-                await self.controller.command(wanted, PLC_REASON)
+                await self.controller.command(wanted, PLC_REASON, PLC_WHO)
             else:
-                self.controller.packml.set_mode(wanted)
+                await self.controller.set_mode(wanted, PLC_WHO)
         except BwsdError as exc:
             log.warning("PLC: %s refused: %s", wanted.label, exc)
             return False
@@ -221,15 +215,10 @@ class PlcTags:
         return True
 
     # ----- what the daemon keeps -----
-    def _on_state(self, old: State, new: State, cause: str) -> None:
-        """A PackML listener: the good count and the stop reason code."""
-        if new is State.COMPLETE:
+    def _on_event(self, event: Event) -> None:
+        """The good count: programs that reached Complete."""
+        if isinstance(event, StateChanged) and event.new is State.COMPLETE:
             self._good = (self._good + 1) & U32
-        elif new is State.RESETTING:
-            self._stop_reason = StopReason.NONE
-        elif new in STOPS:
-            # the run loop stops while handling its error: the error is still in flight here
-            self._stop_reason = stop_reason(sys.exception(), self.controller.packml.reason)
 
     async def _beat_forever(self) -> None:
         loop = asyncio.get_running_loop()

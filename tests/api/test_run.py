@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import time
 from typing import Any
@@ -14,6 +15,7 @@ from bwsd.controller.packml import State
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
 from bwsd.twin import simulate
+from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
 from tests.api.skeletons import apply_delta, yarns_of
 from tests.fieldbus.conftest import client_config
@@ -197,24 +199,18 @@ def test_the_skeleton_in_json_tg3_and_vtp(live: Live, tmp_path):
     assert viewer.get("/skeleton", params={"format": "stl"}).status_code == 422
 
 
-def test_preview_works_on_a_copy_and_never_touches_the_twin(live: Live):
+def test_preview_predicts_on_the_twin_and_never_changes_it(live: Live):
     operator = live.client("operator")
     assert operator.post("/preview").status_code == 409
     assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
     before = operator.get("/skeleton").json()
     twin = live.controller.twin
-    calls: list[object] = []
-    real = twin.predict
-
-    def spy(instruction):
-        calls.append(instruction)
-        return real(instruction)
-
-    twin.predict = spy  # type: ignore[method-assign]
+    snapshot = twin.snapshot().to_bytes()
     answer = operator.post("/preview")
     assert answer.status_code == 200, answer.text
     preview = answer.json()
-    assert calls == [] and live.controller.twin is twin and twin.done == 0
+    assert live.controller.twin is twin and twin.done == 0
+    assert twin.snapshot().to_bytes() == snapshot  # not replayed aside, and nothing committed
     assert operator.get("/skeleton").json() == before
     program = parse_program(BRAID)
     assert (preview["index"], preview["line"], preview["refused"]) == (1, program.lines[0], None)
@@ -241,19 +237,20 @@ def test_unknown_programs_are_404_and_pages_are_bounded(live: Live):
     assert viewer.get("/nowhere").json() == {"error": "Not Found"}
 
 
-def test_bus_faults_the_controller_reports_show_in_the_bus_health(live: Live):
-    viewer, ctx = live.client("viewer"), live.app.state.ctx
-    ctx.forward(
-        {"event": "fault", "reason": "instruction 2: axis col2: jam", "cause": "DriveFault"}
-    )
-    state = viewer.get("/state").json()
-    assert state["bus"]["connected"] is True and state["last_fault"].endswith("jam")
-    ctx.forward({"event": "fault", "reason": "lost", "cause": "FieldbusConnectionError"})
-    assert viewer.get("/state").json()["bus"] == {"connected": False, "last_error": "lost",
-                                                  "checked": ANY}  # fmt: skip
-    ctx.forward({"event": "fault", "reason": "too many contacts", "cause": "RefusedMove"})
-    state = viewer.get("/state").json()
-    assert state["bus"]["last_error"] == "lost" and state["last_fault"] == "too many contacts"
+def test_the_bus_health_follows_each_read_and_clears_when_it_stops_being_true(live: Live, mock):
+    viewer = live.client("viewer")
+    control = ("127.0.0.1", mock.ports["control"])
+    assert viewer.get("/machine").status_code == 200
+    bus = viewer.get("/state").json()["bus"]
+    assert (bus["connected"], bus["last_error"], bus["estop"]) == (True, None, False)
+    asyncio.run(request(*control, {"cmd": "fault", "kind": "mute"}))
+    assert viewer.get("/machine").status_code == 503
+    bus = viewer.get("/state").json()["bus"]
+    assert bus["connected"] is False and "no answer" in bus["last_error"]
+    asyncio.run(request(*control, {"cmd": "clear"}))
+    assert viewer.get("/machine").status_code == 200
+    bus = viewer.get("/state").json()["bus"]
+    assert (bus["connected"], bus["last_error"]) == (True, None)  # no stale error
 
 
 def test_a_bus_that_is_gone_is_503_with_the_reason(live: Live, mock):
@@ -262,6 +259,6 @@ def test_a_bus_that_is_gone_is_503_with_the_reason(live: Live, mock):
     mock.stop()
     answer = viewer.get("/machine")
     assert answer.status_code == 503
-    assert "the bus cannot be read" in answer.json()["error"]
+    assert "the machine cannot be read" in answer.json()["error"]
     bus = viewer.get("/state").json()["bus"]
     assert bus["connected"] is False and bus["last_error"]

@@ -234,7 +234,7 @@ def test_abort_clear_stopped():
     assert packml.state_complete() is State.ABORTED
     assert packml.command(Command.CLEAR) is State.CLEARING
     assert packml.state_complete() is State.STOPPED
-    assert packml.reason == "e-stop"
+    assert packml.reason == ""  # cleared: what stopped it is no longer true
 
 
 def test_abort_while_clearing():
@@ -243,13 +243,17 @@ def test_abort_while_clearing():
     assert packml.command(Command.ABORT) is State.ABORTING
 
 
-def test_reason_kept_for_stop_abort_hold_and_cleared_on_reset():
+def test_reason_kept_for_stop_abort_hold_suspend_and_cleared_by_every_other_command():
     packml = executing()
     packml.command(Command.HOLD, reason="jam at carrier 3")
     packml.state_complete()
     assert packml.reason == "jam at carrier 3"
     packml.command(Command.UNHOLD, reason="ignored")
-    assert packml.reason == "jam at carrier 3"
+    assert packml.reason == ""  # resumed: the jam is no longer why it stands
+    packml.state_complete()
+    packml.command(Command.SUSPEND, reason="waiting for yarn")
+    assert packml.reason == "waiting for yarn"
+    packml.state_complete()
     packml.command(Command.STOP, reason="operator")
     assert packml.reason == "operator"
     packml.state_complete()

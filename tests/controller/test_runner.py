@@ -11,6 +11,7 @@ import pytest
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
 from bwsd.controller.runner import Controller, ControllerError
+from bwsd.controller.status import Event, InstructionDone
 from bwsd.fieldbus import AxisMove, open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program
@@ -64,10 +65,15 @@ def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
     run(scenario())
 
 
-def test_a_refused_move_aborts_with_its_reason_before_anything_moves(mock, tmp_path):
+def test_a_limit_refuses_the_program_at_load_and_a_move_at_run(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path, limits=Limits(tensioner_stroke=0.001))
+        with pytest.raises(ControllerError, match="instruction 1: .* beyond the tensioner"):
+            await ctl.load("braid.bws", TEXT)  # the limits are checked by the dry run
+        assert ctl.program is None and journal.history() == []
+        ctl.limits = Limits()
         pid = await ctl.load("braid.bws", TEXT)
+        ctl.limits = Limits(tensioner_stroke=0.001)  # and again before every move
         await ctl.command(Command.RESET)
         await ctl.command(Command.START)
         await ctl.wait()
@@ -198,19 +204,23 @@ def test_a_machine_in_neither_state_blocks_unhold(mock, tmp_path):
     run(scenario())
 
 
-def test_a_silent_bus_holds_with_the_reason(mock, tmp_path):
+def test_a_silent_bus_refuses_start_and_consumes_nothing(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
         await ctl.command(Command.RESET)
         await request("127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "mute"})
+        with pytest.raises(ControllerError, match="the machine cannot be read: .*no answer"):
+            await ctl.command(Command.START)
+        assert ctl.packml.state is State.IDLE
+        assert journal.program(pid).outcome == "loaded" and journal.pending(pid) is None
+        assert ctl.status().bus.connected is False and "no answer" in ctl.status().bus.last_error
+        await request("127.0.0.1", mock.ports["control"], {"cmd": "clear"})
         await ctl.command(Command.START)
         await ctl.wait()
-        assert ctl.packml.state is State.HELD
-        assert ctl.packml.reason.startswith("instruction 1: ")
-        assert journal.program(pid).outcome == "held"
-        assert journal.pending(pid) is None  # the bus was silent before anything was journaled
-        journal.close()
+        assert ctl.packml.state is State.COMPLETE
+        assert ctl.status().bus.last_error is None  # cleared once the machine answered again
+        await ctl.close()
 
     run(scenario())
 
@@ -264,11 +274,11 @@ def test_every_injected_fault_stops_with_its_reason_and_no_unpredicted_move(
         await ctl.command(Command.RESET)
         seen: list[int] = []
 
-        def inject(event: dict) -> None:
-            if event.get("event") == "instruction":
-                seen.append(event["index"])
+        def inject(event: Event) -> None:
+            if isinstance(event, InstructionDone):
+                seen.append(event.index)
 
-        ctl.publish = inject
+        ctl.events.subscribe(inject)
         await ctl.command(Command.START)
         while not seen:
             await asyncio.sleep(0.001)

@@ -213,8 +213,9 @@ def test_a_drive_fault_reads_stop_reason_2_until_reset(mock, tmp_path):
 
 def test_a_refused_move_reads_stop_reason_1(mock, tmp_path):
     async def scenario() -> None:
-        async with rig(mock, tmp_path, limits=Limits(tensioner_stroke=0.001)) as (ctl, _, plc):
+        async with rig(mock, tmp_path) as (ctl, _, plc):
             await ctl.load("braid.bws", TEXT)
+            ctl.limits = Limits(tensioner_stroke=0.001)  # tightened after the load's dry run
             await plc.command(RESET)
             await plc.command(START)
             aborted = await plc.until(lambda t: t.state_current == State.ABORTED)
