@@ -177,6 +177,7 @@ class Controller:
         self._snapped = 0  # instructions done at the last snapshot
         self._background: set[asyncio.Task[Any]] = set()
         self._recovery: asyncio.Task[None] | None = None
+        self._unrecorded: tuple[int, str, str] | None = None  # an outcome not yet journaled
 
     # ----- what the doors read -----
     @property
@@ -239,6 +240,7 @@ class Controller:
         twin = await asyncio.to_thread(Twin.from_program, self.machine, program)
         async with self._lock:
             self._refuse_load()
+            await self._record_late()
             pid = await self._writer.run(self.journal.add_program, name, text,
                                          len(program.instructions))  # fmt: skip
             self.program, self.program_id, self.program_name = program, pid, name
@@ -292,6 +294,8 @@ class Controller:
             said = f"{command.label} from {who or '?'}" + (f": {reason}" if reason else "")
             log.info("command %s", said)
             try:
+                if command is not Command.ABORT:
+                    await self._record_late()
                 if command in _READS_FIRST:
                     await self._prepare(command)
                 refusal = self._refusal(command)
@@ -531,16 +535,30 @@ class Controller:
         """
         if self.program_id is None or self._finished:
             return
+        record = (self.program_id, outcome, self.packml.reason)
         try:
-            await self._writer.run(self.journal.set_outcome, self.program_id, outcome,
-                                   self.packml.reason)  # fmt: skip
+            await self._writer.run(self.journal.set_outcome, *record)
         except Exception as exc:
             if outcome == RUNNING:
                 raise
-            log.exception("the journal cannot record %s", outcome)
+            log.error("the journal cannot record %s: %s (retried at the next command)", outcome,
+                      exc)  # fmt: skip
             self.events.publish(Fault(f"the journal cannot record {outcome}: {exc}",
                                       StopCause.INTERNAL))  # fmt: skip
+            self._unrecorded = record
         self._finished = outcome in (COMPLETE, ABORTED, STOPPED)
+
+    async def _record_late(self) -> None:
+        """Write an outcome the journal could not take when it came (a full disk)."""
+        if self._unrecorded is None:
+            return
+        try:
+            await self._writer.run(self.journal.set_outcome, *self._unrecorded)
+        except Exception as exc:
+            raise ControllerError(f"the journal still cannot record that program "
+                                  f"{self._unrecorded[0]} is {self._unrecorded[1]}: {exc}") from exc
+        log.info("program %d recorded %s", self._unrecorded[0], self._unrecorded[1])
+        self._unrecorded = None
 
     def _on_state(self, old: State, new: State, cause: str) -> None:
         reason = self.packml.reason

@@ -68,7 +68,7 @@ def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
 def test_a_limit_refuses_the_program_at_load_and_a_move_at_run(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path, limits=Limits(tensioner_stroke=0.001))
-        with pytest.raises(ControllerError, match="instruction 1: .* beyond the tensioner"):
+        with pytest.raises(ControllerError, match=r"instruction 1: .* beyond the tensioner"):
             await ctl.load("braid.bws", TEXT)  # the limits are checked by the dry run
         assert ctl.program is None and journal.history() == []
         ctl.limits = Limits()
@@ -210,7 +210,7 @@ def test_a_silent_bus_refuses_start_and_consumes_nothing(mock, tmp_path):
         pid = await ctl.load("braid.bws", TEXT)
         await ctl.command(Command.RESET)
         await request("127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "mute"})
-        with pytest.raises(ControllerError, match="the machine cannot be read: .*no answer"):
+        with pytest.raises(ControllerError, match=r"the machine cannot be read: .*no answer"):
             await ctl.command(Command.START)
         assert ctl.packml.state is State.IDLE
         assert journal.program(pid).outcome == "loaded" and journal.pending(pid) is None

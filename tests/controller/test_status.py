@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 
 from bwsd.config import parse_config
+from bwsd.controller.packml import State
 from bwsd.controller.plan import Mismatch, RefusedMove
+from bwsd.controller.status import EventStream, Fault, StateChanged, StopCause, cause_of
 from bwsd.errors import MoveError, TwinError
 from bwsd.fieldbus.axes import machine_axes
 from bwsd.fieldbus.base import (
@@ -18,8 +20,6 @@ from bwsd.fieldbus.base import (
     FieldbusError,
     FieldbusTimeout,
 )
-from bwsd.controller.packml import State
-from bwsd.controller.status import EventStream, Fault, StateChanged, StopCause, cause_of
 from bwsd.plc import StopReason
 from tests.fieldbus.conftest import MACHINE
 
