@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from bwsd.api.auth import TokenStore  # noqa: E402
 from bwsd.config import load_config  # noqa: E402
+from bwsd.paths import state_folder, tokens_file  # noqa: E402
 from bwsd.program.generators import braid4  # noqa: E402
 from tests.fieldbus.conftest import BUS, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
@@ -60,9 +61,9 @@ def start(tmp: Path, program: str) -> tuple[Any, Served]:
         "fieldbus.modbus": {"port": int(ports["modbus"])},
         "api": {"port": 0}, "plc": {"port": 0},
     }))  # fmt: skip
-    state = tmp / "state"
-    state.mkdir()
-    token = TokenStore.load(state / "tokens.json").add("bench", "operator")
+    state = state_folder(tmp / "state")
+    tokens = tokens_file(load_config(tmp / "bwsd.toml"), state)
+    token = TokenStore.load(tokens).add("bench", "operator")
     return mock, Served(tmp / "bwsd.toml", state, token)
 
 

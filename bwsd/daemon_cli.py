@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from bwsd.config import load_config
-from bwsd.daemon import Daemon, serve, state_folder
+from bwsd.daemon import Daemon, serve
+from bwsd.paths import journal_file, state_folder, tokens_file
 
 ROOT = Path(__file__).resolve().parent.parent  # the source tree: examples/ and config/
 DEMO_CONFIG = ROOT / "config" / "loom.toml"
@@ -43,9 +44,10 @@ def _serve_cmd(args: argparse.Namespace) -> int:
 
 
 def _demo_cmd(args: argparse.Namespace) -> int:
-    state_dir = Path(args.state_dir)
-    for stale in ("journal.db", "journal.db-wal", "journal.db-shm", "journal.db-lock"):
-        (state_dir / stale).unlink(missing_ok=True)  # a demo starts from scratch
+    state_dir = state_folder(args.state_dir)
+    journal = journal_file(load_config(DEMO_CONFIG), state_dir)
+    for suffix in ("", "-wal", "-shm", "-lock"):  # a demo starts from scratch
+        journal.with_name(journal.name + suffix).unlink(missing_ok=True)
     mock = subprocess.Popen(
         [sys.executable, "-m", "simulator_hw", "--config", str(DEMO_CONFIG), "--program",
          str(DEMO_PROGRAM)],
@@ -58,7 +60,7 @@ def _demo_cmd(args: argparse.Namespace) -> int:
             print(f"bwsd: error: the mock loom did not start: {line.strip()}", file=sys.stderr)
             return 2
         print(f"mock loom: {line.strip()[6:]}")
-        return asyncio.run(_demo(state_folder(str(state_dir)), args.exit_when_done))
+        return asyncio.run(_demo(state_dir, args.exit_when_done))
     finally:
         mock.terminate()
         mock.wait(timeout=20)
@@ -70,7 +72,7 @@ async def _demo(state_dir: Path, exit_when_done: bool) -> int:
     from bwsd.daemon import start, stop
 
     config = load_config(DEMO_CONFIG)
-    tokens = TokenStore.load(state_dir / config.table("api")["tokens_file"])
+    tokens = TokenStore.load(tokens_file(config, state_dir))
     token = tokens.add(f"demo-{len(tokens.entries) + 1}", "operator")
     daemon = await start(config, state_dir)
     ctl = daemon.controller

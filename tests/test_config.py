@@ -107,7 +107,12 @@ def test_modbus_map_limits_the_matrix():
 def test_daemon_tables_defaults_and_flags():
     cfg = parse_config(GOOD)
     assert cfg.table("api")["open_reads"] is False and cfg.table("plc")["enabled"] is True
-    assert cfg.table("controller") == {"max_contacts": 0, "tensioner_stroke": 0.0}
+    assert cfg.table("controller") == {
+        "max_contacts": 0,
+        "tensioner_stroke": 0.0,
+        "max_instructions": 1_000_000,
+        "snapshot_every": 200,
+    }
     with pytest.raises(ConfigError, match=r"\[api.open_reads\]: must be true or false"):
         parse_config({**GOOD, "api": {"open_reads": 1}})
 

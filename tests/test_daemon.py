@@ -7,6 +7,7 @@ that the journal holds every instruction exactly once.
 
 from __future__ import annotations
 
+import asyncio
 import os
 import random
 import signal
@@ -26,6 +27,7 @@ from bwsd.config import parse_config
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
 from bwsd.twin import simulate
+from simulator_hw.control import request
 from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
@@ -71,6 +73,14 @@ class Served:
 
     def command(self, name: str) -> None:
         self.http.post(f"/commands/{name}", json={}).raise_for_status()
+
+    def recovered(self, limit: float = 60) -> dict[str, Any]:
+        """The state once the twin is rebuilt (commands wait while it is)."""
+        deadline = time.monotonic() + limit
+        while (state := self.state())["recovering"].startswith("rebuilding"):
+            assert time.monotonic() < deadline, state["recovering"]
+            time.sleep(0.02)
+        return state
 
     def wait_for(self, names: set[str], limit: float = 120) -> dict[str, Any]:
         deadline = time.monotonic() + limit
@@ -141,7 +151,7 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
         assert served.state()["index"] < LONG_STEPS - 10, f"LONG is too short for {KILLS} kills"
         served.kill()
         served = Served(config, state, token)
-        now = served.state()
+        now = served.recovered()
         assert now["name"] == "Held" and now["reason"].startswith("restarted"), (
             f"after kill {kill + 1}: {now['name']}: {now['reason']} at {now['index']}"
         )
@@ -157,6 +167,38 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
     journal.close()
     assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
+
+
+def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(rig):
+    config, state, token, mock = rig
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "braid.bws", "text": TEXT}).raise_for_status()
+    served.command("reset")
+    served.command("start")
+    while served.state()["index"] < 6:
+        time.sleep(0.01)
+    served.kill()
+    control = ("127.0.0.1", mock.ports["control"])
+    asyncio.run(request(*control, {"cmd": "fault", "kind": "mute"}))
+    served = Served(config, state, token)  # answers although the loom does not
+    try:
+        now = served.recovered()
+        assert now["name"] == "Held" and now["stop_cause"] == "restart", now
+        refused = served.http.post("/commands/unhold", json={})
+        assert refused.status_code == 409 and "cannot be read" in refused.json()["error"]
+        assert served.state()["bus"]["connected"] is False
+        asyncio.run(request(*control, {"cmd": "clear"}))
+        deadline = time.monotonic() + 30
+        while not served.state()["bus"]["connected"]:  # the watch task reads it again
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        served.command("unhold")
+        final = served.wait_for({"Complete", "Held", "Aborted"})
+        assert final["name"] == "Complete", final["reason"]
+        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
+        assert same_geometry(skeleton, expected_skeleton())
+    finally:
+        served.stop()
 
 
 def test_serve_talks_to_systemd(rig, tmp_path):

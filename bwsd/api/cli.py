@@ -5,20 +5,20 @@
     bwsd token remove NAME --config C                             revokes it
 
 The file is the config's ``[api] tokens_file``; a relative path is taken from the daemon's
-state folder (``--state-dir``, else ``$STATE_DIRECTORY``, else the current folder).
+state folder, found as `bwsd serve` finds it (``--state-dir``, else ``$STATE_DIRECTORY``,
+else ``./state``; see bwsd.paths). ``add`` creates the folder when it is missing.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 from bwsd.api.auth import ROLES, TokenStore
-from bwsd.config import Config, load_config
+from bwsd.config import load_config
+from bwsd.paths import state_folder, tokens_file
 
 
 def configure(sub: Any) -> None:
@@ -36,24 +36,21 @@ def configure(sub: Any) -> None:
     remove.set_defaults(handler=_remove)
     for parser in (add, listing, remove):
         parser.add_argument("--config", required=True, help="daemon config (TOML)")
-        parser.add_argument("--state-dir", help="the daemon's state folder")
+        parser.add_argument("--state-dir", help="the daemon's state folder "
+                            "(default: $STATE_DIRECTORY, else ./state)")  # fmt: skip
 
 
-def tokens_path(config: Config, state_dir: str | Path | None = None) -> Path:
-    """Where the config's token file is; relative paths start at the state folder."""
-    path = Path(config.table("api")["tokens_file"])
-    if path.is_absolute():
-        return path
-    env = os.environ.get("STATE_DIRECTORY", "").split(":")[0]
-    return Path(state_dir or env or ".") / path
-
-
-def _store(args: argparse.Namespace) -> TokenStore:
-    return TokenStore.load(tokens_path(load_config(args.config), args.state_dir))
+def _store(args: argparse.Namespace, *, create: bool = False) -> TokenStore:
+    """The token store of ``--config`` in the state folder (made first when ``create``)."""
+    config = load_config(args.config)
+    path = tokens_file(config, state_folder(args.state_dir, create=create))
+    if create:
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    return TokenStore.load(path)
 
 
 def _add(args: argparse.Namespace) -> int:
-    store = _store(args)
+    store = _store(args, create=True)
     token = store.add(args.name, args.role)
     print(token)
     print(f"token {args.name!r} ({args.role}) added to {store.path}; it is not shown again",

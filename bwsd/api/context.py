@@ -9,11 +9,11 @@ from fastapi import Depends, Request
 
 from bwsd.controller.packml import State
 from bwsd.controller.runner import Controller
-from bwsd.controller.status import Event, Fault, InstructionDone, StateChanged
+from bwsd.controller.status import Event, Fault, StateChanged
 
 from .events import EventHub
 from .metrics import Metrics
-from .view import SkeletonView, wire_step
+from .view import SkeletonView
 
 
 @dataclass
@@ -37,10 +37,7 @@ class Context:
     def forward(self, event: Event) -> None:
         """Complete one controller event, count it, and send it to every client."""
         out = event.wire()
-        if isinstance(event, InstructionDone):
-            out["skeleton"] = self.view.after_instruction()
-            out["next"] = wire_step(self.controller.next_step())
-        elif isinstance(event, Fault):
+        if isinstance(event, Fault):
             self.last_fault = event.reason
         elif isinstance(event, StateChanged) and event.new is State.RESETTING:
             self.last_fault = None  # what stopped the machine is history once it is reset

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 from fastapi import Depends
 
 from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
-from bwsd.controller.runner import Controller, ControllerError
+from bwsd.controller.runner import Controller, ControllerError, instruction_dict
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction
@@ -39,7 +39,7 @@ from .models import (
 )
 from .problems import ApiError, describe
 from .routing import RouteTable
-from .view import instruction_dict, wire_step
+from .view import wire_step
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]

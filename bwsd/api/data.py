@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import tempfile
 import threading
@@ -13,7 +14,7 @@ from typing import Annotated, Literal, TypeVar
 
 from fastapi import Depends, Query, Request
 from fastapi import Path as PathParam
-from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
 from bwsd.controller.runner import Busy, ControllerError
@@ -21,7 +22,7 @@ from bwsd.errors import ProgramError, TwinError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program_with_positions, validate
-from bwsd.twin import Machine
+from bwsd.twin import Machine, SkeletonData
 
 from .auth import Principal, require
 from .context import Ctx
@@ -183,7 +184,8 @@ async def get_skeleton(
     if sk is None:
         raise ApiError(409, "no program is loaded")
     if fmt == "json":
-        return JSONResponse(skeleton_to_dict(sk))
+        body = await asyncio.to_thread(_json, sk)  # the size of the preform: not on the loop
+        return Response(body, media_type="application/json")
     folder = Path(tempfile.mkdtemp(prefix="bwsd-skeleton-"))
     target = folder / f"skeleton.{fmt}"
     try:
@@ -196,6 +198,16 @@ async def get_skeleton(
         raise
     return FileResponse(target, media_type=MEDIA[fmt], filename=target.name,
                         background=BackgroundTask(_remove, folder))  # fmt: skip
+
+
+def _json(sk: SkeletonData) -> bytes:
+    """The skeleton document, encoded yarn by yarn: the C encoder holds the interpreter lock
+    for a whole call, so one call for the whole preform would stall the event loop."""
+    document = skeleton_to_dict(sk)
+    yarns = document.pop("yarns")
+    head = json.dumps(document, separators=(",", ":"))
+    parts = [json.dumps(yarn, separators=(",", ":")) for yarn in yarns]
+    return (head[:-1] + ',"yarns":[' + ",".join(parts) + "]}").encode()
 
 
 def _remove(folder: Path) -> None:

@@ -75,8 +75,10 @@ class StateOut(BaseModel):
     index: int = Field(description="instructions done of the loaded program")
     count: int = Field(description="instructions in the loaded program")
     reason: str = Field(description="why the machine stopped, held, suspended or aborted")
-    stop_cause: str = Field(description="the cause of the last stop: none, refused_move, "
-                            "drive_fault, estop, bus, mismatch, operator, restart, internal")
+    stop_cause: str = Field(
+        description="the cause of the last stop: none, refused_move, "
+        "drive_fault, estop, bus, mismatch, operator, restart, internal"
+    )
     allowed: list[str] = Field(description="exactly the commands that will be accepted now")
     recovering: str = Field(description="why commands wait after a restart ('' if they do not)")
     bus: BusHealth

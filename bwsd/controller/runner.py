@@ -25,7 +25,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from bwsd.controller.packml import Command, PackML, State, UnitMode
@@ -45,6 +45,7 @@ from bwsd.controller.status import (
     cause_of,
 )
 from bwsd.errors import BwsdError, ProgramError, TwinError
+from bwsd.export.skeleton_json import delta_to_dict
 from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
     DriveFault,
@@ -455,9 +456,8 @@ class Controller:
         instruction = self.program.instructions[index - 1]
         begun = time.perf_counter()
         try:
-            pred = await asyncio.to_thread(self.twin.predict, instruction)
+            pred = await asyncio.to_thread(_predict, self.twin, instruction, self.limits)
             self._timing = {"predict_s": time.perf_counter() - begun}
-            check_limits(pred, self.limits)
         except (TwinError, RefusedMove) as exc:
             return Aborted(StopCause.REFUSED_MOVE, str(exc))
         try:
@@ -505,8 +505,12 @@ class Controller:
         return state.axes[axis_by_name(self.machine, "takeup").index].position
 
     async def _commit(self, pred: Prediction, index: int) -> None:
+        """Commit, journal "done" (and a snapshot when due), publish; the twin's work and the
+        skeleton's change are done in a worker thread (the twin's lock is never waited on here).
+        """
         assert self.twin is not None and self.program_id
-        self.twin.commit(pred)
+        twin = self.twin
+        delta = await asyncio.to_thread(_commit_twin, twin, pred)
         self.last = pred
         self._journaled, self._pending = None, None
         begun = time.perf_counter()
@@ -516,8 +520,11 @@ class Controller:
             await self._snapshot()
         self._timing["journal_s"] = time.perf_counter() - begun
         self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
+        step = self.next_step()
+        wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
         self.events.publish(InstructionDone(self.program_id, index, len(pred.contacts),
-                                            len(pred.inserted), self._timing))  # fmt: skip
+                                            len(pred.inserted), self._timing, delta,
+                                            wire))  # fmt: skip
         self._timing = {}
 
     async def _snapshot(self) -> None:
@@ -555,8 +562,10 @@ class Controller:
         try:
             await self._writer.run(self.journal.set_outcome, *self._unrecorded)
         except Exception as exc:
-            raise ControllerError(f"the journal still cannot record that program "
-                                  f"{self._unrecorded[0]} is {self._unrecorded[1]}: {exc}") from exc
+            raise ControllerError(
+                f"the journal still cannot record that program "
+                f"{self._unrecorded[0]} is {self._unrecorded[1]}: {exc}"
+            ) from exc
         log.info("program %d recorded %s", self._unrecorded[0], self._unrecorded[1])
         self._unrecorded = None
 
@@ -637,8 +646,10 @@ class Controller:
                     state = await self.read_machine()
                 except ControllerError:
                     continue
-                if self._journaled is not None and self.packml.state in (State.HELD,
-                                                                         State.SUSPENDED):
+                if self._journaled is not None and self.packml.state in (
+                    State.HELD,
+                    State.SUSPENDED,
+                ):
                     await self._settle_pending(state)
 
     # ----- settling a pending instruction (after a fault hold or a restart) -----
@@ -723,7 +734,7 @@ class Controller:
         self._journaled = pending.index if pending is not None else None
         if pending is None:
             self._recovering = ""
-            self.packml.reason = (f"restarted at instruction {record.done}: resume with Unhold")
+            self.packml.reason = f"restarted at instruction {record.done}: resume with Unhold"
         else:
             self._recovering = (f"instruction {pending.index} started and not done: reading "
                                 "the machine")  # fmt: skip
@@ -757,6 +768,7 @@ class Controller:
 
     def _journal_later(self, fn: Callable[..., Any], *args: Any) -> None:
         """A journal write nobody waits for (a state or event log), in order with the rest."""
+
         async def write() -> None:
             try:
                 await self._writer.run(fn, *args)
@@ -779,6 +791,25 @@ class Controller:
         if pending:
             await asyncio.wait(pending)
         await self._writer.close()
+
+
+def _predict(twin: Twin, instruction: Instruction, limits: Limits) -> Prediction:
+    """Predict and check the limits (in a worker thread); the tables events read are built."""
+    pred = twin.predict(instruction)
+    check_limits(pred, limits)
+    _ = pred.contacts, pred.inserted
+    return pred
+
+
+def _commit_twin(twin: Twin, pred: Prediction) -> dict[str, Any]:
+    """Commit ``pred`` and describe the skeleton's change (in a worker thread)."""
+    twin.commit(pred)
+    return delta_to_dict(twin, pred)
+
+
+def instruction_dict(instruction: Instruction) -> dict[str, Any]:
+    """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
+    return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
 
 
 def _cells(cells: tuple[tuple[int, int], ...]) -> str:

@@ -131,10 +131,13 @@ class InstructionDone(Event):
     contacts: int
     inserted: int
     timing: dict[str, float]
+    skeleton: dict[str, Any]  # the skeleton's change (bwsd.export.skeleton_json.delta_to_dict)
+    next: dict[str, Any] | None  # the instruction that runs next, with its line
 
     def wire(self) -> dict[str, Any]:
         return {**super().wire(), "program_id": self.program_id, "index": self.index,
-                "contacts": self.contacts, "inserted": self.inserted, **self.timing}  # fmt: skip
+                "contacts": self.contacts, "inserted": self.inserted, **self.timing,
+                "skeleton": self.skeleton, "next": self.next}  # fmt: skip
 
 
 @dataclass(frozen=True)

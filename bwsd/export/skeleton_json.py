@@ -12,6 +12,8 @@ import numpy as np
 
 from bwsd.export.errors import ExportError
 from bwsd.twin.machine import Machine
+from bwsd.twin.model import Twin
+from bwsd.twin.prediction import Prediction
 from bwsd.twin.skeleton import ContactData, SkeletonData, YarnData
 
 SCHEMA = "bwsd-skeleton"
@@ -67,6 +69,37 @@ def write_skeleton_json(sk: SkeletonData, path: str | Path) -> None:
         Path(path).write_text(text + "\n", encoding="utf-8")
     except OSError as exc:
         raise ExportError(f"cannot write: {exc.strerror}", path=str(path)) from exc
+
+
+def delta_to_dict(twin: Twin, pred: Prediction) -> dict[str, Any]:
+    """The skeleton's change by ``pred``, just committed to ``twin`` (nothing committed since).
+
+    As in the "instruction" event of docs/api.md: apply it to a copy at ``since`` instructions.
+
+    ``inserted`` nodes come in yarn order, so each one's ``after`` is in place before it.
+    """
+    first_new = min(pred.new_yarns, default=twin.yarn_count)
+    return {
+        "since": pred.index - 1,
+        "inserted": [
+            {"yarn": n.yarn, "node": n.node, "after": n.after, "xyz": _xyz(n.xyz)}
+            for n in pred.inserted
+            if n.yarn < first_new
+        ],
+        "moved": [
+            {"yarn": w, "node": twin.free_node(w), "xyz": _xyz(xyz)}
+            for w, xyz in sorted(pred.free_nodes.items())
+            if w < first_new
+        ],
+        "new_yarns": [yarn_to_dict(twin.yarn(i)) for i in pred.new_yarns],
+        "contacts": [contact_to_dict(c) for c in pred.contacts],
+        "takeup": float(pred.takeup),
+        "occupancy": pred.occupancy.tolist(),
+    }
+
+
+def _xyz(xyz: Any) -> list[float]:
+    return [float(v) for v in xyz]
 
 
 def _yarn_from_dict(d: Mapping[str, Any]) -> YarnData:

@@ -1,9 +1,11 @@
-"""The daemon's durable record: programs, instructions, events and states (docs/journal.md).
+"""The daemon's durable record: programs, instructions, twin snapshots, events and states
+(docs/journal.md).
 
 SQLite in WAL mode with ``synchronous=FULL``: a write returns once it is on disk. The
 journal records "instruction i started" before the actuators move and "instruction i done"
-after the twin commits; on restart the twin is rebuilt from the program text and the done
-instructions, and the one pending instruction, if any, is completed or reported.
+after the twin commits; on restart the twin is rebuilt from the program text, its newest
+snapshot if any and the done instructions after it, and the one pending instruction, if
+any, is completed or reported.
 """
 
 from bwsd.journal.records import (
@@ -26,6 +28,7 @@ from bwsd.journal.records import (
 )
 from bwsd.journal.schema import SCHEMA_VERSION
 from bwsd.journal.store import Journal
+from bwsd.journal.writer import JournalWriter
 
 __all__ = [
     "ABORTED",
@@ -43,6 +46,7 @@ __all__ = [
     "InstructionRecord",
     "Journal",
     "JournalError",
+    "JournalWriter",
     "PendingInstruction",
     "ProgramRecord",
     "StateRecord",

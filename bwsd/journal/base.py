@@ -17,7 +17,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from bwsd.journal import codec
-from bwsd.journal.check import problems
+from bwsd.journal.check import damage, invariants
 from bwsd.journal.records import JournalError
 from bwsd.journal.schema import connect, lock
 
@@ -82,9 +82,22 @@ class Store:
             return {name: conn.execute(f"PRAGMA {name}").fetchone()[0] for name in names}
 
     def check(self) -> None:
-        """Verify the file (SQLite quick check) and the journal's invariants; raise if broken."""
+        """Verify the file (SQLite quick check) and the journal's invariants; raise if broken.
+
+        A JournalError naming the file: ``damaged: ...`` when pages of the file are lost or
+        overwritten, ``inconsistent: ...`` with every broken invariant otherwise. Cheap
+        enough for every start-up (docs/journal.md).
+        """
         with self._read() as conn:
-            found = problems(conn)
+            try:
+                broken = damage(conn)
+                found = [] if broken else invariants(conn)
+            except sqlite3.OperationalError:
+                raise  # busy, I/O error: "cannot read"
+            except sqlite3.DatabaseError as exc:  # SQLite found the file corrupt
+                raise self._error(f"damaged: {exc}") from exc
+        if broken:
+            raise self._error("damaged: SQLite quick check: " + "; ".join(broken))
         if found:
             raise self._error("inconsistent: " + "; ".join(found))
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from bwsd.journal.records import ACTIVE, FINAL, OUTCOMES, JournalError
 
-SCHEMA_VERSION = 1  # PRAGMA user_version
+SCHEMA_VERSION = 2  # PRAGMA user_version; a version-1 file is upgraded in place on open
 APPLICATION_ID = 0x62777364  # PRAGMA application_id: "bwsd" in ASCII
 BUSY_TIMEOUT_MS = 5000  # readers in other processes may hold the WAL briefly
 
@@ -18,7 +18,7 @@ _OUTCOMES = ", ".join(f"'{o}'" for o in OUTCOMES)
 _ACTIVE = ", ".join(f"'{o}'" for o in ACTIVE)
 _FINAL = ", ".join(f"'{o}'" for o in FINAL)
 
-SCHEMA = f"""
+_BASE = f"""
 CREATE TABLE programs (
     id INTEGER PRIMARY KEY,
     name TEXT NOT NULL CHECK (name <> ''),
@@ -79,7 +79,27 @@ CREATE TABLE states (
     reason TEXT NOT NULL
 );
 """
-TABLES = ("events", "instructions", "programs", "states")
+# Version 2: twin snapshots, so that a restart replays only the instructions done after the
+# newest one. Kept for active programs only (set_outcome deletes them when a program ends).
+_SNAPSHOTS = f"""
+CREATE TABLE snapshots (
+    program_id INTEGER NOT NULL REFERENCES programs (id),
+    idx INTEGER NOT NULL CHECK (idx >= 0),
+    data BLOB NOT NULL,
+    sha256 TEXT NOT NULL CHECK (length(sha256) = 64),
+    created REAL NOT NULL,
+    PRIMARY KEY (program_id, idx)
+) WITHOUT ROWID;
+CREATE TRIGGER snapshots_within_done BEFORE INSERT ON snapshots
+WHEN NEW.idx > (SELECT done FROM programs WHERE id = NEW.program_id)
+    OR coalesce((SELECT outcome FROM programs WHERE id = NEW.program_id), '') NOT IN ({_ACTIVE})
+BEGIN SELECT RAISE(ABORT, 'snapshot beyond the instructions done or outside a run'); END;
+"""
+SCHEMA = _BASE + _SNAPSHOTS
+# The script that takes a file from version N to N + 1, and the tables each version added.
+UPGRADES = {1: _SNAPSHOTS}
+ADDED = {2: ("snapshots",)}
+TABLES = ("events", "instructions", "programs", "snapshots", "states")
 
 
 def lock(path: Path) -> int:
@@ -108,10 +128,12 @@ def connect(path: Path) -> sqlite3.Connection:
     except sqlite3.Error as exc:
         raise JournalError(f"cannot open: {exc}", path=where) from exc
     try:
-        fresh = _identify(conn, where)
+        version = _identify(conn, where)
         _configure(conn, where)
-        if fresh:
+        if version == 0:
             _create(conn)
+        elif version < SCHEMA_VERSION:
+            _upgrade(conn, version, where)
     except sqlite3.Error as exc:
         conn.close()
         raise JournalError(f"not a usable journal: {exc}", path=where) from exc
@@ -123,25 +145,27 @@ def connect(path: Path) -> sqlite3.Connection:
     return conn
 
 
-def _identify(conn: sqlite3.Connection, where: str) -> bool:
-    """True for an empty database; raise unless the file is a journal of this schema."""
+def _identify(conn: sqlite3.Connection, where: str) -> int:
+    """The file's schema version, 0 for an empty database; raise unless it is a journal of
+    this schema or an older one this bwsd upgrades."""
     app_id = conn.execute("PRAGMA application_id").fetchone()[0]
     version = conn.execute("PRAGMA user_version").fetchone()[0]
     tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     if app_id == 0 and version == 0 and not tables:
-        return True
+        return 0
     if app_id != APPLICATION_ID:
         raise JournalError(f"not a bwsd journal (application id {app_id:#x}, tables: "
                            f"{', '.join(sorted(tables)) or 'none'})", path=where)  # fmt: skip
     if version > SCHEMA_VERSION:
         raise JournalError(f"written by a newer bwsd (schema version {version}; this bwsd "
                            f"reads version {SCHEMA_VERSION})", path=where)  # fmt: skip
-    if version != SCHEMA_VERSION:
+    if version != SCHEMA_VERSION and version not in UPGRADES:
         raise JournalError(f"unknown schema version {version} (this bwsd reads version "
                            f"{SCHEMA_VERSION})", path=where)  # fmt: skip
-    if missing := set(TABLES) - tables:
+    later = {name for v, names in ADDED.items() if v > version for name in names}
+    if missing := set(TABLES) - later - tables:
         raise JournalError(f"damaged: missing tables {', '.join(sorted(missing))}", path=where)
-    return False
+    return int(version)
 
 
 def _configure(conn: sqlite3.Connection, where: str) -> None:
@@ -164,6 +188,30 @@ def _create(conn: sqlite3.Connection) -> None:
         conn.execute("COMMIT")
     except BaseException:
         conn.execute("ROLLBACK")
+        raise
+
+
+def _upgrade(conn: sqlite3.Connection, version: int, where: str) -> None:
+    """Bring a file of an older schema to this one in one transaction: a crash leaves it at
+    its old version, whole, and the next open upgrades it again."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        found = conn.execute("PRAGMA user_version").fetchone()[0]
+        if found != version:  # only this process writes; a mismatch means the file changed
+            raise JournalError(f"schema version changed from {version} to {found} while "
+                               "opening", path=where)  # fmt: skip
+        for step in range(version, SCHEMA_VERSION):
+            for statement in _statements(UPGRADES[step]):
+                conn.execute(statement)
+        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        conn.execute("COMMIT")
+    except BaseException as exc:
+        if conn.in_transaction:
+            with contextlib.suppress(sqlite3.Error):
+                conn.execute("ROLLBACK")
+        if isinstance(exc, sqlite3.Error):
+            raise JournalError(f"cannot upgrade from schema version {version}: {exc}",
+                               path=where) from exc  # fmt: skip
         raise
 
 

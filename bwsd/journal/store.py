@@ -1,4 +1,4 @@
-"""The journal: programs and their instructions, every write one SQLite transaction.
+"""The journal: programs, their instructions and twin snapshots, every write one transaction.
 
 Write order is checked twice: here, with messages naming the program and instruction, and
 by the schema's triggers (schema.py), so that no code path can journal an instruction out
@@ -8,6 +8,7 @@ of order.
 from __future__ import annotations
 
 import hashlib
+import logging
 import sqlite3
 from typing import Any
 
@@ -29,6 +30,8 @@ from bwsd.journal.records import (
 _PROGRAM = ("SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
             "reason FROM programs")  # fmt: skip
 _ACTIVE_SQL = ", ".join("?" for _ in ACTIVE)
+_log = logging.getLogger(__name__)
+SNAPSHOTS_KEPT = 2  # twin snapshots kept per program: the newest, and one if it is damaged
 
 
 class Journal(EventLog):
@@ -102,6 +105,8 @@ class Journal(EventLog):
                 "finished = CASE WHEN ? THEN ? ELSE finished END WHERE id = ?",
                 (outcome, reason, outcome == RUNNING, now, outcome in FINAL, now, program_id),
             )
+            if outcome in FINAL:  # a finished program is never resumed: its snapshots go
+                conn.execute("DELETE FROM snapshots WHERE program_id = ?", (program_id,))
 
     def _check_outcome(self, conn: sqlite3.Connection, rec: ProgramRecord, outcome: str) -> None:
         if rec.outcome in FINAL:
@@ -198,6 +203,62 @@ class Journal(EventLog):
             InstructionRecord(program_id, idx, t0, codec.load(p0), t1, codec.load_optional(p1))
             for idx, t0, p0, t1, p1 in rows
         ]
+
+    # -- twin snapshots ---------------------------------------------------------------------
+
+    def save_snapshot(self, program_id: int, index: int, data: bytes) -> None:
+        """Keep the twin's state after instruction ``index`` (0: before the first) as ``data``.
+
+        The program must be active and have ``index`` instructions done or more. Only its
+        newest ``SNAPSHOTS_KEPT`` snapshots are kept; saving one deletes older ones in the same
+        transaction, and saving at an index already kept replaces it.
+        """
+        if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+            raise self._error(f"snapshot index must be an integer >= 0, got {index!r}",
+                              program=program_id)  # fmt: skip
+        if not isinstance(data, bytes | bytearray | memoryview) or not len(data):
+            raise self._error(f"snapshot must be non-empty bytes, got {type(data).__name__}",
+                              program=program_id, index=index)  # fmt: skip
+        blob = bytes(data)
+        digest = hashlib.sha256(blob).hexdigest()
+        with self._write() as conn:
+            rec = self._program(conn, program_id, index)
+            if rec.outcome not in ACTIVE:
+                raise self._error(f"the program is {rec.outcome}: snapshots are kept only while "
+                                  "it is active", program=program_id, index=index)  # fmt: skip
+            if index > rec.done:
+                raise self._error(f"snapshot beyond the instructions done ({rec.done})",
+                                  program=program_id, index=index)  # fmt: skip
+            conn.execute(
+                "INSERT INTO snapshots (program_id, idx, data, sha256, created) "
+                "VALUES (?, ?, ?, ?, ?) ON CONFLICT (program_id, idx) DO UPDATE SET "
+                "data = excluded.data, sha256 = excluded.sha256, created = excluded.created",
+                (program_id, index, blob, digest, self._clock()),
+            )
+            conn.execute(
+                "DELETE FROM snapshots WHERE program_id = ? AND idx NOT IN "
+                "(SELECT idx FROM snapshots WHERE program_id = ? ORDER BY idx DESC LIMIT ?)",
+                (program_id, program_id, SNAPSHOTS_KEPT),
+            )
+
+    def latest_snapshot(self, program_id: int) -> tuple[int, bytes] | None:
+        """The newest intact snapshot of the program, as (index, data), or None.
+
+        A snapshot whose bytes no longer match their sha256 is skipped for the one before.
+        The twin restored from it replays the done instructions after ``index``.
+        """
+        with self._read() as conn:
+            self._program(conn, program_id)
+            rows = conn.execute(
+                "SELECT idx, data, sha256 FROM snapshots WHERE program_id = ? ORDER BY idx DESC",
+                (program_id,),
+            ).fetchall()
+        for index, data, digest in rows:
+            if isinstance(data, bytes) and hashlib.sha256(data).hexdigest() == digest:
+                return int(index), data
+            _log.warning("%s: program %d: snapshot at instruction %d does not match its sha256; "
+                         "skipped", self._path, program_id, index)  # fmt: skip
+        return None
 
     @staticmethod
     def _pending_row(conn: sqlite3.Connection, rec: ProgramRecord) -> Any:

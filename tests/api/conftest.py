@@ -92,6 +92,7 @@ class _Thread(threading.Thread):
         tokens = {role: store.add(f"{role}-token", role) for role in ROLES}
         app = create_app(controller, store, self.open_reads)
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as the daemon's listener
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
         self.server = uvicorn.Server(uvicorn.Config(app, lifespan="on", log_level="warning"))

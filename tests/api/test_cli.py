@@ -9,8 +9,7 @@ import json
 import pytest
 
 from bwsd.api import TokenError, TokenStore
-from bwsd.api.cli import configure, tokens_path
-from bwsd.config import parse_config
+from bwsd.api.cli import configure
 
 CONFIG = (
     "[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\nd_mat = 100.0\nc_mat = 0.5\n"
@@ -27,7 +26,6 @@ def _run(*argv: str) -> int:
 def test_add_prints_the_token_once_and_stores_its_hash(tmp_path, capsys):
     config = tmp_path / "bwsd.toml"
     config.write_text(CONFIG + '[api]\ntokens_file = "keys/tokens.json"\n')
-    (tmp_path / "state" / "keys").mkdir(parents=True)
     where = ("--config", str(config), "--state-dir", str(tmp_path / "state"))
     assert _run("token", "add", "line-3", "--role", "operator", *where) == 0
     out, err = capsys.readouterr()
@@ -48,12 +46,27 @@ def test_add_prints_the_token_once_and_stores_its_hash(tmp_path, capsys):
         _run("token", "remove", "line-3", *where)
 
 
-def test_a_relative_file_starts_at_the_state_folder(tmp_path, monkeypatch):
-    config = parse_config({"machine": {"rows": 2, "cols": 2, "pitch_x": 1.0, "pitch_y": 1.0,
-                                       "d_mat": 10.0, "c_mat": 0.5}})  # fmt: skip
-    assert tokens_path(config, tmp_path) == tmp_path / "tokens.json"
-    monkeypatch.setenv("STATE_DIRECTORY", f"{tmp_path}/a:{tmp_path}/b")
-    assert tokens_path(config) == tmp_path / "a" / "tokens.json"
-    absolute = parse_config({"machine": dict(config.table("machine")),
-                             "api": {"tokens_file": str(tmp_path / "t.json")}})  # fmt: skip
-    assert tokens_path(absolute, "/elsewhere") == tmp_path / "t.json"
+def test_add_finds_the_state_folder_as_serve_does_and_creates_it(tmp_path, monkeypatch):
+    config = tmp_path / "bwsd.toml"
+    config.write_text(CONFIG)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    assert _run("token", "add", "a", "--role", "viewer", "--config", str(config)) == 0
+    assert [e.name for e in TokenStore.load(tmp_path / "state" / "tokens.json").entries] == ["a"]
+    assert not (tmp_path / "tokens.json").exists()
+    monkeypatch.setenv("STATE_DIRECTORY", f"{tmp_path}/sd:{tmp_path}/other")
+    assert _run("token", "add", "b", "--role", "admin", "--config", str(config)) == 0
+    assert [e.name for e in TokenStore.load(tmp_path / "sd" / "tokens.json").entries] == ["b"]
+    where = ("--config", str(config), "--state-dir", str(tmp_path / "given"))
+    assert _run("token", "add", "c", "--role", "operator", *where) == 0
+    assert [e.name for e in TokenStore.load(tmp_path / "given" / "tokens.json").entries] == ["c"]
+    assert not (tmp_path / "other").exists()
+
+
+def test_list_does_not_create_the_state_folder(tmp_path, capsys):
+    config = tmp_path / "bwsd.toml"
+    config.write_text(CONFIG)
+    where = ("--config", str(config), "--state-dir", str(tmp_path / "missing"))
+    assert _run("token", "list", *where) == 0
+    assert capsys.readouterr().out == ""
+    assert not (tmp_path / "missing").exists()

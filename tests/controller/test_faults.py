@@ -187,9 +187,7 @@ def test_nothing_moves_on_a_matrix_whose_cases_are_not_where_the_fill_puts_them(
     run(scenario())
 
 
-def test_with_the_estop_pressed_reset_and_start_are_refused_and_nothing_is_consumed(
-    mock, tmp_path
-):
+def test_with_the_estop_pressed_reset_and_start_are_refused_and_nothing_is_consumed(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from bwsd.plc import MAP_VERSION, REG_COUNT, Tags, decode, encode
-from bwsd.plc.registers import REG_ESTOP
 from bwsd.plc.registers import (
     REG_CMD_CHANGE_REQUEST,
+    REG_ESTOP,
     REG_GOOD_COUNT,
     REG_HEARTBEAT,
     REG_INSTRUCTION_COUNT,

@@ -1,0 +1,150 @@
+"""The event loop never waits on CPU or disk: a 24x24 job under asyncio's debug mode.
+
+The daemon runs in this process (``bwsd.daemon.start``: journal, controller, API, PLC tags,
+watch task) on a loop in debug mode with ``slow_callback_duration`` = 20 ms, against the mock
+loom in its own process. A client process loads the 624-carrier braid, resets, reads once
+(first-use costs are paid there: lazy imports, the debug mode's first source reads), then
+starts it and reads ``/state``, ``/skeleton`` and the event WebSocket while it runs; slow
+callbacks are counted from that start.
+asyncio logs every callback that held the loop longer than 20 ms; the test fails on any.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import linecache
+import logging
+import multiprocessing
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+from websockets.sync.client import connect
+
+from bwsd.api.auth import TokenStore
+from bwsd.config import load_config, parse_config
+from bwsd.daemon import start, stop
+from bwsd.program.generators import braid4
+from tests.fieldbus.conftest import BUS, ROOT
+
+SLOW = 0.020  # s
+
+
+class SlowCallbacks(logging.Handler):
+    """asyncio's "Executing <Handle ...> took 0.031 seconds" warnings, kept."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.seen: list[str] = []
+        self.armed = False  # from the moment the daemon serves
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = record.getMessage()
+        if self.armed and text.startswith("Executing ") and " took " in text:
+            self.seen.append(text)
+
+
+def machine() -> dict[str, Any]:
+    m = load_config(ROOT / "config" / "braid-24x24.toml").machine
+    return {"rows": m.rows, "cols": m.cols, "pitch_x": m.pitch_x, "pitch_y": m.pitch_y,
+            "d_mat": m.d_mat, "c_mat": m.c_mat}  # fmt: skip
+
+
+def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
+    """What an operator's page and a PLC do at once: load, start, read, follow the events.
+
+    Runs in its own process: a client thread in the daemon's process would take the
+    interpreter lock from the event loop, and the test would measure the client.
+    """
+    headers = {"Authorization": f"Bearer {token}"}
+    try:
+        events = base.replace("http", "ws") + f"/api/v1/events?token={token}"
+        with httpx.Client(base_url=base + "/api/v1", headers=headers, timeout=60) as http, \
+                connect(events) as ws:  # fmt: skip
+            http.post("/programs", json={"name": "b.bws", "text": program}).raise_for_status()
+            http.post("/commands/reset", json={}).raise_for_status()
+            http.get("/skeleton").raise_for_status()
+            http.get("/state").raise_for_status()
+            warm.set()  # first-use costs (lazy imports, the debug mode's first source reads)
+            http.post("/commands/start", json={}).raise_for_status()
+            done = False
+            while not done:
+                state = http.get("/state").raise_for_status().json()
+                done = state["name"] in ("Complete", "Held", "Aborted")
+                if state["index"] % 3 == 1:
+                    http.get("/skeleton").raise_for_status()
+                while True:
+                    try:
+                        ws.recv(timeout=0.001)
+                    except TimeoutError:
+                        break
+                time.sleep(0.01)
+            if state["name"] != "Complete":
+                errors.put(f"ended {state['name']}: {state['reason']}")
+    except Exception as exc:  # reported by the test
+        errors.put(repr(exc))
+
+
+def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkeypatch) -> None:
+    program = braid4(24, 24, cycles=2, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
+                     diameter=1.5).program  # fmt: skip
+    (tmp_path / "prog.bws").write_text(program)
+    from tests.fieldbus.conftest import toml
+
+    (tmp_path / "mock.toml").write_text(toml({"machine": machine(), "simulator": {
+        "modbus_port": 0, "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
+    mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config",
+                             str(tmp_path / "mock.toml"), "--program", str(tmp_path / "prog.bws")],
+                            stdout=subprocess.PIPE, text=True, cwd=ROOT)  # fmt: skip
+    assert mock.stdout is not None
+    ports = dict(p.split("=") for p in mock.stdout.readline().split()[1:])
+    config = parse_config({
+        "machine": machine(),
+        "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0,
+                     "modbus": {"port": int(ports["modbus"])}},
+        "api": {"port": 0}, "plc": {"port": 0},
+    })  # fmt: skip
+    state = tmp_path / "state"
+    state.mkdir()
+    token = TokenStore.load(state / "tokens.json").add("tester", "operator")
+    slow = SlowCallbacks()
+    logging.getLogger("asyncio").addHandler(slow)
+    spawn = multiprocessing.get_context("spawn")
+    errors, warm = spawn.Queue(), spawn.Event()
+
+    async def scenario() -> None:
+        loop = asyncio.get_running_loop()
+        loop.slow_callback_duration = SLOW
+        daemon = await start(config, state)
+        try:
+            args = (daemon.urls["api"], token, program, errors, warm)
+            worker = spawn.Process(target=client, args=args)
+            worker.start()
+            while worker.is_alive():
+                slow.armed = warm.is_set()
+                await asyncio.sleep(0.005)
+            worker.join()
+        finally:
+            await stop(daemon)
+
+    # Debug mode records where every handle and future was made; for each it re-checks every
+    # source file in linecache with os.stat, and each stat gives the interpreter lock away for
+    # up to a switch interval while a worker thread runs Python: the debug mode would measure
+    # itself. The source lines are not read anyway (lookup_lines=False).
+    monkeypatch.setattr(linecache, "checkcache", lambda filename=None: None)
+    try:
+        asyncio.run(scenario(), debug=True)
+    finally:
+        logging.getLogger("asyncio").removeHandler(slow)
+        mock.terminate()
+        mock.wait(timeout=20)
+        if mock.stdout is not None:
+            mock.stdout.close()
+    found = []
+    while not errors.empty():
+        found.append(errors.get())
+    assert found == []
+    assert slow.seen == [], "\n".join(slow.seen)
