@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import logging
 import signal
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
+from bwsd import logs
 from bwsd.config import load_config
 from bwsd.daemon import Daemon, serve
 from bwsd.paths import journal_file, state_folder, tokens_file
@@ -39,11 +41,13 @@ def _print_ready(daemon: Daemon) -> None:
 
 def _serve_cmd(args: argparse.Namespace) -> int:
     config = load_config(args.config)
+    logs.setup()
     asyncio.run(serve(config, state_folder(args.state_dir), _print_ready))
     return 0
 
 
 def _demo_cmd(args: argparse.Namespace) -> int:
+    logs.setup(logging.WARNING)
     state_dir = state_folder(args.state_dir)
     journal = journal_file(load_config(DEMO_CONFIG), state_dir)
     for suffix in ("", "-wal", "-shm", "-lock"):  # a demo starts from scratch

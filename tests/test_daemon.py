@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import os
 import random
+import re
 import signal
 import sqlite3
 import subprocess
@@ -53,16 +54,18 @@ class Served:
     """`bwsd serve` in its own process, and an HTTP client with an operator token."""
 
     def __init__(self, config: Path, state: Path, token: str) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-             "--state-dir", str(state)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-        )  # fmt: skip
+        self.log = state.parent / "daemon.log"  # appended to by every daemon of the test
+        with self.log.open("a") as log:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+                 "--state-dir", str(state)],
+                stdout=subprocess.PIPE, stderr=log, stdin=subprocess.DEVNULL, text=True,
+            )  # fmt: skip
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline()
         if not line.startswith("ready "):
             self.proc.kill()
-            raise RuntimeError(f"daemon did not start: {line!r} {self.proc.stderr.read()!r}")  # type: ignore[union-attr]
+            raise RuntimeError(f"daemon did not start: {line!r} {self.log.read_text()[-2000:]!r}")
         urls = dict(part.split("=", 1) for part in line.split()[1:])
         self.http = httpx.Client(base_url=urls["api"] + "/api/v1", timeout=30,
                                  headers={"Authorization": f"Bearer {token}"})  # fmt: skip
@@ -199,6 +202,38 @@ def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(ri
         assert same_geometry(skeleton, expected_skeleton())
     finally:
         served.stop()
+
+
+def test_the_log_says_who_commanded_what_and_why_in_timestamped_lines(rig):
+    config, state, token, mock = rig
+    served = Served(config, state, token)
+    try:
+        served.http.post("/programs", json={"name": "braid.bws", "text": TEXT}).raise_for_status()
+        served.command("reset")
+        assert served.http.post("/commands/unhold", json={}).status_code == 409
+        asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "mute"}))
+        assert served.http.post("/commands/start", json={}).status_code == 409  # bus silent
+        asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "clear"}))
+        served.command("start")
+        # the link may still drop once while the loom's muted answers drain: a fault hold,
+        # resumed as an operator would
+        while served.wait_for({"Complete", "Held"})["name"] == "Held":
+            served.recovered()
+            served.command("unhold")
+    finally:
+        served.stop()
+    lines = served.log.read_text().splitlines()
+    stamp = r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} (INFO|WARNING|ERROR) "
+    assert lines and all(re.match(stamp, line) for line in lines), lines[:5]
+    text = "\n".join(lines)
+    assert "program 1 'braid.bws' loaded by tester: 20 instructions" in text
+    assert "command Reset from tester" in text and "command Start from tester" in text
+    assert "state Stopped -> Resetting (Reset)" in text
+    assert "command Unhold from tester refused: Unhold is not accepted in state Idle" in text
+    assert re.search(r"command Start from tester refused: the machine cannot be read: .*no answer",
+                     text)  # fmt: skip
+    assert "program 1 complete" in text
+    assert "Traceback" not in text and ">>>>>" not in text  # no library frame dumps
 
 
 def test_serve_talks_to_systemd(rig, tmp_path):

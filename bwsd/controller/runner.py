@@ -229,9 +229,13 @@ class Controller:
         if self._checking.locked():
             raise Busy("another program is being checked: try again when it has finished")
         async with self._checking:
-            return await asyncio.to_thread(_check, self.machine, self.limits,
-                                           self.settings.max_instructions, name, text,
-                                           cancel)  # fmt: skip
+            try:
+                return await asyncio.to_thread(_check, self.machine, self.limits,
+                                               self.settings.max_instructions, name, text,
+                                               cancel)  # fmt: skip
+            except Cancelled:
+                log.info("check of %r cancelled", name)
+                raise
 
     async def load(self, name: str, text: str, who: str = "",
                    cancel: threading.Event | None = None) -> int:  # fmt: skip

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
+import socket
 import time
 from typing import Any
 from unittest.mock import ANY
@@ -262,3 +264,68 @@ def test_a_bus_that_is_gone_is_503_with_the_reason(live: Live, mock):
     assert "the machine cannot be read" in answer.json()["error"]
     bus = viewer.get("/state").json()["bus"]
     assert bus["connected"] is False and bus["last_error"]
+
+
+def test_checks_run_one_at_a_time_and_stop_when_their_client_goes(live: Live, caplog):
+    """A long dry run is left by its client: the daemon stops it; meanwhile a second check is
+    429 and the API keeps answering."""
+    long = BRAID.replace("REPEAT 3", "REPEAT 150000")  # 600,000 instructions
+    body = json.dumps({"name": "long.bws", "text": long}).encode()
+    token = live.tokens["operator"]
+    host, port = live.base.removeprefix("http://").split(":")
+    caplog.set_level(logging.INFO, logger="bwsd.controller")
+    with socket.create_connection((host, int(port))) as raw:
+        raw.sendall(b"POST /api/v1/programs?dry_run=true HTTP/1.1\r\nHost: x\r\n"
+                    b"Authorization: Bearer " + token.encode() + b"\r\n"
+                    b"Content-Type: application/json\r\n"
+                    b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body)  # fmt: skip
+        operator = live.client("operator")
+        deadline = time.monotonic() + WAIT
+        while not live.controller._checking.locked():  # the long check has begun
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        busy = operator.post("/programs", params={"dry_run": "true"},
+                             json={"name": "b.bws", "text": BRAID})  # fmt: skip
+        assert busy.status_code == 429 and "another program is being checked" in busy.text
+        assert busy.headers["retry-after"] == "1"
+        assert live.client("viewer").get("/state").status_code == 200  # the loop is free
+    # the client is gone: the check stops (it would otherwise run for about 8 s more)
+    deadline = time.monotonic() + 60
+    while live.controller._checking.locked():
+        assert time.monotonic() < deadline, "the check went on after its client left"
+        time.sleep(0.05)
+    assert "check of 'long.bws' cancelled" in caplog.text
+    again = operator.post("/programs", params={"dry_run": "true"},
+                          json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    assert again.status_code == 200
+
+
+def test_the_mode_route_changes_the_unit_mode_where_packml_allows_it(live: Live):
+    operator, viewer = live.client("operator"), live.client("viewer")
+    changed = operator.put("/mode", json={"mode": "maintenance"})
+    assert changed.status_code == 200 and changed.json() == {"mode": 2, "mode_name": "Maintenance"}
+    assert viewer.get("/state").json()["mode_name"] == "Maintenance"
+    assert viewer.put("/mode", json={"mode": "production"}).status_code == 403
+    assert operator.put("/mode", json={"mode": "turbo"}).status_code == 422
+    operator.post("/programs", json={"name": "b.bws", "text": BRAID}).raise_for_status()
+    operator.post("/commands/reset").raise_for_status()
+    operator.post("/commands/start").raise_for_status()
+    operator.post("/commands/hold").raise_for_status()
+    refused = operator.put("/mode", json={"mode": "production"})
+    assert refused.status_code == 409 and "not accepted in state Held" in refused.json()["error"]
+
+
+def test_a_pressed_estop_shows_in_state_and_refuses_reset(live: Live, mock):
+    operator, viewer = live.client("operator"), live.client("viewer")
+    control = ("127.0.0.1", mock.ports["control"])
+    operator.post("/programs", json={"name": "b.bws", "text": BRAID}).raise_for_status()
+    asyncio.run(request(*control, {"cmd": "estop", "pressed": True}))
+    refused = operator.post("/commands/reset")
+    assert refused.status_code == 409
+    assert "the emergency stop is pressed: release it before Reset" in refused.json()["error"]
+    state = viewer.get("/state").json()
+    assert state["bus"]["estop"] is True and state["allowed"] == ["abort"]
+    asyncio.run(request(*control, {"cmd": "estop", "pressed": False}))
+    assert operator.post("/commands/reset").status_code == 200
+    state = viewer.get("/state").json()
+    assert state["bus"]["estop"] is False and state["allowed"] == ["start", "stop", "abort"]

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import logging
+import threading
 from typing import Any
 
 import numpy as np
@@ -10,12 +12,13 @@ import pytest
 
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
-from bwsd.controller.runner import Controller, ControllerError
+from bwsd.controller.runner import Busy, Cancelled, Controller, ControllerError, Settings
 from bwsd.controller.status import Event, InstructionDone
+from bwsd.errors import ProgramError
 from bwsd.fieldbus import AxisMove, open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program
-from bwsd.twin import simulate
+from bwsd.twin import replay, simulate
 from simulator_hw.control import request
 from tests.fieldbus.conftest import client_config
 
@@ -322,5 +325,80 @@ def test_a_shift_cut_between_its_lines_is_completed_line_by_line(mock, tmp_path)
         assert np.array_equal(np.array(answer["occupancy"], dtype=bool), ctl.twin.occupancy >= 0)
         await ctl.bus.close()
         journal.close()
+
+    run(scenario())
+
+
+def test_a_program_beyond_the_instruction_limit_is_refused_at_check(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, journal, _ = await controller(mock, tmp_path, settings=Settings(max_instructions=10))
+        limit = r"expands to 15 instructions, more than this daemon's limit of 10 \(\["
+        with pytest.raises(ProgramError, match=limit + r"controller\] max_instructions\)"):
+            await ctl.check("braid.bws", TEXT)
+        assert journal.history() == []
+        await ctl.close()
+
+    run(scenario())
+
+
+def test_max_contacts_is_checked_by_the_dry_run(mock, tmp_path):
+    async def scenario() -> None:
+        most = simulate(client_config("modbus", mock.ports).machine, parse_program(TEXT))
+        assert most.contact_count > 0
+        ctl, journal, _ = await controller(mock, tmp_path, limits=Limits(max_contacts=1))
+        with pytest.raises(ControllerError, match=r"instruction \d+: \d+ contacts, more than "
+                           r"the limit of 1"):  # fmt: skip
+            await ctl.load("braid.bws", TEXT)
+        assert ctl.program is None and journal.history() == []
+        await ctl.close()
+
+    run(scenario())
+
+
+def test_one_check_at_a_time_and_a_cancelled_one_stops(mock, tmp_path):
+    async def scenario() -> None:
+        ctl, _, _ = await controller(mock, tmp_path)
+        long = TEXT.replace("REPEAT 3", "REPEAT 100000")  # 500,000 instructions
+        cancel = threading.Event()
+        first = asyncio.create_task(ctl.check("long.bws", long, cancel))
+        await asyncio.sleep(0.05)
+        with pytest.raises(Busy, match="another program is being checked"):
+            await ctl.check("braid.bws", TEXT)
+        cancel.set()
+        with pytest.raises(Cancelled, match=r"long\.bws: the check was cancelled"):
+            await first
+        _, totals = await ctl.check("braid.bws", TEXT)  # free again
+        assert totals.instructions == 15
+        await ctl.close()
+
+    run(scenario())
+
+
+def test_a_restart_replays_only_what_follows_the_last_snapshot(mock, tmp_path, caplog):
+    async def scenario() -> None:
+        every = Settings(snapshot_every=4)
+        first, journal, _ = await controller(mock, tmp_path, settings=every)
+        pid = await first.load("braid.bws", TEXT)
+        await first.command(Command.RESET)
+        await first.command(Command.START)
+        while first.twin.done < 10:
+            await asyncio.sleep(0)
+        await first.command(Command.HOLD, "operator")
+        done = first.twin.done
+        snap = journal.latest_snapshot(pid)
+        assert snap is not None and snap[0] == done - done % 4
+        await first.close()
+        second, journal, _ = await controller(mock, tmp_path, settings=every)
+        with caplog.at_level(logging.INFO, logger="bwsd.controller"):
+            await second.recover()
+        assert f"rebuilt at instruction {done} from the snapshot at {snap[0]}" in caplog.text
+        replayed = replay(second.machine, parse_program(TEXT), done)
+        assert bits(second.twin) == bits(replayed)  # restored + replayed = replayed whole
+        await second.command(Command.UNHOLD)
+        await second.wait()
+        assert second.packml.state is State.COMPLETE
+        assert bits(second.twin) == bits(simulate(second.machine, parse_program(TEXT)))
+        assert journal.latest_snapshot(pid) is None  # dropped once the program ended
+        await second.close()
 
     run(scenario())

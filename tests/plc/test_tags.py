@@ -158,12 +158,18 @@ def test_status_registers_and_bad_requests_are_refused_on_the_wire(mock, tmp_pat
 
 def test_unit_mode_changes_in_idle_and_is_refused_in_execute(slow_mock, tmp_path):
     async def scenario() -> None:
-        async with rig(slow_mock, tmp_path) as (ctl, _, plc):
+        async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
             await ctl.load("braid.bws", TEXT)
             await plc.command(RESET)
             changed = await plc.mode(UnitMode.MAINTENANCE)
             assert (changed.unit_mode_current, changed.cmd_invalid) == (UnitMode.MAINTENANCE, 0)
             assert ctl.packml.mode is UnitMode.MAINTENANCE
+            for _ in range(500):  # the journal's writer records it, in order, soon after
+                if mode := [e for e in journal.events(0, 100) if e.kind == "mode"]:
+                    break
+                await asyncio.sleep(0.01)
+            assert [e.data for e in mode] == [{"from": "Production", "to": "Maintenance",
+                                               "by": "plc"}]  # fmt: skip
             assert (await plc.command(START)).state_current == State.EXECUTE
             refused = await plc.mode(UnitMode.PRODUCTION)
             assert (refused.unit_mode_current, refused.cmd_invalid) == (UnitMode.MAINTENANCE, 1)
@@ -173,6 +179,28 @@ def test_unit_mode_changes_in_idle_and_is_refused_in_execute(slow_mock, tmp_path
             held = await plc.command(HOLD)
             assert (held.state_current, held.cmd_invalid) == (State.HELD, 0)
             assert held.stop_reason == StopReason.OPERATOR
+
+    run(scenario())
+
+
+def test_a_pressed_estop_reads_1_and_refuses_reset_and_start(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path) as (ctl, journal, plc):
+            pid = await ctl.load("braid.bws", TEXT)
+            control = ("127.0.0.1", mock.ports["control"])
+            assert (await plc.tags()).estop == 0
+            await request(*control, {"cmd": "estop", "pressed": True})
+            refused = await plc.command(RESET)
+            assert (refused.state_current, refused.cmd_invalid, refused.estop) == (
+                State.STOPPED, 1, 1)  # fmt: skip
+            await request(*control, {"cmd": "estop", "pressed": False})
+            idle = await plc.command(RESET)
+            assert (idle.state_current, idle.cmd_invalid, idle.estop) == (State.IDLE, 0, 0)
+            await request(*control, {"cmd": "estop", "pressed": True})
+            again = await plc.command(START)
+            assert (again.state_current, again.cmd_invalid, again.estop) == (State.IDLE, 1, 1)
+            assert journal.program(pid).outcome == "loaded"  # the program is not consumed
+            await request(*control, {"cmd": "estop", "pressed": False})
 
     run(scenario())
 

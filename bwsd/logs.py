@@ -1,0 +1,40 @@
+"""The daemon's log: one timestamped line per record, for an operator to read.
+
+Every command (with the token name, or ``plc``, that gave it), every state change with its
+cause, holds, aborts and recovery decisions are logged at INFO or above by
+``bwsd.controller``. Library records keep their first line only: pymodbus appends the raw
+frames of a failed transaction to its error, which is noise in an operator's log (the
+controller logs the failure in its own words).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+QUIET = ("pymodbus", "canopen", "can.")
+
+
+class FirstLine(logging.Filter):
+    """Keeps a library record's first line and drops its traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.name.startswith(QUIET):
+            return True
+        text = record.getMessage()
+        if "\n" in text:
+            record.msg, record.args = text.split("\n", 1)[0], None
+        record.exc_info, record.exc_text, record.stack_info = None, None, None
+        return True
+
+
+def setup(level: int = logging.INFO) -> None:
+    """Log to standard error (journald under systemd), one line per record."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter(FORMAT))
+    handler.addFilter(FirstLine())
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    logging.getLogger("pymodbus").setLevel(logging.WARNING)
