@@ -1,12 +1,14 @@
 """Benchmark of the daemon: prints the markdown table of docs/benchmarks.md.
 
-    python bench/daemon.py [--cycles 2] [--rate 500]
+    python bench/daemon.py [--cycles 10] [--rate 500] [--restart-cycles 1000]
 
 `bwsd serve` and the mock loom run in their own processes on loopback, zero travel time,
 with the 24x24 braid. Measured: the daemon's per-instruction overhead (an instruction's
-wall time in the run loop minus the twin's predict time, both reported in its event);
-`GET state` latency at a fixed request rate while the program runs; WebSocket event lag
-(receipt time minus the event's own time stamp).
+wall time in the run loop minus the twin's predict time and the bus's time, all reported in
+its event); `GET state` latency at a fixed request rate, first idle (the baseline) and then
+while the program runs; WebSocket event lag (receipt time minus the event's own time
+stamp); the restart of a held 1000-cycle job: seconds until the API answers and until the
+twin is rebuilt, with snapshots in the journal and without (the baseline).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import socket
 import statistics
 import sys
 import tempfile
@@ -86,53 +89,188 @@ def serving(program: str) -> Iterator[Served]:
             mock.wait(timeout=20)
 
 
-async def measure(served: Served, program: str, rate: float) -> dict[str, list[float]]:
+async def measure(served: Served, program: str, rate: float,
+                  idle_s: float) -> dict[str, list[float]]:  # fmt: skip
+    """GET state at ``rate`` while idle for ``idle_s``, then during the run; events' timings."""
     base = str(served.http.base_url).rstrip("/")
     token = served.http.headers["Authorization"].split()[1]
     ws_url = base.replace("http", "ws", 1) + f"/events?token={token}"
-    out: dict[str, list[float]] = {"lag": [], "overhead": [], "predict": [], "state": []}
+    out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus",
+                                                   "commit", "state", "idle")}  # fmt: skip
     done = asyncio.Event()
     async with websockets.connect(ws_url, max_size=None) as ws:
-        reader = asyncio.create_task(_events(ws, out, done))
         async with httpx.AsyncClient(base_url=base, headers=served.http.headers, timeout=30) as c:
             (await c.post("/programs", json={"name": "b.bws", "text": program})).raise_for_status()
-            await c.post("/commands/reset", json={})
-            await c.post("/commands/start", json={})
-            await _load(c, rate, out["state"], done)
+            (await c.post("/commands/reset", json={})).raise_for_status()
+            load = Requester(base, token)
+            quiet = asyncio.Event()
+            asyncio.get_running_loop().call_later(idle_s, quiet.set)
+            await load.run(rate, out["idle"], quiet)
+            reader = asyncio.create_task(_events(ws, out, done, time.time()))
+            (await c.post("/commands/start", json={})).raise_for_status()
+            await load.run(rate, out["state"], done)
         await reader
     return out
 
 
-async def _events(ws: Any, out: dict[str, list[float]], done: asyncio.Event) -> None:
+async def _events(ws: Any, out: dict[str, list[float]], done: asyncio.Event,
+                  since: float) -> None:  # fmt: skip
     async for text in ws:
         now = time.time()
         event = json.loads(text)
-        if "at" in event:
+        if event.get("at", 0) >= since:  # not those queued before the run
             out["lag"].append(now - event["at"])
         if event.get("event") == "instruction" and "step_s" in event:
-            out["overhead"].append(event["step_s"] - event["predict_s"])
+            step, commit = event["step_s"], event["commit_s"]
+            out["overhead"].append(step + commit - event["predict_s"] - event["bus_s"])
             out["predict"].append(event["predict_s"])
+            out["bus"].append(event["bus_s"])
+            out["commit"].append(commit)
         if event.get("event") == "state" and event.get("to") in ("Complete", "Held", "Aborted"):
             done.set()
             return
 
 
-async def _load(client: httpx.AsyncClient, rate: float, into: list[float],
-                done: asyncio.Event) -> None:  # fmt: skip
-    async def one() -> None:
-        start = time.perf_counter()
-        (await client.get("/state")).raise_for_status()
-        into.append(time.perf_counter() - start)
+class Requester:
+    """GET /api/v1/state over ``conns`` kept-alive connections, raw HTTP/1.1.
 
-    pending: set[asyncio.Task[None]] = set()
-    next_at = time.perf_counter()
-    while not done.is_set():
-        task = asyncio.create_task(one())
-        pending.add(task)
-        task.add_done_callback(pending.discard)
-        next_at += 1 / rate
-        await asyncio.sleep(max(0.0, next_at - time.perf_counter()))
-    await asyncio.gather(*pending)
+    A load generator as light as possible (one prepared request, the response read by its
+    length), so that the latency measured is the daemon's, not the client's.
+    """
+
+    def __init__(self, base: str, token: str, conns: int = 8) -> None:
+        host, port = base.removeprefix("http://").split("/")[0].split(":")
+        self.host, self.port, self.conns = host, int(port), conns
+        self.request = (f"GET /api/v1/state HTTP/1.1\r\nHost: {host}\r\n"
+                        f"Authorization: Bearer {token}\r\n\r\n").encode()  # fmt: skip
+
+    async def run(self, rate: float, into: list[float], done: asyncio.Event) -> None:
+        """Requests at ``rate`` per second in all (spread over the connections) until done."""
+        period = self.conns / rate
+        start = time.perf_counter()
+        await asyncio.gather(*(self._one(start + i / rate, period, into, done)
+                               for i in range(self.conns)))  # fmt: skip
+
+    async def _one(self, first: float, period: float, into: list[float],
+                   done: asyncio.Event) -> None:  # fmt: skip
+        reader, writer = await asyncio.open_connection(self.host, self.port)
+        sock = writer.get_extra_info("socket")
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        due = first
+        try:
+            while not done.is_set():
+                await asyncio.sleep(max(0.0, due - time.perf_counter()))
+                sent = time.perf_counter()
+                writer.write(self.request)
+                head = await reader.readuntil(b"\r\n\r\n")
+                if not head.startswith(b"HTTP/1.1 200"):
+                    raise RuntimeError(head.decode(errors="replace"))
+                length = int(head.lower().split(b"content-length:")[1].split(b"\r\n")[0])
+                await reader.readexactly(length)
+                into.append(time.perf_counter() - sent)
+                due = max(due + period, time.perf_counter())  # late requests are not queued
+        finally:
+            writer.close()
+
+
+# ----- restart -----
+def journal_of_a_long_job(folder: Path, cycles: int, snapshot_every: int) -> tuple[Path, int]:
+    """A journal as a daemon leaves it after ``cycles`` cycles of the 24x24 braid, every
+    instruction done, held (snapshots every ``snapshot_every``; 0: none)."""
+    from bwsd.journal import Journal
+    from bwsd.program import parse_program
+    from bwsd.twin import Twin
+
+    text = braid_24x24(cycles)
+    program = parse_program(text)
+    machine = load_config(ROOT / "config" / "braid-24x24.toml").machine
+    twin = Twin.from_program(machine, program)
+    state = folder / "state"
+    state.mkdir(parents=True)
+    with Journal.open(state / "journal.db") as journal:
+        pid = journal.add_program("long.bws", text, len(program.instructions))
+        journal.set_outcome(pid, "running")
+        for i, instruction in enumerate(program.instructions, start=1):
+            journal.started(pid, i, {"takeup_origin": 0})
+            twin.advance(instruction)
+            journal.done(pid, i, {})
+            if snapshot_every and i % snapshot_every == 0:
+                journal.save_snapshot(pid, i, twin.snapshot().to_bytes())
+        journal.set_outcome(pid, "held", "daemon stopping")
+    return state, len(program.instructions)
+
+
+def restart(folder: Path, state: Path, mock_ports: dict[str, int]) -> tuple[float, float]:
+    """Seconds from `bwsd serve` starting to its API answering, and to recovery's end."""
+    import subprocess
+
+    config = folder / "bwsd.toml"
+    config.write_text(toml({
+        "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
+        "fieldbus.modbus": {"port": mock_ports["modbus"]},
+        "api": {"port": 0}, "plc": {"enabled": False},
+    }))  # fmt: skip
+    token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "viewer")
+    begun = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+                             "--state-dir", str(state)], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, cwd=ROOT)  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        api = dict(p.split("=", 1) for p in proc.stdout.readline().split()[1:])["api"]
+        with httpx.Client(base_url=api + "/api/v1", timeout=30,
+                          headers={"Authorization": f"Bearer {token}"}) as http:  # fmt: skip
+            while True:
+                try:
+                    first = http.get("/state")
+                    break
+                except httpx.TransportError:
+                    time.sleep(0.001)
+            up = time.perf_counter() - begun
+            assert first.status_code == 200, first.text
+            while http.get("/state").json()["recovering"].startswith("rebuilding"):
+                time.sleep(0.005)
+            recovered = time.perf_counter() - begun
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    return up, recovered
+
+
+def restart_rows(cycles: int, repeats: int) -> list[str]:
+    """Restart of a held ``cycles``-cycle job, with snapshots (every 200) and without."""
+    import subprocess
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        (folder / "prog.bws").write_text(braid_24x24(1))
+        (folder / "mock.toml").write_text(toml({"machine": machine_table(), "simulator": {
+            "modbus_port": 0, "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
+        mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config",
+                                 str(folder / "mock.toml"), "--program", str(folder / "prog.bws")],
+                                stdout=subprocess.PIPE, text=True, cwd=ROOT)  # fmt: skip
+        try:
+            assert mock.stdout is not None
+            ports = {
+                k: int(v) for k, v in (p.split("=") for p in mock.stdout.readline().split()[1:])
+            }
+            for every, label in ((200, "snapshot every 200"), (0, "no snapshot (baseline)")):
+                job = folder / f"job-{every}"
+                state, count = journal_of_a_long_job(job, cycles, every)
+                ups, recs = [], []
+                for _ in range(repeats):
+                    up, recovered = restart(job, state, ports)
+                    ups.append(up)
+                    recs.append(recovered)
+                rows.append(
+                    f"| {label} | {count} | {statistics.median(ups):.2f} | "
+                    f"{max(ups):.2f} | {statistics.median(recs):.2f} | {max(recs):.2f} |"
+                )
+        finally:
+            mock.terminate()
+            mock.wait(timeout=20)
+    return rows
 
 
 def row(name: str, values: list[float]) -> str:
@@ -144,21 +282,35 @@ def row(name: str, values: list[float]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--cycles", type=int, default=2)
+    parser.add_argument("--cycles", type=int, default=10)
     parser.add_argument("--rate", type=float, default=500.0)
+    parser.add_argument("--idle", type=float, default=5.0, help="seconds of idle load first")
+    parser.add_argument("--restart-cycles", type=int, default=1000)
+    parser.add_argument("--restarts", type=int, default=3)
     args = parser.parse_args()
     program = braid_24x24(args.cycles)
     with serving(program) as served:
-        result = asyncio.run(measure(served, program, args.rate))
-    print(
-        f"24x24 braid (624 carriers), {args.cycles} cycles, zero travel time, "
-        f"GET state at {args.rate:g} requests/s during the run.\n"
-    )
+        result = asyncio.run(measure(served, program, args.rate, args.idle))
+    print(f"24x24 braid (624 carriers), {args.cycles} cycles, zero travel time, GET state at "
+          f"{args.rate:g} requests/s for {args.idle:g} s idle, then during the run.\n")  # fmt: skip
     print("| measure | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
     print(row("twin predict (for reference)", result["predict"]))
-    print(row("daemon overhead per instruction (wall - predict)", result["overhead"]))
-    print(row("GET /api/v1/state during production", result["state"]))
+    print(row("bus: moves, waits and read-back (for reference)", result["bus"]))
+    print(row("daemon overhead per instruction (wall - predict - bus)", result["overhead"]))
+    print(row("  of which the commit (a worker thread)", result["commit"]))
+    print(row("GET /api/v1/state idle (baseline)", result["idle"]))
+    print(row("GET /api/v1/state during the run", result["state"]))
     print(row("WebSocket event lag", result["lag"]))
+    idle, busy = (np.percentile(result[k], 99) for k in ("idle", "state"))
+    idle50, busy50 = (statistics.median(result[k]) for k in ("idle", "state"))
+    print(f"\nGET state during the run over idle: {busy50 / idle50:.2f}x at p50, "
+          f"{busy / idle:.2f}x at p99.\n")  # fmt: skip
+    print(f"Restart of a held {args.restart_cycles}-cycle 24x24 job, `bwsd serve` spawned "
+          f"{args.restarts} times each (median, worst):\n")  # fmt: skip
+    print("| journal | instructions | API up s | worst | recovered s | worst |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for line in restart_rows(args.restart_cycles, args.restarts):
+        print(line)
 
 
 if __name__ == "__main__":

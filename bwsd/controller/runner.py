@@ -45,7 +45,7 @@ from bwsd.controller.status import (
     cause_of,
 )
 from bwsd.errors import BwsdError, ProgramError, TwinError
-from bwsd.export.skeleton_json import delta_to_dict
+from bwsd.export.skeleton_json import committed_parts, delta_from
 from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
     DriveFault,
@@ -178,6 +178,8 @@ class Controller:
         self._snapped = 0  # instructions done at the last snapshot
         self._background: set[asyncio.Task[Any]] = set()
         self._recovery: asyncio.Task[None] | None = None
+        self._done_write: asyncio.Future[None] | None = None  # "done" of the last instruction
+        self._describing: asyncio.Future[InstructionDone] | None = None  # its event
         self._unrecorded: tuple[int, str, str] | None = None  # an outcome not yet journaled
 
     # ----- what the doors read -----
@@ -420,6 +422,7 @@ class Controller:
             await self._outcome(RUNNING)
             while self.packml.state is State.EXECUTE:
                 if self.twin.done >= len(self.program.instructions):
+                    await self._flush()
                     self.packml.execute_done()
                     await self._outcome(COMPLETE)
                     self.packml.state_complete()
@@ -435,11 +438,19 @@ class Controller:
             log.exception("the run loop failed: %s", reason)
             await self._end(Aborted(StopCause.INTERNAL, reason))
         finally:
+            try:
+                await self._flush()
+            except Exception as exc:
+                log.error("the journal cannot record the last instruction done: %s", exc)
             if self._task is asyncio.current_task():
                 self._task = None
 
     async def _end(self, outcome: Held | Aborted) -> None:
         """Hold or abort the run from inside it (unless a command already took over)."""
+        try:
+            await self._flush()  # the last instruction done is told before the stop
+        except Exception as exc:
+            log.error("the journal cannot record the last instruction done: %s", exc)
         self._stop_cause = outcome.cause
         self.events.publish(Fault(outcome.reason, outcome.cause))
         command = Command.HOLD if isinstance(outcome, Held) else Command.ABORT
@@ -454,32 +465,48 @@ class Controller:
             log.exception("the %s after %r failed", command.label, outcome.reason)
 
     async def _step(self) -> Outcome:
-        """One instruction end to end."""
+        """One instruction end to end.
+
+        The prediction runs in a worker thread while the journal records "started" (and
+        finishes the previous "done") and the previous instruction's event is published: the
+        disk and the event cost nothing on top of the prediction. Nothing moves before both
+        the prediction and "started" are in.
+        """
         assert self.program is not None and self.twin is not None and self.program_id
         index = self.twin.done + 1
         instruction = self.program.instructions[index - 1]
         begun = time.perf_counter()
         try:
-            pred = await asyncio.to_thread(_predict, self.twin, instruction, self.limits)
-            self._timing = {"predict_s": time.perf_counter() - begun}
-        except (TwinError, RefusedMove) as exc:
-            return Aborted(StopCause.REFUSED_MOVE, str(exc))
-        try:
             origin = await self._takeup_origin()
         except FieldbusError as exc:
+            self._bus_failed(exc)
             return Held(cause_of(exc), _about(index, exc))
         doing = self._rest if self._journaled == index and self._rest else instruction
         self._rest = None
         steps = setpoints(self.machine, doing, self.twin.takeup, origin)
-        if self._journaled != index:
-            payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
-                       "contacts": len(pred.contacts), "takeup_origin": origin}  # fmt: skip
-            await self._writer.run(self.journal.started, self.program_id, index, payload)
-            self._journaled, self._pending = index, pred
+        predicting = asyncio.ensure_future(
+            asyncio.to_thread(_predict, self.twin, instruction, self.limits)
+        )
+        try:
+            if self._journaled != index:
+                payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
+                           "takeup_origin": origin}  # fmt: skip
+                await self._writer.run(self.journal.started, self.program_id, index, payload)
+                self._journaled = index
+            await self._flush()
+            pred, self._timing["predict_s"] = await predicting
+            self._pending = pred
+        except (TwinError, RefusedMove) as exc:
+            return Aborted(StopCause.REFUSED_MOVE, str(exc))
+        finally:
+            if not predicting.done():  # never leave the twin to a prediction nobody awaits
+                await asyncio.wait({predicting})
+        moving = time.perf_counter()
         try:
             for step in steps:
                 await self.bus.execute(step)
             state = await self.bus.state()
+            self._timing["bus_s"] = time.perf_counter() - moving
             self._verify(pred, state)
         except (DriveFault, EStopError) as exc:
             self._bus_failed(exc)
@@ -509,27 +536,36 @@ class Controller:
         return state.axes[axis_by_name(self.machine, "takeup").index].position
 
     async def _commit(self, pred: Prediction, index: int) -> None:
-        """Commit, journal "done" (and a snapshot when due), publish; the twin's work and the
-        skeleton's change are done in a worker thread (the twin's lock is never waited on here).
-        """
+        """Commit (in a worker thread: the twin's lock is never waited on here), then queue the
+        journal's "done" and the event, finished while the next instruction is predicted
+        (``_flush``). A snapshot, when due, is taken now."""
         assert self.twin is not None and self.program_id
-        twin = self.twin
-        delta = await asyncio.to_thread(_commit_twin, twin, pred)
+        twin, pid = self.twin, self.program_id
+        committing = time.perf_counter()
+        parts = await asyncio.to_thread(_commit_twin, twin, pred)
+        self._timing["commit_s"] = time.perf_counter() - committing
         self.last = pred
         self._journaled, self._pending = None, None
-        begun = time.perf_counter()
-        await self._writer.run(self.journal.done, self.program_id, index,
-                               {"contacts": len(pred.contacts)})  # fmt: skip
+        self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
+        self._done_write = self._writer.submit(self.journal.done, pid, index,
+                                               {"contacts": len(pred.contacts)})  # fmt: skip
         if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
             await self._snapshot()
-        self._timing["journal_s"] = time.perf_counter() - begun
-        self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
         step = self.next_step()
         wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
-        self.events.publish(InstructionDone(self.program_id, index, len(pred.contacts),
-                                            len(pred.inserted), self._timing, delta,
-                                            wire))  # fmt: skip
-        self._timing = {}
+        timing, self._timing = self._timing, {}
+        self._describing = asyncio.ensure_future(asyncio.to_thread(
+            lambda: InstructionDone(pid, index, len(pred.contacts), len(pred.inserted), timing,
+                                    delta_from(pred, *parts), wire)))  # fmt: skip
+
+    async def _flush(self) -> None:
+        """Publish the last instruction's event and finish its "done" (raising its error)."""
+        describing, self._describing = self._describing, None
+        if describing is not None:
+            self.events.publish(await describing)
+        done, self._done_write = self._done_write, None
+        if done is not None:
+            await done
 
     async def _snapshot(self) -> None:
         """Journal a snapshot of the twin (restart replays only what follows it)."""
@@ -675,6 +711,7 @@ class Controller:
         then = "resume with Unhold"
         if decision.kind == "commit":
             await self._commit(pred, index)
+            await self._flush()
             self._observe(state)
         elif decision.kind == "rerun":
             then = "Unhold runs it"
@@ -797,18 +834,21 @@ class Controller:
         await self._writer.close()
 
 
-def _predict(twin: Twin, instruction: Instruction, limits: Limits) -> Prediction:
-    """Predict and check the limits (in a worker thread); the tables events read are built."""
+def _predict(twin: Twin, instruction: Instruction, limits: Limits) -> tuple[Prediction, float]:
+    """Predict and check the limits (in a worker thread); the tables events read are built.
+    Also the seconds the twin's own predict took."""
+    begun = time.perf_counter()
     pred = twin.predict(instruction)
+    took = time.perf_counter() - begun
     check_limits(pred, limits)
     _ = pred.contacts, pred.inserted
-    return pred
+    return pred, took
 
 
-def _commit_twin(twin: Twin, pred: Prediction) -> dict[str, Any]:
-    """Commit ``pred`` and describe the skeleton's change (in a worker thread)."""
+def _commit_twin(twin: Twin, pred: Prediction) -> tuple[dict[int, int], list[Any], int]:
+    """Commit ``pred`` and read what its skeleton delta needs (in a worker thread)."""
     twin.commit(pred)
-    return delta_to_dict(twin, pred)
+    return committed_parts(twin, pred)
 
 
 def instruction_dict(instruction: Instruction) -> dict[str, Any]:

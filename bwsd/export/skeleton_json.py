@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -75,10 +75,25 @@ def delta_to_dict(twin: Twin, pred: Prediction) -> dict[str, Any]:
     """The skeleton's change by ``pred``, just committed to ``twin`` (nothing committed since).
 
     As in the "instruction" event of docs/api.md: apply it to a copy at ``since`` instructions.
+    """
+    return delta_from(pred, *committed_parts(twin, pred))
+
+
+def committed_parts(twin: Twin, pred: Prediction) -> tuple[dict[int, int], list[YarnData], int]:
+    """What a delta needs of the twin right after ``pred`` was committed (a few small reads):
+    the free node of each moved warp, the new yarns, the yarn count."""
+    first_new = min(pred.new_yarns, default=twin.yarn_count)
+    free = {w: twin.free_node(w) for w in pred.free_nodes if w < first_new}
+    return free, [twin.yarn(i) for i in pred.new_yarns], twin.yarn_count
+
+
+def delta_from(pred: Prediction, free_nodes: Mapping[int, int], new_yarns: Sequence[YarnData],
+               yarn_count: int) -> dict[str, Any]:  # fmt: skip
+    """The delta from the prediction and ``committed_parts`` (no twin needed: any thread).
 
     ``inserted`` nodes come in yarn order, so each one's ``after`` is in place before it.
     """
-    first_new = min(pred.new_yarns, default=twin.yarn_count)
+    first_new = min(pred.new_yarns, default=yarn_count)
     return {
         "since": pred.index - 1,
         "inserted": [
@@ -87,11 +102,11 @@ def delta_to_dict(twin: Twin, pred: Prediction) -> dict[str, Any]:
             if n.yarn < first_new
         ],
         "moved": [
-            {"yarn": w, "node": twin.free_node(w), "xyz": _xyz(xyz)}
+            {"yarn": w, "node": free_nodes[w], "xyz": _xyz(xyz)}
             for w, xyz in sorted(pred.free_nodes.items())
             if w < first_new
         ],
-        "new_yarns": [yarn_to_dict(twin.yarn(i)) for i in pred.new_yarns],
+        "new_yarns": [yarn_to_dict(yarn) for yarn in new_yarns],
         "contacts": [contact_to_dict(c) for c in pred.contacts],
         "takeup": float(pred.takeup),
         "occupancy": pred.occupancy.tolist(),

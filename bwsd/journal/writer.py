@@ -37,10 +37,15 @@ class JournalWriter:
 
     async def run(self, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
         """``fn(*args, **kwargs)`` on the writer's thread, after every call submitted before."""
+        return await self.submit(fn, *args, **kwargs)
+
+    def submit(self, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> asyncio.Future[T]:
+        """Queue ``fn(*args, **kwargs)`` now (in order with every other call) and return its
+        future, for a caller that awaits it later."""
         if self._closed:
             raise JournalError("the journal writer is closed", path=str(self.journal.path))
         loop = asyncio.get_running_loop()
-        return await loop.run_in_executor(self._executor, functools.partial(fn, *args, **kwargs))
+        return loop.run_in_executor(self._executor, functools.partial(fn, *args, **kwargs))
 
     async def close(self) -> None:
         """Refuse new calls, finish the ones submitted, close the journal; twice is harmless."""

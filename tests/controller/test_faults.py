@@ -154,10 +154,14 @@ def test_an_unexpected_error_aborts_with_its_reason_logged_counted_and_published
         assert faults and faults[0].cause is StopCause.INTERNAL
         assert [e["to"] for e in events if e["event"] == "state"][-2:] == ["Aborting", "Aborted"]
         assert "the run loop failed" in caplog.text
-        assert ctl.twin.done == 3  # nothing moved unjournaled
+        # the lock came with instruction 3's event, published while instruction 4 began:
+        # 4 was journaled as started, moved and committed; its "done" met the lock
+        assert ctl.twin.done == 4
         # the lock is gone: the operator clears, resets, and the outcome is recorded late
         other.execute("ROLLBACK")
         other.close()
+        pending = journal.pending(pid)
+        assert journal.program(pid).done == 3 and pending is not None and pending.index == 4
         assert await ctl.command(Command.CLEAR) is State.STOPPED
         assert await ctl.command(Command.RESET) is State.IDLE
         assert journal.program(pid).outcome == "aborted"

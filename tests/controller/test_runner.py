@@ -82,7 +82,8 @@ def test_a_limit_refuses_the_program_at_load_and_a_move_at_run(mock, tmp_path):
         await ctl.wait()
         assert ctl.packml.state is State.ABORTED
         assert "beyond the tensioner's stroke" in ctl.packml.reason
-        assert journal.program(pid).done == 0 and journal.pending(pid) is None
+        record = journal.program(pid)  # journaled as begun (with the prediction), never moved:
+        assert (record.done, record.outcome) == (0, "aborted")  # the program ended there
         answer = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})
         assert answer["occupancy"] == [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
         await ctl.bus.close()
