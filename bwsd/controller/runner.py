@@ -178,8 +178,9 @@ class Controller:
         self._snapped = 0  # instructions done at the last snapshot
         self._background: set[asyncio.Task[Any]] = set()
         self._recovery: asyncio.Task[None] | None = None
-        self._done_write: asyncio.Future[None] | None = None  # "done" of the last instruction
-        self._describing: asyncio.Future[InstructionDone] | None = None  # its event
+        self._unjournaled: tuple[int, dict[str, Any]] | None = None  # last "done", not written
+        self._undescribed: Callable[[], InstructionDone] | None = None  # its event, not built
+        self._describing: asyncio.Future[InstructionDone] | None = None  # being built
         self._unrecorded: tuple[int, str, str] | None = None  # an outcome not yet journaled
 
     # ----- what the doors read -----
@@ -487,15 +488,22 @@ class Controller:
         predicting = asyncio.ensure_future(
             asyncio.to_thread(_predict, self.twin, instruction, self.limits)
         )
+        timing = self._timing
         try:
             if self._journaled != index:
                 payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                            "takeup_origin": origin}  # fmt: skip
-                await self._writer.run(self.journal.started, self.program_id, index, payload)
+                done, self._unjournaled = self._unjournaled, None
+                await self._writer.run(self.journal.started, self.program_id, index, payload,
+                                       done)  # fmt: skip
                 self._journaled = index
-            await self._flush()
-            pred, self._timing["predict_s"] = await predicting
+            else:
+                await self._flush()
+            timing["started_s"] = time.perf_counter() - begun
+            pred, timing["predict_s"], timing["tables_s"] = await predicting
+            timing["predicted_s"] = time.perf_counter() - begun
             self._pending = pred
+            self._describe()  # the last instruction's event, built while this one moves
         except (TwinError, RefusedMove) as exc:
             return Aborted(StopCause.REFUSED_MOVE, str(exc))
         finally:
@@ -536,9 +544,10 @@ class Controller:
         return state.axes[axis_by_name(self.machine, "takeup").index].position
 
     async def _commit(self, pred: Prediction, index: int) -> None:
-        """Commit (in a worker thread: the twin's lock is never waited on here), then queue the
-        journal's "done" and the event, finished while the next instruction is predicted
-        (``_flush``). A snapshot, when due, is taken now."""
+        """Commit (in a worker thread: the twin's lock is never waited on here). The journal's
+        "done" goes to the disk with the next instruction's "started" (one write for both),
+        and the event is built while the next instruction moves; ``_flush`` finishes both
+        when no instruction follows. A snapshot, when due, is taken now."""
         assert self.twin is not None and self.program_id
         twin, pid = self.twin, self.program_id
         committing = time.perf_counter()
@@ -547,25 +556,39 @@ class Controller:
         self.last = pred
         self._journaled, self._pending = None, None
         self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
-        self._done_write = self._writer.submit(self.journal.done, pid, index,
-                                               {"contacts": len(pred.contacts)})  # fmt: skip
-        if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
-            await self._snapshot()
+        self._unjournaled = (index, {"contacts": len(pred.contacts)})
         step = self.next_step()
         wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
-        timing, self._timing = self._timing, {}
-        self._describing = asyncio.ensure_future(asyncio.to_thread(
-            lambda: InstructionDone(pid, index, len(pred.contacts), len(pred.inserted), timing,
-                                    delta_from(pred, *parts), wire)))  # fmt: skip
+        timing, self._timing, now = self._timing, {}, time.time()
+        self._undescribed = lambda: InstructionDone(
+            pid, index, len(pred.contacts), len(pred.inserted), timing, delta_from(pred, *parts),
+            wire, at=now)  # fmt: skip
+        if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
+            await self._flush()
+            await self._snapshot()
+
+    def _describe(self) -> None:
+        """Build the last instruction's event in a worker thread; publish it once built."""
+        build, self._undescribed = self._undescribed, None
+        if build is None:
+            return
+        self._describing = asyncio.ensure_future(asyncio.to_thread(build))
+        self._describing.add_done_callback(self._described)
+
+    def _described(self, future: asyncio.Future[InstructionDone]) -> None:
+        if not future.cancelled() and future.exception() is None:
+            self.events.publish(future.result())
 
     async def _flush(self) -> None:
-        """Publish the last instruction's event and finish its "done" (raising its error)."""
+        """Journal the last instruction's "done" and publish its event, now."""
+        done, self._unjournaled = self._unjournaled, None
+        self._describe()
         describing, self._describing = self._describing, None
-        if describing is not None:
-            self.events.publish(await describing)
-        done, self._done_write = self._done_write, None
         if done is not None:
-            await done
+            assert self.program_id is not None
+            await self._writer.run(self.journal.done, self.program_id, *done)
+        if describing is not None:
+            await describing  # published by its callback (which ran first)
 
     async def _snapshot(self) -> None:
         """Journal a snapshot of the twin (restart replays only what follows it)."""
@@ -834,15 +857,16 @@ class Controller:
         await self._writer.close()
 
 
-def _predict(twin: Twin, instruction: Instruction, limits: Limits) -> tuple[Prediction, float]:
+def _predict(twin: Twin, instruction: Instruction,
+             limits: Limits) -> tuple[Prediction, float, float]:  # fmt: skip
     """Predict and check the limits (in a worker thread); the tables events read are built.
-    Also the seconds the twin's own predict took."""
+    Also the seconds of the twin's own predict, and of the checks and tables after it."""
     begun = time.perf_counter()
     pred = twin.predict(instruction)
     took = time.perf_counter() - begun
     check_limits(pred, limits)
     _ = pred.contacts, pred.inserted
-    return pred, took
+    return pred, took, time.perf_counter() - begun - took
 
 
 def _commit_twin(twin: Twin, pred: Prediction) -> tuple[dict[int, int], list[Any], int]:

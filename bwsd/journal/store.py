@@ -126,10 +126,18 @@ class Journal(EventLog):
 
     # -- instructions -----------------------------------------------------------------------
 
-    def started(self, program_id: int, index: int, payload: dict[str, Any]) -> None:
-        """Journal that instruction ``index`` (1-based) starts: before the actuators move."""
+    def started(self, program_id: int, index: int, payload: dict[str, Any],
+                done: tuple[int, dict[str, Any]] | None = None) -> None:  # fmt: skip
+        """Journal that instruction ``index`` (1-based) starts: before the actuators move.
+
+        ``done``: (index, payload) of the instruction before, journaled as done in the same
+        transaction (one write to the disk for both).
+        """
         data = self._payload(payload, program_id, index)
+        finished = None if done is None else (done[0], self._payload(done[1], program_id, done[0]))
         with self._write() as conn:
+            if finished is not None:
+                self._done(conn, program_id, *finished)
             rec = self._program(conn, program_id, index)
             self._check_start(conn, rec, index)
             conn.execute(
@@ -159,22 +167,24 @@ class Journal(EventLog):
         """Journal that instruction ``index`` is done: after the twin committed it."""
         data = self._payload(payload, program_id, index)
         with self._write() as conn:
-            rec = self._program(conn, program_id, index)
-            if rec.outcome not in ACTIVE:
-                raise self._error(f"the program is {rec.outcome}: no instruction of it can finish",
-                                  program=program_id, index=index)  # fmt: skip
-            row = conn.execute(
-                "SELECT done FROM instructions WHERE program_id = ? AND idx = ?",
-                (program_id, index),
-            ).fetchone()
-            if row is None or row[0] is not None:
-                message = "not started" if row is None else "already done"
-                raise self._error(message, program=program_id, index=index)
-            conn.execute(
-                "UPDATE instructions SET done = ?, done_payload = ? WHERE program_id = ? "
-                "AND idx = ?",
-                (self._clock(), data, program_id, index),
-            )
+            self._done(conn, program_id, index, data)
+
+    def _done(self, conn: sqlite3.Connection, program_id: int, index: int, data: str) -> None:
+        rec = self._program(conn, program_id, index)
+        if rec.outcome not in ACTIVE:
+            raise self._error(f"the program is {rec.outcome}: no instruction of it can finish",
+                              program=program_id, index=index)  # fmt: skip
+        row = conn.execute(
+            "SELECT done FROM instructions WHERE program_id = ? AND idx = ?",
+            (program_id, index),
+        ).fetchone()
+        if row is None or row[0] is not None:
+            message = "not started" if row is None else "already done"
+            raise self._error(message, program=program_id, index=index)
+        conn.execute(
+            "UPDATE instructions SET done = ?, done_payload = ? WHERE program_id = ? AND idx = ?",
+            (self._clock(), data, program_id, index),
+        )
 
     def done_count(self, program_id: int) -> int:
         """How many instructions of the program are done (they are 1 .. this count)."""
