@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import multiprocessing
 import socket
 import statistics
 import sys
@@ -34,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bwsd.api.auth import TokenStore  # noqa: E402
-from bwsd.config import load_config  # noqa: E402
+from bwsd.config import load_config, parse_config  # noqa: E402
 from bwsd.paths import state_folder, tokens_file  # noqa: E402
 from bwsd.program.generators import braid4  # noqa: E402
 from tests.fieldbus.conftest import BUS, toml  # noqa: E402
@@ -91,44 +92,70 @@ def serving(program: str) -> Iterator[Served]:
 
 async def measure(served: Served, program: str, rate: float,
                   idle_s: float) -> dict[str, list[float]]:  # fmt: skip
-    """GET state at ``rate`` while idle for ``idle_s``, then during the run; events' timings."""
+    """GET state at ``rate`` while idle for ``idle_s``, then during the run; events' timings.
+
+    The events are read in a process of their own, so that the load generator's work does
+    not delay their receipt (and the other way round).
+    """
     base = str(served.http.base_url).rstrip("/")
     token = served.http.headers["Authorization"].split()[1]
     ws_url = base.replace("http", "ws", 1) + f"/events?token={token}"
-    out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus",
-                                                   "commit", "state", "idle")}  # fmt: skip
-    done = asyncio.Event()
-    async with websockets.connect(ws_url, max_size=None) as ws:
-        async with httpx.AsyncClient(base_url=base, headers=served.http.headers, timeout=30) as c:
-            (await c.post("/programs", json={"name": "b.bws", "text": program})).raise_for_status()
-            (await c.post("/commands/reset", json={})).raise_for_status()
-            load = Requester(base, token)
-            quiet = asyncio.Event()
-            asyncio.get_running_loop().call_later(idle_s, quiet.set)
-            await load.run(rate, out["idle"], quiet)
-            reader = asyncio.create_task(_events(ws, out, done, time.time()))
-            (await c.post("/commands/start", json={})).raise_for_status()
-            await load.run(rate, out["state"], done)
-        await reader
+    out: dict[str, list[float]] = {"state": [], "idle": []}
+    spawn = multiprocessing.get_context("spawn")
+    results, listening = spawn.Queue(), spawn.Event()
+    async with httpx.AsyncClient(base_url=base, headers=served.http.headers, timeout=30) as c:
+        (await c.post("/programs", json={"name": "b.bws", "text": program})).raise_for_status()
+        (await c.post("/commands/reset", json={})).raise_for_status()
+        load = Requester(base, token)
+        quiet = asyncio.Event()
+        asyncio.get_running_loop().call_later(idle_s, quiet.set)
+        await load.run(rate, out["idle"], quiet)
+        reader = spawn.Process(target=read_events, args=(ws_url, results, listening))
+        reader.start()
+        while not listening.is_set():
+            await asyncio.sleep(0.01)
+        (await c.post("/commands/start", json={})).raise_for_status()
+        done = asyncio.Event()
+
+        async def watch() -> None:
+            while reader.is_alive():
+                await asyncio.sleep(0.05)
+            done.set()
+
+        watcher = asyncio.create_task(watch())
+        await load.run(rate, out["state"], done)
+        await watcher
+    out.update(results.get(timeout=30))
     return out
 
 
-async def _events(ws: Any, out: dict[str, list[float]], done: asyncio.Event,
-                  since: float) -> None:  # fmt: skip
-    async for text in ws:
-        now = time.time()
-        event = json.loads(text)
-        if event.get("at", 0) >= since:  # not those queued before the run
-            out["lag"].append(now - event["at"])
-        if event.get("event") == "instruction" and "step_s" in event:
-            step, commit = event["step_s"], event["commit_s"]
-            out["overhead"].append(step + commit - event["predict_s"] - event["bus_s"])
-            out["predict"].append(event["predict_s"])
-            out["bus"].append(event["bus_s"])
-            out["commit"].append(commit)
-        if event.get("event") == "state" and event.get("to") in ("Complete", "Held", "Aborted"):
-            done.set()
-            return
+def read_events(ws_url: str, results: Any, listening: Any) -> None:
+    """The event reader's process: lags and the instructions' timings, until the run ends."""
+    out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus",
+                                                   "commit")}  # fmt: skip
+
+    async def main() -> None:
+        async with websockets.connect(ws_url, max_size=None) as ws:
+            await ws.recv()  # hello
+            since = time.time()
+            listening.set()
+            async for text in ws:
+                now = time.time()
+                event = json.loads(text)
+                if event.get("at", 0) >= since:  # not those queued before the run
+                    out["lag"].append(now - event["at"])
+                if event.get("event") == "instruction" and "step_s" in event:
+                    step, commit = event["step_s"], event["commit_s"]
+                    out["overhead"].append(step + commit - event["predict_s"] - event["bus_s"])
+                    out["predict"].append(event["predict_s"])
+                    out["bus"].append(event["bus_s"])
+                    out["commit"].append(commit)
+                if event.get("event") == "state" and event.get("to") in ("Complete", "Held",
+                                                                          "Aborted"):  # fmt: skip
+                    return
+
+    asyncio.run(main())
+    results.put(out)
 
 
 class Requester:
@@ -183,7 +210,7 @@ def journal_of_a_long_job(folder: Path, cycles: int, snapshot_every: int) -> tup
 
     text = braid_24x24(cycles)
     program = parse_program(text)
-    machine = load_config(ROOT / "config" / "braid-24x24.toml").machine
+    machine = parse_config({"machine": machine_table()}).machine  # as the daemon's config
     twin = Twin.from_program(machine, program)
     state = folder / "state"
     state.mkdir(parents=True)
@@ -210,7 +237,8 @@ def restart(folder: Path, state: Path, mock_ports: dict[str, int]) -> tuple[floa
         "fieldbus.modbus": {"port": mock_ports["modbus"]},
         "api": {"port": 0}, "plc": {"enabled": False},
     }))  # fmt: skip
-    token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "viewer")
+    store = TokenStore.load(tokens_file(load_config(config), state))
+    token = store.add(f"bench-{len(store.entries) + 1}", "viewer")
     begun = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
                              "--state-dir", str(state)], stdout=subprocess.PIPE,

@@ -546,8 +546,10 @@ class Controller:
     async def _commit(self, pred: Prediction, index: int) -> None:
         """Commit (in a worker thread: the twin's lock is never waited on here). The journal's
         "done" goes to the disk with the next instruction's "started" (one write for both),
-        and the event is built while the next instruction moves; ``_flush`` finishes both
-        when no instruction follows. A snapshot, when due, is taken now."""
+        and the event is built in a worker thread once the next instruction is predicted (a
+        Python thread beside the prediction and the journal's write would slow both: they
+        wait for the interpreter lock); ``_flush`` finishes both when no instruction
+        follows. A snapshot, when due, is taken now."""
         assert self.twin is not None and self.program_id
         twin, pid = self.twin, self.program_id
         committing = time.perf_counter()

@@ -113,8 +113,9 @@ def delta_from(pred: Prediction, free_nodes: Mapping[int, int], new_yarns: Seque
     }
 
 
-def _xyz(xyz: Any) -> list[float]:
-    return [float(v) for v in xyz]
+def _xyz(xyz: Sequence[float]) -> list[float]:
+    """A point as a list (the predictions' points are Python floats already)."""
+    return list(xyz)
 
 
 def _yarn_from_dict(d: Mapping[str, Any]) -> YarnData:
