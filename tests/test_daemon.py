@@ -283,3 +283,23 @@ def test_a_port_in_use_is_a_clear_error_and_nothing_stays_open(rig):
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith(f"bwsd: error: [api] cannot listen on 127.0.0.1:{port}: "), last
     assert "address already in use" in last.lower() and "Traceback" not in done.stderr
+
+
+def test_a_damaged_journal_stops_the_start_with_the_reason(rig):
+    config, state, token, _ = rig
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "braid.bws", "text": TEXT}).raise_for_status()
+    served.stop()
+    journal = state / "journal.db"
+    data = bytearray(journal.read_bytes())
+    assert len(data) > 8192
+    data[4096:8192] = bytes(range(256)) * 16  # garbage over the second page
+    journal.write_bytes(bytes(data))
+    done = subprocess.run(
+        [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config), "--state-dir",
+         str(state)],
+        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert done.returncode != 0 and done.stdout == ""  # never ready
+    assert "journal.db" in done.stderr and "damaged" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr

@@ -7,8 +7,10 @@ from typing import Annotated, Any
 
 from fastapi import Depends
 
+from bwsd.controller.errors import ControllerError
 from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
-from bwsd.controller.runner import Controller, ControllerError, instruction_dict
+from bwsd.controller.programs import instruction_dict
+from bwsd.controller.runner import Controller
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction

@@ -17,7 +17,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
-from bwsd.controller.runner import Busy, ControllerError
+from bwsd.controller.errors import Busy, ControllerError
 from bwsd.errors import ProgramError, TwinError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict

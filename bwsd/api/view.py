@@ -10,7 +10,8 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from bwsd.controller.runner import Controller, instruction_dict
+from bwsd.controller.programs import instruction_dict
+from bwsd.controller.runner import Controller
 from bwsd.twin import SkeletonData
 
 

@@ -25,11 +25,13 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Coroutine
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
+from bwsd.controller.errors import Busy, Cancelled, ControllerError
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
+from bwsd.controller.programs import DryRun, check_program, instruction_dict, rebuild
 from bwsd.controller.recovery import Before, Settle, differing_cells, settle
 from bwsd.controller.status import (
     BusChanged,
@@ -44,7 +46,7 @@ from bwsd.controller.status import (
     StopCause,
     cause_of,
 )
-from bwsd.errors import BwsdError, ProgramError, TwinError
+from bwsd.errors import BwsdError, TwinError
 from bwsd.export.skeleton_json import committed_parts, delta_from
 from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
@@ -57,8 +59,8 @@ from bwsd.fieldbus.base import (
 )
 from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, Journal
 from bwsd.journal.writer import JournalWriter
-from bwsd.program import parse_program, validate
-from bwsd.twin import Machine, Prediction, Program, Shift, Snapshot, Twin
+from bwsd.program import parse_program
+from bwsd.twin import Machine, Prediction, Program, Shift, Twin
 from bwsd.twin.instructions import Instruction
 
 log = logging.getLogger("bwsd.controller")
@@ -68,18 +70,6 @@ _READS_FIRST = _RUNS | {Command.RESET}
 _LOADABLE = frozenset({State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED})
 
 
-class ControllerError(BwsdError):
-    """A request the controller cannot take in its present state (names why)."""
-
-
-class Busy(ControllerError):
-    """Another program check is running: one at a time."""
-
-
-class Cancelled(ControllerError):
-    """A program check was cancelled (its client went away)."""
-
-
 @dataclass(frozen=True)
 class Settings:
     """The ``[controller]`` table's run settings (the limits are in ``Limits``)."""
@@ -87,17 +77,6 @@ class Settings:
     max_instructions: int = 1_000_000  # a program may expand to at most this many
     snapshot_every: int = 200  # instructions between twin snapshots in the journal
     poll_interval: float = 0.5  # s between reads of the machine at rest
-
-
-@dataclass(frozen=True)
-class DryRun:
-    """What a program makes when the twin runs it to the end."""
-
-    instructions: int
-    contacts: int
-    yarns: int
-    nodes: int
-    takeup: float  # mm
 
 
 # ----- how one step ends -----
@@ -179,8 +158,6 @@ class Controller:
         self._background: set[asyncio.Task[Any]] = set()
         self._recovery: asyncio.Task[None] | None = None
         self._unjournaled: tuple[int, dict[str, Any]] | None = None  # last "done", not written
-        self._undescribed: Callable[[], InstructionDone] | None = None  # its event, not built
-        self._describing: asyncio.Future[InstructionDone] | None = None  # being built
         self._unrecorded: tuple[int, str, str] | None = None  # an outcome not yet journaled
 
     # ----- what the doors read -----
@@ -233,7 +210,7 @@ class Controller:
             raise Busy("another program is being checked: try again when it has finished")
         async with self._checking:
             try:
-                return await asyncio.to_thread(_check, self.machine, self.limits,
+                return await asyncio.to_thread(check_program, self.machine, self.limits,
                                                self.settings.max_instructions, name, text,
                                                cancel)  # fmt: skip
             except Cancelled:
@@ -449,7 +426,7 @@ class Controller:
     async def _end(self, outcome: Held | Aborted) -> None:
         """Hold or abort the run from inside it (unless a command already took over)."""
         try:
-            await self._flush()  # the last instruction done is told before the stop
+            await self._flush()  # the last instruction done is journaled before the stop
         except Exception as exc:
             log.error("the journal cannot record the last instruction done: %s", exc)
         self._stop_cause = outcome.cause
@@ -468,10 +445,9 @@ class Controller:
     async def _step(self) -> Outcome:
         """One instruction end to end.
 
-        The prediction runs in a worker thread while the journal records "started" (and
-        finishes the previous "done") and the previous instruction's event is published: the
-        disk and the event cost nothing on top of the prediction. Nothing moves before both
-        the prediction and "started" are in.
+        The prediction runs in a worker thread while the journal records "started" together
+        with the previous instruction's "done": the disk costs nothing on top of the
+        prediction. Nothing moves before both the prediction and "started" are in.
         """
         assert self.program is not None and self.twin is not None and self.program_id
         index = self.twin.done + 1
@@ -493,17 +469,15 @@ class Controller:
             if self._journaled != index:
                 payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                            "takeup_origin": origin}  # fmt: skip
-                done, self._unjournaled = self._unjournaled, None
                 await self._writer.run(self.journal.started, self.program_id, index, payload,
-                                       done)  # fmt: skip
-                self._journaled = index
+                                       self._unjournaled)  # fmt: skip
+                self._journaled, self._unjournaled = index, None
             else:
                 await self._flush()
             timing["started_s"] = time.perf_counter() - begun
             pred, timing["predict_s"], timing["tables_s"] = await predicting
             timing["predicted_s"] = time.perf_counter() - begun
             self._pending = pred
-            self._describe()  # the last instruction's event, built while this one moves
         except (TwinError, RefusedMove) as exc:
             return Aborted(StopCause.REFUSED_MOVE, str(exc))
         finally:
@@ -544,16 +518,14 @@ class Controller:
         return state.axes[axis_by_name(self.machine, "takeup").index].position
 
     async def _commit(self, pred: Prediction, index: int) -> None:
-        """Commit (in a worker thread: the twin's lock is never waited on here). The journal's
-        "done" goes to the disk with the next instruction's "started" (one write for both),
-        and the event is built in a worker thread once the next instruction is predicted (a
-        Python thread beside the prediction and the journal's write would slow both: they
-        wait for the interpreter lock); ``_flush`` finishes both when no instruction
-        follows. A snapshot, when due, is taken now."""
+        """Commit and describe the skeleton's change in one worker thread call (the twin's lock
+        is never waited on here), publish. The journal's "done" goes to the disk with the
+        next instruction's "started" (one write for both); ``_flush`` writes it alone when no
+        instruction follows. A snapshot, when due, is taken now."""
         assert self.twin is not None and self.program_id
         twin, pid = self.twin, self.program_id
         committing = time.perf_counter()
-        parts = await asyncio.to_thread(_commit_twin, twin, pred)
+        delta = await asyncio.to_thread(_commit_twin, twin, pred)
         self._timing["commit_s"] = time.perf_counter() - committing
         self.last = pred
         self._journaled, self._pending = None, None
@@ -561,36 +533,21 @@ class Controller:
         self._unjournaled = (index, {"contacts": len(pred.contacts)})
         step = self.next_step()
         wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
-        timing, self._timing, now = self._timing, {}, time.time()
-        self._undescribed = lambda: InstructionDone(
-            pid, index, len(pred.contacts), len(pred.inserted), timing, delta_from(pred, *parts),
-            wire, at=now)  # fmt: skip
+        timing, self._timing = self._timing, {}
+        self.events.publish(InstructionDone(pid, index, len(pred.contacts), len(pred.inserted),
+                                            timing, delta, wire))  # fmt: skip
         if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
             await self._flush()
             await self._snapshot()
 
-    def _describe(self) -> None:
-        """Build the last instruction's event in a worker thread; publish it once built."""
-        build, self._undescribed = self._undescribed, None
-        if build is None:
-            return
-        self._describing = asyncio.ensure_future(asyncio.to_thread(build))
-        self._describing.add_done_callback(self._described)
-
-    def _described(self, future: asyncio.Future[InstructionDone]) -> None:
-        if not future.cancelled() and future.exception() is None:
-            self.events.publish(future.result())
-
     async def _flush(self) -> None:
-        """Journal the last instruction's "done" and publish its event, now."""
-        done, self._unjournaled = self._unjournaled, None
-        self._describe()
-        describing, self._describing = self._describing, None
+        """Journal the last instruction's "done" now (when no instruction follows it); if the
+        journal refuses, it is kept for the next try (``_record_late``)."""
+        done = self._unjournaled
         if done is not None:
             assert self.program_id is not None
             await self._writer.run(self.journal.done, self.program_id, *done)
-        if describing is not None:
-            await describing  # published by its callback (which ran first)
+            self._unjournaled = None
 
     async def _snapshot(self) -> None:
         """Journal a snapshot of the twin (restart replays only what follows it)."""
@@ -621,7 +578,16 @@ class Controller:
         self._finished = outcome in (COMPLETE, ABORTED, STOPPED)
 
     async def _record_late(self) -> None:
-        """Write an outcome the journal could not take when it came (a full disk)."""
+        """Write what the journal could not take when it came (a full disk, a lock): the last
+        instruction's "done", then the program's outcome."""
+        if self._unjournaled is not None and not self.running:
+            try:
+                await self._flush()
+            except Exception as exc:
+                raise ControllerError(
+                    f"the journal still cannot record instruction "
+                    f"{self._unjournaled[0]} done: {exc}"
+                ) from exc
         if self._unrecorded is None:
             return
         try:
@@ -791,7 +757,7 @@ class Controller:
         text = await run(self.journal.program_text, program_id)
         program = await asyncio.to_thread(parse_program, text, record.name)
         snap = await run(self.journal.latest_snapshot, program_id)
-        twin = await asyncio.to_thread(_rebuild, self.machine, program, record.done, snap)
+        twin = await asyncio.to_thread(rebuild, self.machine, program, record.done, snap)
         first = await run(self.journal.instructions, program_id, 0, 1)
         pending = await run(self.journal.pending, program_id)
         self.program, self.program_id, self.program_name = program, program_id, record.name
@@ -871,15 +837,10 @@ def _predict(twin: Twin, instruction: Instruction,
     return pred, took, time.perf_counter() - begun - took
 
 
-def _commit_twin(twin: Twin, pred: Prediction) -> tuple[dict[int, int], list[Any], int]:
-    """Commit ``pred`` and read what its skeleton delta needs (in a worker thread)."""
+def _commit_twin(twin: Twin, pred: Prediction) -> dict[str, Any]:
+    """Commit ``pred`` and describe the skeleton's change (in a worker thread)."""
     twin.commit(pred)
-    return committed_parts(twin, pred)
-
-
-def instruction_dict(instruction: Instruction) -> dict[str, Any]:
-    """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
-    return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
+    return delta_from(pred, *committed_parts(twin, pred))
 
 
 def _cells(cells: tuple[tuple[int, int], ...]) -> str:
@@ -900,49 +861,3 @@ def _held_machine(current: PackML, reason: str) -> PackML:
     machine.reason = reason
     machine.on_change.extend(current.on_change)
     return machine
-
-
-def _rebuild(machine: Machine, program: Program, done: int,
-             snap: tuple[int, bytes] | None) -> Twin:  # fmt: skip
-    """The twin after ``done`` instructions: from the snapshot if there is one, then replay."""
-    twin = None
-    if snap is not None and snap[0] <= done:
-        try:
-            twin = Twin.from_snapshot(machine, Snapshot.from_bytes(snap[1]))
-        except (BwsdError, ValueError) as exc:
-            log.warning("snapshot at %d not usable (%s): replaying from the start", snap[0], exc)
-    if twin is None:
-        twin = Twin.from_program(machine, program)
-    for instruction in program.instructions[twin.done : done]:
-        twin.advance(instruction)
-    return twin
-
-
-def _check(machine: Machine, limits: Limits, most: int, name: str, text: str,
-           cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
-    """Parse, validate, bound and dry-run a program (in a worker thread)."""
-    program = parse_program(text, name)
-    count = len(program.instructions)
-    if count > most:
-        raise ProgramError(f"the program expands to {count} instructions, more than this "
-                           f"daemon's limit of {most} ([controller] max_instructions)",
-                           source=name)  # fmt: skip
-    validate(program, machine, name)
-    twin = Twin.from_program(machine, program)
-    predict = bool(limits.max_contacts or limits.tensioner_stroke)
-    try:
-        for instruction in program.instructions:
-            if cancel is not None and cancel.is_set():
-                raise Cancelled(f"{name}: the check was cancelled")
-            if predict:
-                pred = twin.predict(instruction)
-                check_limits(pred, limits)
-                twin.commit(pred)
-            else:
-                twin.advance(instruction)
-    except TwinError as exc:
-        raise ControllerError(f"{name}: {exc}") from exc
-    except RefusedMove as exc:
-        raise ControllerError(f"{name}: {exc}") from TwinError(str(exc), instruction=pred.index)
-    return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
-                           twin.takeup)  # fmt: skip

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bwsd.controller.errors import ControllerError
 from bwsd.controller.packml import Command, State
-from bwsd.controller.runner import Controller, ControllerError
+from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, Fault, InstructionDone, StopCause
 from bwsd.errors import BwsdError
 from bwsd.program import parse_program
@@ -154,17 +155,15 @@ def test_an_unexpected_error_aborts_with_its_reason_logged_counted_and_published
         assert faults and faults[0].cause is StopCause.INTERNAL
         assert [e["to"] for e in events if e["event"] == "state"][-2:] == ["Aborting", "Aborted"]
         assert "the run loop failed" in caplog.text
-        # the lock came with instruction 3's event, published while instruction 4 began:
-        # 4 was journaled as started, moved and committed; its "done" met the lock
-        assert ctl.twin.done == 4
-        # the lock is gone: the operator clears, resets, and the outcome is recorded late
+        assert ctl.twin.done == 3  # instruction 4 never started: its "started" met the lock
+        # the lock is gone: the operator clears, resets; "done" of 3 and the outcome are
+        # recorded late
         other.execute("ROLLBACK")
         other.close()
-        pending = journal.pending(pid)
-        assert journal.program(pid).done == 3 and pending is not None and pending.index == 4
         assert await ctl.command(Command.CLEAR) is State.STOPPED
         assert await ctl.command(Command.RESET) is State.IDLE
-        assert journal.program(pid).outcome == "aborted"
+        record = journal.program(pid)
+        assert (record.outcome, record.done) == ("aborted", 3) and journal.pending(pid) is None
         await ctl.close()
 
     with caplog.at_level(logging.INFO, logger="bwsd"):

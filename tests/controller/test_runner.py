@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bwsd.controller.errors import Busy, Cancelled, ControllerError
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
-from bwsd.controller.runner import Busy, Cancelled, Controller, ControllerError, Settings
+from bwsd.controller.runner import Controller, Settings
 from bwsd.controller.status import Event, InstructionDone
 from bwsd.errors import ProgramError
 from bwsd.fieldbus import AxisMove, open_bus

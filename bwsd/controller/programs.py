@@ -1,0 +1,85 @@
+"""Programs off the event loop: the check before a load, the twin rebuilt after a restart.
+
+Both run in a worker thread and touch no controller state: ``check_program`` parses,
+validates, bounds and dry-runs a program (cancellable between instructions, the configured
+limits checked on each); ``rebuild`` restores the twin from the journal's latest snapshot
+and replays the instructions after it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from bwsd.controller.errors import Cancelled, ControllerError
+from bwsd.controller.plan import Limits, RefusedMove, check_limits
+from bwsd.errors import BwsdError, ProgramError, TwinError
+from bwsd.program import parse_program, validate
+from bwsd.twin import Machine, Program, Snapshot, Twin
+from bwsd.twin.instructions import Instruction
+
+log = logging.getLogger("bwsd.controller")
+
+
+@dataclass(frozen=True)
+class DryRun:
+    """What a program makes when the twin runs it to the end."""
+
+    instructions: int
+    contacts: int
+    yarns: int
+    nodes: int
+    takeup: float  # mm
+
+
+def instruction_dict(instruction: Instruction) -> dict[str, Any]:
+    """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
+    return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
+
+
+def rebuild(machine: Machine, program: Program, done: int,
+             snap: tuple[int, bytes] | None) -> Twin:  # fmt: skip
+    """The twin after ``done`` instructions: from the snapshot if there is one, then replay."""
+    twin = None
+    if snap is not None and snap[0] <= done:
+        try:
+            twin = Twin.from_snapshot(machine, Snapshot.from_bytes(snap[1]))
+        except (BwsdError, ValueError) as exc:
+            log.warning("snapshot at %d not usable (%s): replaying from the start", snap[0], exc)
+    if twin is None:
+        twin = Twin.from_program(machine, program)
+    for instruction in program.instructions[twin.done : done]:
+        twin.advance(instruction)
+    return twin
+
+
+def check_program(machine: Machine, limits: Limits, most: int, name: str, text: str,
+           cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
+    """Parse, validate, bound and dry-run a program (in a worker thread)."""
+    program = parse_program(text, name)
+    count = len(program.instructions)
+    if count > most:
+        raise ProgramError(f"the program expands to {count} instructions, more than this "
+                           f"daemon's limit of {most} ([controller] max_instructions)",
+                           source=name)  # fmt: skip
+    validate(program, machine, name)
+    twin = Twin.from_program(machine, program)
+    predict = bool(limits.max_contacts or limits.tensioner_stroke)
+    try:
+        for instruction in program.instructions:
+            if cancel is not None and cancel.is_set():
+                raise Cancelled(f"{name}: the check was cancelled")
+            if predict:
+                pred = twin.predict(instruction)
+                check_limits(pred, limits)
+                twin.commit(pred)
+            else:
+                twin.advance(instruction)
+    except TwinError as exc:
+        raise ControllerError(f"{name}: {exc}") from exc
+    except RefusedMove as exc:
+        raise ControllerError(f"{name}: {exc}") from TwinError(str(exc), instruction=pred.index)
+    return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
+                           twin.takeup)  # fmt: skip
