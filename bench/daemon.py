@@ -38,7 +38,7 @@ from bwsd.api.auth import TokenStore  # noqa: E402
 from bwsd.config import load_config, parse_config  # noqa: E402
 from bwsd.paths import state_folder, tokens_file  # noqa: E402
 from bwsd.program.generators import braid4  # noqa: E402
-from tests.fieldbus.conftest import BUS, toml  # noqa: E402
+from tests.fieldbus.conftest import BUS, Mock, start_mock, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 
 
@@ -48,27 +48,27 @@ def machine_table() -> dict[str, Any]:
             "d_mat": m.d_mat, "c_mat": m.c_mat}  # fmt: skip
 
 
-def start(tmp: Path, program: str) -> tuple[Any, Served]:
-    import subprocess
+def loom(tmp: Path, program: str) -> Mock:
+    """The mock loom with the 24x24 machine, its cases where ``program``'s FILL puts them."""
+    return start_mock(tmp, {}, machine=machine_table(), program=program)
 
-    machine = machine_table()
-    (tmp / "prog.bws").write_text(program)
-    (tmp / "mock.toml").write_text(toml({"machine": machine, "simulator": {
-        "modbus_port": 0, "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
-    mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config",
-                             str(tmp / "mock.toml"), "--program", str(tmp / "prog.bws")],
-                            stdout=subprocess.PIPE, text=True, cwd=ROOT)  # fmt: skip
-    assert mock.stdout is not None
-    ports = dict(p.split("=") for p in mock.stdout.readline().split()[1:])
-    (tmp / "bwsd.toml").write_text(toml({
-        "machine": machine, "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
-        "fieldbus.modbus": {"port": int(ports["modbus"])},
-        "api": {"port": 0}, "plc": {"port": 0},
+
+def write_config(path: Path, ports: dict[str, int], plc: bool = True) -> Path:
+    """A daemon config for the 24x24 machine on the mock loom's ports (API and PLC: any)."""
+    path.write_text(toml({
+        "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
+        "fieldbus.modbus": {"port": ports["modbus"]},
+        "api": {"port": 0}, "plc": {"port": 0, "enabled": plc},
     }))  # fmt: skip
+    return path
+
+
+def start(tmp: Path, program: str) -> tuple[Mock, Served]:
+    mock = loom(tmp, program)
+    config = write_config(tmp / "bwsd.toml", mock.ports)
     state = state_folder(tmp / "state")
-    tokens = tokens_file(load_config(tmp / "bwsd.toml"), state)
-    token = TokenStore.load(tokens).add("bench", "operator")
-    return mock, Served(tmp / "bwsd.toml", state, token)
+    token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
+    return mock, Served(config, state, token)
 
 
 def braid_24x24(cycles: int) -> str:
@@ -86,8 +86,7 @@ def serving(program: str) -> Iterator[Served]:
             yield served
         finally:
             served.stop()
-            mock.terminate()
-            mock.wait(timeout=20)
+            mock.stop()
 
 
 async def measure(served: Served, program: str, rate: float,
@@ -231,12 +230,7 @@ def restart(folder: Path, state: Path, mock_ports: dict[str, int]) -> tuple[floa
     """Seconds from `bwsd serve` starting to its API answering, and to recovery's end."""
     import subprocess
 
-    config = folder / "bwsd.toml"
-    config.write_text(toml({
-        "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
-        "fieldbus.modbus": {"port": mock_ports["modbus"]},
-        "api": {"port": 0}, "plc": {"enabled": False},
-    }))  # fmt: skip
+    config = write_config(folder / "bwsd.toml", mock_ports, plc=False)
     store = TokenStore.load(tokens_file(load_config(config), state))
     token = store.add(f"bench-{len(store.entries) + 1}", "viewer")
     begun = time.perf_counter()
@@ -267,22 +261,12 @@ def restart(folder: Path, state: Path, mock_ports: dict[str, int]) -> tuple[floa
 
 def restart_rows(cycles: int, repeats: int) -> list[str]:
     """Restart of a held ``cycles``-cycle job, with snapshots (every 200) and without."""
-    import subprocess
-
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        (folder / "prog.bws").write_text(braid_24x24(1))
-        (folder / "mock.toml").write_text(toml({"machine": machine_table(), "simulator": {
-            "modbus_port": 0, "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
-        mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config",
-                                 str(folder / "mock.toml"), "--program", str(folder / "prog.bws")],
-                                stdout=subprocess.PIPE, text=True, cwd=ROOT)  # fmt: skip
+        mock = loom(folder, braid_24x24(1))
         try:
-            assert mock.stdout is not None
-            ports = {
-                k: int(v) for k, v in (p.split("=") for p in mock.stdout.readline().split()[1:])
-            }
+            ports = mock.ports
             for every, label in ((200, "snapshot every 200"), (0, "no snapshot (baseline)")):
                 job = folder / f"job-{every}"
                 state, count = journal_of_a_long_job(job, cycles, every)
@@ -296,8 +280,7 @@ def restart_rows(cycles: int, repeats: int) -> list[str]:
                     f"{max(ups):.2f} | {statistics.median(recs):.2f} | {max(recs):.2f} |"
                 )
         finally:
-            mock.terminate()
-            mock.wait(timeout=20)
+            mock.stop()
     return rows
 
 

@@ -15,8 +15,6 @@ import asyncio
 import linecache
 import logging
 import multiprocessing
-import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -28,7 +26,7 @@ from bwsd.api.auth import TokenStore
 from bwsd.config import load_config, parse_config
 from bwsd.daemon import start, stop
 from bwsd.program.generators import braid4
-from tests.fieldbus.conftest import BUS, ROOT
+from tests.fieldbus.conftest import BUS, ROOT, start_mock
 
 SLOW = 0.020  # s
 
@@ -91,20 +89,12 @@ def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
 def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkeypatch) -> None:
     program = braid4(24, 24, cycles=2, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
                      diameter=1.5).program  # fmt: skip
-    (tmp_path / "prog.bws").write_text(program)
-    from tests.fieldbus.conftest import toml
-
-    (tmp_path / "mock.toml").write_text(toml({"machine": machine(), "simulator": {
-        "modbus_port": 0, "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
-    mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config",
-                             str(tmp_path / "mock.toml"), "--program", str(tmp_path / "prog.bws")],
-                            stdout=subprocess.PIPE, text=True, cwd=ROOT)  # fmt: skip
-    assert mock.stdout is not None
-    ports = dict(p.split("=") for p in mock.stdout.readline().split()[1:])
+    mock = start_mock(tmp_path, {}, machine=machine(), program=program)
+    ports = mock.ports
     config = parse_config({
         "machine": machine(),
         "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0,
-                     "modbus": {"port": int(ports["modbus"])}},
+                     "modbus": {"port": ports["modbus"]}},
         "api": {"port": 0}, "plc": {"port": 0},
     })  # fmt: skip
     state = tmp_path / "state"
@@ -139,10 +129,7 @@ def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkey
         asyncio.run(scenario(), debug=True)
     finally:
         logging.getLogger("asyncio").removeHandler(slow)
-        mock.terminate()
-        mock.wait(timeout=20)
-        if mock.stdout is not None:
-            mock.stdout.close()
+        mock.stop()
     found = []
     while not errors.empty():
         found.append(errors.get())

@@ -52,14 +52,16 @@ class Mock:
                 pipe.close()
 
 
-def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | None = None) -> Mock:
+def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | None = None, *,
+               machine: dict[str, Any] = MACHINE, program: str = PROGRAM) -> Mock:  # fmt: skip
+    """The mock loom in its own process; ``program`` gives its FILL (the cases' places)."""
     ports = ports or {"modbus": 0, "socketcand": 0, "control": 0}
     sim = {"modbus_port": ports["modbus"], "socketcand_port": ports["socketcand"],
            "control_port": ports["control"], "heartbeat_ms": 50, **simulator}  # fmt: skip
     config_path = tmp / "mock.toml"
-    config_path.write_text(toml({"machine": MACHINE, "simulator": sim}))
+    config_path.write_text(toml({"machine": machine, "simulator": sim}))
     program_path = tmp / "fill.bws"
-    program_path.write_text(PROGRAM)
+    program_path.write_text(program)
     proc = subprocess.Popen(
         [sys.executable, "-m", "simulator_hw", "--config", str(config_path), "--program",
          str(program_path)],
