@@ -25,17 +25,16 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 from bwsd.controller.errors import Busy, Cancelled, ControllerError
+from bwsd.controller.machine import MachineView
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
 from bwsd.controller.programs import DryRun, check_program, instruction_dict, rebuild
-from bwsd.controller.recovery import Before, Settle, differing_cells, settle
+from bwsd.controller.recovery import Before, Settle, settle
 from bwsd.controller.status import (
-    BusChanged,
-    BusStatus,
     EventStream,
     Fault,
     InstructionDone,
@@ -46,14 +45,15 @@ from bwsd.controller.status import (
     StopCause,
     cause_of,
 )
+from bwsd.controller.tasks import Tasks
 from bwsd.errors import BwsdError, TwinError
 from bwsd.export.skeleton_json import committed_parts, delta_from
 from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
 from bwsd.fieldbus.base import (
+    BoolGrid,
     DriveFault,
     EStopError,
     Fieldbus,
-    FieldbusConnectionError,
     FieldbusError,
     MachineState,
 )
@@ -113,6 +113,21 @@ class Preview:
     takeup: float
 
 
+@dataclass
+class Progress:
+    """What the run of the loaded program carries from one instruction to the next."""
+
+    origin: int | None = None  # take-up position (um) where the program started
+    journaled: int | None = None  # an instruction journaled as started and not done
+    pending: Prediction | None = None  # its prediction
+    rest: Shift | None = None  # the lines of it still to move (a cut shift)
+    blocked: str = ""  # why it cannot be settled (Unhold is refused)
+    unjournaled: tuple[int, dict[str, Any]] | None = None  # the last "done", not yet written
+    snapped: int = 0  # instructions done at the last snapshot
+    finished: bool = False  # the program reached complete, aborted or stopped
+    timing: dict[str, float] = field(default_factory=dict)  # the running step's, published
+
+
 class Controller:
     """The one place that decides: PackML state, the loaded program, the twin, the run.
 
@@ -140,24 +155,15 @@ class Controller:
         self.dry_run: DryRun | None = None  # the loaded program's (None after a restart)
         self.last: Prediction | None = None  # the instruction done last (read in its event)
         self.faults = 0  # runs ended by an unexpected error
+        self.seen = MachineView(bus, self.events.publish)  # the machine as last read
         self._writer = JournalWriter(journal)
+        self._tasks = Tasks(self._task_failed)
         self._stop_cause = StopCause.NONE
-        self._bus = BusStatus()
-        self._task: asyncio.Task[None] | None = None
+        self._task: asyncio.Task[None] | None = None  # the run loop
         self._lock = asyncio.Lock()  # one command at a time, whoever sends it
         self._checking = asyncio.Lock()  # one program check at a time
-        self._journaled: int | None = None  # an instruction started and not done
-        self._pending: Prediction | None = None  # its prediction
-        self._rest: Shift | None = None  # the lines of it still to move
-        self._blocked = ""  # why the run cannot resume (a pending instruction not settled)
+        self._p = Progress()  # the loaded program's run
         self._recovering = ""  # why commands wait (a restart is being recovered)
-        self._timing: dict[str, float] = {}  # seconds of the running instruction, published
-        self._finished = False  # the loaded program reached complete, aborted or stopped
-        self._origin: int | None = None  # take-up position (um) where the program started
-        self._snapped = 0  # instructions done at the last snapshot
-        self._background: set[asyncio.Task[Any]] = set()
-        self._recovery: asyncio.Task[None] | None = None
-        self._unjournaled: tuple[int, dict[str, Any]] | None = None  # last "done", not written
         self._unrecorded: tuple[int, str, str] | None = None  # an outcome not yet journaled
 
     # ----- what the doors read -----
@@ -186,7 +192,7 @@ class Controller:
             stop_cause=self._stop_cause, program_id=self.program_id,
             program_name=self.program_name, index=self.index,
             count=len(program.instructions) if program is not None else 0,
-            allowed=tuple(self.allowed()), bus=self._bus, recovering=self._recovering,
+            allowed=tuple(self.allowed()), bus=self.seen.status, recovering=self._recovering,
             next=self.next_step(),
         )  # fmt: skip
 
@@ -230,12 +236,11 @@ class Controller:
                                          len(program.instructions))  # fmt: skip
             self.program, self.program_id, self.program_name = program, pid, name
             self.dry_run, self.twin, self.last = totals, twin, None
-            self._forget_pending()
-            self._finished, self._origin, self._snapped = False, None, 0
+            self._p = Progress()
             log.info("program %d %r loaded by %s: %d instructions", pid, name, who or "?",
                      len(program.instructions))  # fmt: skip
             self.events.publish(ProgramLoaded(pid, name, len(program.instructions)))
-            self._observe_twin()
+            self.seen.compare(self._at_rest())
         return pid
 
     def _refuse_load(self) -> None:
@@ -243,9 +248,6 @@ class Controller:
             raise ControllerError(f"recovering: {self._recovering}")
         if self.packml.state not in _LOADABLE:
             raise ControllerError(f"a program cannot be loaded in state {self.packml.state.label}")
-
-    def _forget_pending(self) -> None:
-        self._journaled, self._pending, self._rest, self._blocked = None, None, None, ""
 
     async def preview(self) -> Preview:
         """The next instruction predicted on the controller's twin; the twin is not changed."""
@@ -321,20 +323,20 @@ class Controller:
         if command is Command.START:
             if self.program is None:
                 return "no program is loaded"
-            if self._finished:
+            if self._p.finished:
                 return "the loaded program has ended: load a program to start"
-        if command in _READS_FIRST and self._bus.estop:
+        if command in _READS_FIRST and self.seen.status.estop:
             return f"the emergency stop is pressed: release it before {command.label}"
         if command in _RUNS and self.packml.accepts(command):
-            if self._blocked:
-                return f"cannot resume: {self._blocked} (Abort ends the program)"
-            if self._bus.connected is False:
-                return f"the machine cannot be read: {self._bus.last_error}"
-            if self._bus.faulted:
-                return f"axes {', '.join(self._bus.faulted)} report a fault"
-            if self._bus.differs and self._rest is None:
+            if self._p.blocked:
+                return f"cannot resume: {self._p.blocked} (Abort ends the program)"
+            if self.seen.status.connected is False:
+                return f"the machine cannot be read: {self.seen.status.last_error}"
+            if self.seen.status.faulted:
+                return f"axes {', '.join(self.seen.status.faulted)} report a fault"
+            if self.seen.status.differs and self._p.rest is None:
                 return ("the occupancy sensors differ from the twin at "
-                        f"{_cells(self._bus.differs)}: nothing is moved")  # fmt: skip
+                        f"{_cells(self.seen.status.differs)}: nothing is moved")  # fmt: skip
         return None
 
     async def _prepare(self, command: Command) -> None:
@@ -353,7 +355,7 @@ class Controller:
             await self._guard(self.bus.reset_faults())
         elif state in (State.STARTING, State.UNHOLDING, State.UNSUSPENDING):
             self.packml.state_complete()
-            self._task = self._spawn(self._run(), "run")
+            self._task = self._tasks.spawn(self._run(), "run")
             return
         elif state in (State.ABORTING, State.STOPPING):
             await self._wait_run()
@@ -371,7 +373,7 @@ class Controller:
         try:
             await action
         except FieldbusError as exc:
-            self._bus_failed(exc)
+            self.seen.failed(exc)
             self.events.publish(Fault(str(exc), cause_of(exc)))
 
     async def _wait_run(self) -> None:
@@ -456,28 +458,28 @@ class Controller:
         try:
             origin = await self._takeup_origin()
         except FieldbusError as exc:
-            self._bus_failed(exc)
+            self.seen.failed(exc)
             return Held(cause_of(exc), _about(index, exc))
-        doing = self._rest if self._journaled == index and self._rest else instruction
-        self._rest = None
+        doing = self._p.rest if self._p.journaled == index and self._p.rest else instruction
+        self._p.rest = None
         steps = setpoints(self.machine, doing, self.twin.takeup, origin)
         predicting = asyncio.ensure_future(
             asyncio.to_thread(_predict, self.twin, instruction, self.limits)
         )
-        timing = self._timing
+        timing = self._p.timing
         try:
-            if self._journaled != index:
+            if self._p.journaled != index:
                 payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                            "takeup_origin": origin}  # fmt: skip
                 await self._writer.run(self.journal.started, self.program_id, index, payload,
-                                       self._unjournaled)  # fmt: skip
-                self._journaled, self._unjournaled = index, None
+                                       self._p.unjournaled)  # fmt: skip
+                self._p.journaled, self._p.unjournaled = index, None
             else:
                 await self._flush()
             timing["started_s"] = time.perf_counter() - begun
             pred, timing["predict_s"], timing["tables_s"] = await predicting
             timing["predicted_s"] = time.perf_counter() - begun
-            self._pending = pred
+            self._p.pending = pred
         except (TwinError, RefusedMove) as exc:
             return Aborted(StopCause.REFUSED_MOVE, str(exc))
         finally:
@@ -488,30 +490,30 @@ class Controller:
             for step in steps:
                 await self.bus.execute(step)
             state = await self.bus.state()
-            self._timing["bus_s"] = time.perf_counter() - moving
+            self._p.timing["bus_s"] = time.perf_counter() - moving
             self._verify(pred, state)
         except (DriveFault, EStopError) as exc:
-            self._bus_failed(exc)
+            self.seen.failed(exc)
             return Aborted(cause_of(exc), _about(index, exc))
         except (FieldbusError, Mismatch) as exc:
             if isinstance(exc, FieldbusError):
-                self._bus_failed(exc)
+                self.seen.failed(exc)
             return Held(cause_of(exc), _about(index, exc))
-        self._timing["step_s"] = time.perf_counter() - begun
+        self._p.timing["step_s"] = time.perf_counter() - begun
         await self._commit(pred, index)
         return Done(index)
 
     async def _takeup_origin(self) -> int:
         """Where the take-up stood when this program started (read once, journaled)."""
-        if self._origin is None:
+        if self._p.origin is None:
             assert self.twin is not None
             state = await self.bus.state()
-            self._origin = self._takeup(state) - round(self.twin.takeup * UM_PER_MM)
-        return self._origin
+            self._p.origin = self._takeup(state) - round(self.twin.takeup * UM_PER_MM)
+        return self._p.origin
 
     def _verify(self, pred: Prediction, state: MachineState) -> None:
         tolerance = self.bus.settings.position_tolerance
-        verify(pred, state, self._takeup(state) - (self._origin or 0), tolerance)
+        verify(pred, state, self._takeup(state) - (self._p.origin or 0), tolerance)
 
     def _takeup(self, state: MachineState) -> int:
         """The take-up axis's position as the machine reports it (um)."""
@@ -526,28 +528,28 @@ class Controller:
         twin, pid = self.twin, self.program_id
         committing = time.perf_counter()
         delta = await asyncio.to_thread(_commit_twin, twin, pred)
-        self._timing["commit_s"] = time.perf_counter() - committing
+        self._p.timing["commit_s"] = time.perf_counter() - committing
         self.last = pred
-        self._journaled, self._pending = None, None
-        self._bus = replace(self._bus, connected=True, last_error=None, checked=time.time())
-        self._unjournaled = (index, {"contacts": len(pred.contacts)})
+        self._p.journaled, self._p.pending = None, None
+        self.seen.answered()
+        self._p.unjournaled = (index, {"contacts": len(pred.contacts)})
         step = self.next_step()
         wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
-        timing, self._timing = self._timing, {}
+        timing, self._p.timing = self._p.timing, {}
         self.events.publish(InstructionDone(pid, index, len(pred.contacts), len(pred.inserted),
                                             timing, delta, wire))  # fmt: skip
-        if self.settings.snapshot_every and index - self._snapped >= self.settings.snapshot_every:
+        if self.settings.snapshot_every and index - self._p.snapped >= self.settings.snapshot_every:
             await self._flush()
             await self._snapshot()
 
     async def _flush(self) -> None:
         """Journal the last instruction's "done" now (when no instruction follows it); if the
         journal refuses, it is kept for the next try (``_record_late``)."""
-        done = self._unjournaled
+        done = self._p.unjournaled
         if done is not None:
             assert self.program_id is not None
             await self._writer.run(self.journal.done, self.program_id, *done)
-            self._unjournaled = None
+            self._p.unjournaled = None
 
     async def _snapshot(self) -> None:
         """Journal a snapshot of the twin (restart replays only what follows it)."""
@@ -555,14 +557,14 @@ class Controller:
         twin, pid = self.twin, self.program_id
         data = await asyncio.to_thread(lambda: twin.snapshot().to_bytes())
         await self._writer.run(self.journal.save_snapshot, pid, twin.done, data)
-        self._snapped = twin.done
+        self._p.snapped = twin.done
 
     async def _outcome(self, outcome: str) -> None:
         """Journal the program's outcome; an ended program's outcome never changes again.
 
         A journal that cannot write is logged and published; the state machine goes on.
         """
-        if self.program_id is None or self._finished:
+        if self.program_id is None or self._p.finished:
             return
         record = (self.program_id, outcome, self.packml.reason)
         try:
@@ -575,18 +577,18 @@ class Controller:
             self.events.publish(Fault(f"the journal cannot record {outcome}: {exc}",
                                       StopCause.INTERNAL))  # fmt: skip
             self._unrecorded = record
-        self._finished = outcome in (COMPLETE, ABORTED, STOPPED)
+        self._p.finished = outcome in (COMPLETE, ABORTED, STOPPED)
 
     async def _record_late(self) -> None:
         """Write what the journal could not take when it came (a full disk, a lock): the last
         instruction's "done", then the program's outcome."""
-        if self._unjournaled is not None and not self.running:
+        if self._p.unjournaled is not None and not self.running:
             try:
                 await self._flush()
             except Exception as exc:
                 raise ControllerError(
                     f"the journal still cannot record instruction "
-                    f"{self._unjournaled[0]} done: {exc}"
+                    f"{self._p.unjournaled[0]} done: {exc}"
                 ) from exc
         if self._unrecorded is None:
             return
@@ -607,61 +609,24 @@ class Controller:
         self.events.publish(StateChanged(old, new, cause, reason))
         if new in (State.IDLE, State.HELD, State.SUSPENDED, State.STOPPED, State.COMPLETE,
                    State.ABORTED):  # fmt: skip
-            self._observe_twin()
+            self.seen.compare(self._at_rest())
 
     # ----- the machine at rest -----
     async def read_machine(self) -> MachineState:
         """Read the machine now (connecting if needed); ControllerError when it cannot."""
         try:
-            if not self.bus.connected:
-                await self.bus.connect()
-            try:
-                state = await self.bus.state()
-            except FieldbusConnectionError:
-                await self.bus.connect()
-                state = await self.bus.state()
+            state = await self.seen.read()
         except FieldbusError as exc:
-            self._bus_failed(exc)
             raise ControllerError(f"the machine cannot be read: {exc}") from exc
-        self._observe(state)
+        self.seen.observe(state, self._at_rest())
         return state
 
-    def _bus_failed(self, exc: FieldbusError) -> None:
-        lost = not isinstance(exc, DriveFault | EStopError) and (
-            isinstance(exc, FieldbusConnectionError) or "did not complete" not in str(exc)
-        )
-        estop = True if isinstance(exc, EStopError) else self._bus.estop
-        self._set_bus(replace(self._bus, connected=not lost, last_error=str(exc),
-                              checked=time.time(), estop=estop))  # fmt: skip
-
-    def _observe(self, state: MachineState) -> None:
-        faulted = tuple(self.bus.axes[i].name for i, a in enumerate(state.axes) if a.fault)
-        self._machine = state
-        self._set_bus(BusStatus(connected=True, last_error=None, checked=time.time(),
-                                estop=bool(state.estop), faulted=faulted,
-                                differs=self._differs(state)))  # fmt: skip
-
-    def _observe_twin(self) -> None:
-        """The twin changed at rest: compare it again with the last read."""
-        machine = getattr(self, "_machine", None)
-        if machine is not None:
-            self._set_bus(replace(self._bus, differs=self._differs(machine)))
-
-    def _differs(self, state: MachineState) -> tuple[tuple[int, int], ...]:
+    def _at_rest(self) -> BoolGrid | None:
+        """The twin's occupancy where the machine should show it now (None while moving)."""
         twin = self.twin
         if twin is None or self.running or self.packml.state is State.EXECUTE:
-            return ()
-        if state.occupancy.shape != twin.occupancy.shape:
-            return ((-1, -1),)
-        return tuple(differing_cells(state.occupancy, twin.occupancy >= 0))
-
-    def _set_bus(self, status: BusStatus) -> None:
-        old = self._bus
-        self._bus = status
-        if replace(old, checked=None) != replace(status, checked=None):
-            if status.estop != old.estop and None not in (status.estop, old.estop):
-                log.warning("emergency stop %s", "pressed" if status.estop else "released")
-            self.events.publish(BusChanged(status))
+            return None
+        return twin.occupancy >= 0
 
     async def watch(self) -> None:
         """Read the machine at rest every ``poll_interval``: e-stop, faults, occupancy; settle
@@ -677,7 +642,7 @@ class Controller:
                     state = await self.read_machine()
                 except ControllerError:
                     continue
-                if self._journaled is not None and self.packml.state in (
+                if self._p.journaled is not None and self.packml.state in (
                     State.HELD,
                     State.SUSPENDED,
                 ):
@@ -686,32 +651,32 @@ class Controller:
     # ----- settling a pending instruction (after a fault hold or a restart) -----
     async def _settle_pending(self, state: MachineState) -> Settle | None:
         """Decide on the instruction started and not done, from ``state`` just read."""
-        index = self._journaled
+        index = self._p.journaled
         if index is None or self.twin is None or self.program is None:
             return None
         instruction = self.program.instructions[index - 1]
-        pred = self._pending
+        pred = self._p.pending
         if pred is None or pred.index != index:
             pred = await asyncio.to_thread(self.twin.predict, instruction)
-            self._pending = pred
+            self._p.pending = pred
         before = Before(self.twin.occupancy >= 0,
-                        (self._origin or 0) + round(self.twin.takeup * UM_PER_MM))  # fmt: skip
+                        (self._p.origin or 0) + round(self.twin.takeup * UM_PER_MM))  # fmt: skip
         decision = settle(instruction, pred, state, self._takeup(state), before,
-                          self._origin or 0, self.bus.settings.position_tolerance)  # fmt: skip
-        self._blocked, self._rest = "", None
+                          self._p.origin or 0, self.bus.settings.position_tolerance)  # fmt: skip
+        self._p.blocked, self._p.rest = "", None
         then = "resume with Unhold"
         if decision.kind == "commit":
             await self._commit(pred, index)
             await self._flush()
-            self._observe(state)
+            self.seen.observe(state, self._at_rest())
         elif decision.kind == "rerun":
             then = "Unhold runs it"
         elif decision.kind == "finish":
             assert decision.rest is not None
-            self._rest = decision.rest
+            self._p.rest = decision.rest
             then = f"Unhold moves the other {len(decision.rest.moves)}"
         else:
-            self._blocked = decision.reason
+            self._p.blocked = decision.reason
             then = "Abort ends the program"
         if self.packml.state in (State.HELD, State.SUSPENDED):
             restarted = "restarted: " if self._stop_cause is StopCause.RESTART else ""
@@ -732,7 +697,7 @@ class Controller:
         self._stop_cause = StopCause.RESTART
         self._recovering = (f"rebuilding the twin of program {record.id} ({record.done} of "
                             f"{record.instructions} instructions done)")  # fmt: skip
-        self._recovery = self._spawn(self._recover(record.id), "recovery")
+        self._recovery = self._tasks.spawn(self._recover(record.id), "recovery")
         return f"restarted with program {record.id} {record.name!r} {record.outcome}: recovering"
 
     async def recover(self) -> str:
@@ -743,7 +708,7 @@ class Controller:
             return said
         assert self._recovery is not None
         await asyncio.wait({self._recovery})
-        if self._journaled is not None and self._lock.locked() is False:
+        if self._p.journaled is not None and self._lock.locked() is False:
             async with self._lock:
                 try:
                     await self._settle_pending(await self.read_machine())
@@ -761,9 +726,9 @@ class Controller:
         first = await run(self.journal.instructions, program_id, 0, 1)
         pending = await run(self.journal.pending, program_id)
         self.program, self.program_id, self.program_name = program, program_id, record.name
-        self.twin, self._snapped = twin, snap[0] if snap else 0
-        self._origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None
-        self._journaled = pending.index if pending is not None else None
+        self.twin, self._p.snapped = twin, snap[0] if snap else 0
+        self._p.origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None
+        self._p.journaled = pending.index if pending is not None else None
         if pending is None:
             self._recovering = ""
             self.packml.reason = f"restarted at instruction {record.done}: resume with Unhold"
@@ -773,30 +738,14 @@ class Controller:
             self.packml.reason = f"restarted: instruction {pending.index} pending"
         log.info("program %d rebuilt at instruction %d%s", program_id, record.done,
                  f" from the snapshot at {snap[0]}" if snap else "")  # fmt: skip
-        self._observe_twin()
+        self.seen.compare(self._at_rest())
 
     # ----- tasks -----
-    def _spawn(self, coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]:
-        """A task whose end is always logged (and, if it failed, published)."""
-        task = asyncio.create_task(coro, name=f"bwsd-{name}")
-        self._background.add(task)
-        task.add_done_callback(self._ended)
-        return task
-
-    def _ended(self, task: asyncio.Task[Any]) -> None:
-        self._background.discard(task)
-        if task.cancelled():
-            log.info("task %s cancelled", task.get_name())
-            return
-        error = task.exception()
-        if error is None:
-            log.debug("task %s ended", task.get_name())
-            return
+    def _task_failed(self, name: str, error: BaseException) -> None:
         self.faults += 1
-        log.error("task %s failed: %s", task.get_name(), error, exc_info=error)
-        if task.get_name() == "bwsd-recovery":
+        if name == "recovery":
             self._recovering = f"recovery failed: {error} (see the log)"
-        self.events.publish(Fault(f"{task.get_name()} failed: {error}", StopCause.INTERNAL))
+        self.events.publish(Fault(f"{name} failed: {error}", StopCause.INTERNAL))
 
     def _journal_later(self, fn: Callable[..., Any], *args: Any) -> None:
         """A journal write nobody waits for (a state or event log), in order with the rest."""
@@ -812,14 +761,13 @@ class Controller:
         except RuntimeError:
             fn(*args)
             return
-        self._spawn(write(), "journal")
+        self._tasks.spawn(write(), "journal")
 
     async def close(self) -> None:
         """Stop the background tasks, finish the journal's queued writes and close it."""
-        for task in list(self._background):
-            if task.get_name() in ("bwsd-recovery",):
-                task.cancel()
-        pending = [t for t in self._background if t.get_name() == "bwsd-journal"]
+        for task in self._tasks.named("recovery"):
+            task.cancel()
+        pending = self._tasks.named("journal")
         if pending:
             await asyncio.wait(pending)
         await self._writer.close()
