@@ -54,10 +54,6 @@ class MachineView:
         self._set(replace(self.status, connected=not lost, last_error=str(exc),
                           checked=time.time(), estop=estop))  # fmt: skip
 
-    def answered(self) -> None:
-        """A move was read back as predicted: the bus answers, no error stands."""
-        self.status = replace(self.status, connected=True, last_error=None, checked=time.time())
-
     def observe(self, state: MachineState, twin: BoolGrid | None) -> None:
         """A good read; ``twin``: the twin's occupancy to compare with (None while moving)."""
         self.last = state

@@ -492,6 +492,7 @@ class Controller:
             state = await self.bus.state()
             self._p.timing["bus_s"] = time.perf_counter() - moving
             self._verify(pred, state)
+            self.seen.observe(state, None)  # the latest read: what the twin is compared with
         except (DriveFault, EStopError) as exc:
             self.seen.failed(exc)
             return Aborted(cause_of(exc), _about(index, exc))
@@ -531,7 +532,6 @@ class Controller:
         self._p.timing["commit_s"] = time.perf_counter() - committing
         self.last = pred
         self._p.journaled, self._p.pending = None, None
-        self.seen.answered()
         self._p.unjournaled = (index, {"contacts": len(pred.contacts)})
         step = self.next_step()
         wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None

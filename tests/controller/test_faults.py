@@ -229,6 +229,7 @@ def test_suspend_is_journaled_suspended_with_its_reason(mock, tmp_path):
         assert ctl.packml.reason == "waiting for yarn"
         record = journal.program(pid)
         assert (record.outcome, record.reason) == ("suspended", "waiting for yarn")
+        assert Command.UNSUSPEND in ctl.status().allowed  # the machine shows the twin
         await ctl.command(Command.UNSUSPEND)
         await ctl.wait()
         assert ctl.packml.state is State.COMPLETE

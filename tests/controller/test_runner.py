@@ -122,6 +122,7 @@ def test_restart_resumes_to_the_same_skeleton(mock, tmp_path):
         while first.twin.done < 7:
             await asyncio.sleep(0)
         await first.command(Command.HOLD, "operator")
+        assert Command.UNHOLD in first.status().allowed  # compared with the last read-back
         done = first.twin.done
         await first.bus.close()
         journal.close()
