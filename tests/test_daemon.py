@@ -38,8 +38,9 @@ LONG_STEPS = 400
 KILLS = int(os.environ.get("BWSD_CRASH_KILLS", "100"))
 
 
-def daemon_config(tmp: Path, mock: Mock) -> Path:
-    path = tmp / "bwsd.toml"
+def daemon_config(tmp: Path, mock: Mock, path: Path | None = None) -> Path:
+    """A daemon config on the mock loom's Modbus port (API and PLC on any free port)."""
+    path = path or tmp / "bwsd.toml"
     path.write_text(toml({
         "machine": MACHINE,
         "fieldbus": {"backend": "modbus", **BUS},

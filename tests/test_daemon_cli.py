@@ -14,7 +14,8 @@ import httpx
 from bwsd.config import load_config
 from bwsd.program import load_program
 from bwsd.twin import simulate
-from tests.fieldbus.conftest import BUS, MACHINE, start_mock, toml
+from tests.fieldbus.conftest import start_mock
+from tests.test_daemon import daemon_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -53,13 +54,7 @@ def test_the_readme_token_steps_give_a_token_that_serve_accepts(tmp_path):
     config = work / add[add.index("--config") + 1]
     config.parent.mkdir(parents=True)
     mock = start_mock(tmp_path, {})
-    config.write_text(toml({
-        "machine": MACHINE,
-        "fieldbus": {"backend": "modbus", **BUS},
-        "fieldbus.modbus": {"port": mock.ports["modbus"]},
-        "api": {"port": 0},
-        "plc": {"port": 0},
-    }))  # fmt: skip
+    daemon_config(tmp_path, mock, config)
     env = {k: v for k, v in os.environ.items() if k != "STATE_DIRECTORY"}
     try:
         added = subprocess.run([bwsd, *add[1:]], capture_output=True, text=True, timeout=60,
