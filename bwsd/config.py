@@ -247,4 +247,10 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"cannot read: {exc.strerror}", path=text_path) from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", path=text_path) from exc
+    except UnicodeDecodeError as exc:
+        byte = exc.object[exc.start]
+        raise ConfigError(f"not UTF-8 text: byte 0x{byte:02x} at offset {exc.start}",
+                          path=text_path) from None  # fmt: skip
+    except RecursionError:
+        raise ConfigError("not valid TOML: nested too deeply", path=text_path) from None
     return parse_config(data, text_path)
