@@ -40,7 +40,7 @@ class Store:
         """Open the journal at ``path``, creating it (and its folders) if it does not exist."""
         where = Path(path)
         try:
-            where.parent.mkdir(parents=True, exist_ok=True)
+            where.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
         except OSError as exc:
             raise JournalError(
                 f"cannot create its folder: {exc.strerror}", path=str(where)

@@ -118,19 +118,28 @@ def lock(path: Path) -> int:
 
 
 def connect(path: Path) -> sqlite3.Connection:
-    """Open (creating if new) the journal at ``path``: identified, in WAL, synchronous FULL."""
+    """Open (creating if new) the journal at ``path``: identified, in WAL, synchronous FULL.
+
+    A new journal is made whole beside its place and renamed into it, private (0600; SQLite
+    gives its -wal and -shm the same mode): a journal file is never empty, so an empty one is
+    refused, not taken as new.
+    """
     where = str(path)
     if path.is_dir():
         raise JournalError("is a folder, not a journal file", path=where)
-    created = not path.exists()
-    try:
-        conn = sqlite3.connect(where, isolation_level=None, check_same_thread=False)
-    except sqlite3.Error as exc:
-        raise JournalError(f"cannot open: {exc}", path=where) from exc
+    if not path.exists():
+        _create_file(path)
+    elif path.stat().st_size == 0:
+        raise JournalError(
+            "is empty (0 bytes), where a journal was expected: restore the journal, or move "
+            "this file away to start a new one",
+            path=where,
+        )
+    conn = _open(path)
     try:
         version = _identify(conn, where)
         _configure(conn, where)
-        if version == 0:
+        if version == 0:  # an SQLite file with nothing in it
             _create(conn)
         elif version < SCHEMA_VERSION:
             _upgrade(conn, version, where)
@@ -140,9 +149,41 @@ def connect(path: Path) -> sqlite3.Connection:
     except JournalError:
         conn.close()
         raise
-    if created:
-        _sync_folder(path.parent)
     return conn
+
+
+def _open(path: Path) -> sqlite3.Connection:
+    try:
+        return sqlite3.connect(str(path), isolation_level=None, check_same_thread=False)
+    except sqlite3.Error as exc:
+        raise JournalError(f"cannot open: {exc}", path=str(path)) from exc
+
+
+def _create_file(path: Path) -> None:
+    """A new, empty journal at ``path``: built under another name, then renamed."""
+    new = path.with_name(path.name + "-new")
+    with contextlib.suppress(FileNotFoundError):
+        new.unlink()  # a creation cut short before
+    try:
+        os.close(os.open(new, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600))
+    except OSError as exc:
+        raise JournalError(f"cannot create: {exc.strerror}", path=str(path)) from exc
+    conn = _open(new)
+    try:
+        _configure(conn, str(path))
+        _create(conn)
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    except sqlite3.Error as exc:
+        raise JournalError(f"cannot create: {exc}", path=str(path)) from exc
+    finally:
+        conn.close()
+    with open(new, "rb") as fh:
+        os.fsync(fh.fileno())
+    for suffix in ("-wal", "-shm"):
+        with contextlib.suppress(FileNotFoundError):
+            new.with_name(new.name + suffix).unlink()
+    os.replace(new, path)
+    _sync_folder(path.parent)
 
 
 def _identify(conn: sqlite3.Connection, where: str) -> int:

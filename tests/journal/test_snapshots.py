@@ -5,8 +5,10 @@ from __future__ import annotations
 import hashlib
 import itertools
 import logging
+import os
 import random
 import sqlite3
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -356,12 +358,26 @@ def test_garbage_over_any_page_is_a_journal_error(path: Path) -> None:
         assert message.startswith(refused), f"page {page + 1}: {message}"
 
 
-def test_an_empty_file_opens_as_a_new_journal(path: Path) -> None:
-    path.write_bytes(b"")  # e.g. created, and the machine lost power before SQLite wrote
-    with Journal.open(path) as j:
-        j.check()
-        assert j.pragmas()["user_version"] == SCHEMA_VERSION
-        assert j.history() == []
+def test_an_empty_file_is_refused_not_taken_as_new(path: Path) -> None:
+    path.write_bytes(b"")  # a journal truncated, or replaced by mistake
+    with pytest.raises(JournalError, match=r"is empty \(0 bytes\), where a journal was "
+                       r"expected: restore the journal, or move this file away"):  # fmt: skip
+        Journal.open(path)
+    assert path.read_bytes() == b""  # left as it was
+
+
+def test_a_new_journal_and_its_folder_are_private(tmp_path: Path) -> None:
+    old = os.umask(0o022)
+    try:
+        path = tmp_path / "state" / "journal.db"
+        with Journal.open(path) as j:
+            j.add_program("p.bws", "TAKEUP 1\n", 1)  # the WAL appears
+            modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in path.parent.iterdir()}
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.parent.stat().st_mode) == 0o700
+    assert modes["journal.db"] == 0o600 and modes["journal.db-wal"] == 0o600, modes
+    assert not (path.parent / "journal.db-new").exists()
 
 
 # -- version 1 files ---------------------------------------------------------------------------
