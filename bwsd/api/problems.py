@@ -54,13 +54,28 @@ def _invalid_request(gate: Gate) -> Callable[[Request, Exception], Any]:
         refused = gate(request)
         if refused is not None:
             return await _http_error(request, refused)
-        errors = list(exc.errors())
+        errors = [_short(e) for e in exc.errors()]
         first = errors[0] if errors else {}
         where = _where(first.get("loc", ()))
         message = f"invalid request: {where}: {first.get('msg', 'invalid')}"
         return JSONResponse(error_body(message, details=jsonable_encoder(errors)), status_code=422)
 
     return handler
+
+
+EXCERPT = 80  # characters of a refused input quoted back
+
+
+def _short(error: Any) -> dict[str, Any]:
+    """A validation error with at most an excerpt of the input it quotes (never the whole
+    body back), and no lone surrogate (which no JSON encoder can write as UTF-8)."""
+    out = dict(error)
+    if "input" in out:
+        text = repr(out["input"])
+        text = text if len(text) <= EXCERPT else f"{text[:EXCERPT]}... ({len(text)} characters)"
+        out["input"] = text.encode("utf-8", "backslashreplace").decode("utf-8")
+    out.pop("ctx", None)
+    return out
 
 
 def describe(exc: Exception) -> str:

@@ -329,3 +329,23 @@ def test_a_pressed_estop_shows_in_state_and_refuses_reset(live: Live, mock):
     assert operator.post("/commands/reset").status_code == 200
     state = viewer.get("/state").json()
     assert state["bus"]["estop"] is False and state["allowed"] == ["start", "stop", "abort"]
+
+
+def test_a_refusal_quotes_an_excerpt_of_the_input_never_the_whole_body(live: Live):
+    operator = live.client("operator")
+    huge = "x" * 1_100_000
+    answer = operator.post("/programs", json={"name": huge, "text": BRAID})
+    assert answer.status_code == 422
+    assert len(answer.content) < 2_000, len(answer.content)
+    assert "1100002 characters" in answer.text  # the excerpt says how long the input was
+
+
+def test_a_lone_surrogate_is_refused_not_a_server_error(live: Live):
+    operator = live.client("operator")
+    for body in (b'{"name": "b.bws", "text": "TAKEUP 1\\ud800\\n"}',
+                 b'{"name": "b\\udfff.bws", "text": "TAKEUP 1\\n"}',
+                 b'{"reason": "\\ud800"}'):  # fmt: skip
+        path = "/commands/stop" if b"reason" in body else "/programs"
+        answer = operator.post(path, content=body, headers={"Content-Type": "application/json"})
+        assert answer.status_code in (409, 422), (body, answer.status_code, answer.text)
+        assert answer.json()["error"]
