@@ -9,8 +9,8 @@ from bwsd.errors import ProgramError
 from bwsd.twin.exact import decimal_float
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
-_INDEX = re.compile(r"\d+")
-_SHIFT = re.compile(r"[+-]?\d+")
+_INDEX = re.compile(r"[0-9]{1,18}")
+_SHIFT = re.compile(r"[+-]?[0-9]{1,18}")  # ASCII digits only, at most MAX_DIGITS
 
 
 @dataclass(frozen=True)
@@ -55,10 +55,22 @@ def number(text: str, column: int, where: Where, what: str) -> float:
         raise where.error(f"{what}: {exc}", column) from None
 
 
+MAX_DIGITS = 18  # an integer of the language (a count, a shift) fits in 64 bits
+
+
+def _shown(text: str) -> str:
+    """A token quoted in an error, cut to its first 20 characters."""
+    return repr(text) if len(text) <= 20 else f"{text[:20]!r}... ({len(text)} characters)"
+
+
 def integer(text: str, column: int, where: Where, what: str) -> int:
-    """A signed decimal integer."""
+    """A signed decimal integer of ASCII digits, at most MAX_DIGITS of them."""
+    digits = text.lstrip("+-")
+    if len(digits) > MAX_DIGITS and digits.isascii() and digits.isdigit():
+        raise where.error(f"{what}: {text[:20]}... has {len(digits)} digits, more than "
+                          f"{MAX_DIGITS}", column)  # fmt: skip
     if not _SHIFT.fullmatch(text):
-        raise where.error(f"{what}: expected an integer, got {text!r}", column)
+        raise where.error(f"{what}: expected an integer, got {_shown(text)}", column)
     return int(text)
 
 
@@ -97,10 +109,12 @@ def shift_entry(tok: Token, where: Where, axis: str) -> tuple[int, int, int]:
     if not sep:
         raise where.error(f"malformed entry {tok.text!r}: expected {axis}:shift", tok.column)
     if not _INDEX.fullmatch(index_text):
-        raise where.error(f"bad {axis} index {index_text!r}: expected an integer >= 0", tok.column)
+        raise where.error(f"bad {axis} index {_shown(index_text)}: expected an integer >= 0",
+                          tok.column)  # fmt: skip
     shift_column = tok.column + len(index_text) + 1
     if not _SHIFT.fullmatch(shift_text):
-        raise where.error(f"bad shift {shift_text!r}: expected a signed integer", shift_column)
+        raise where.error(f"bad shift {_shown(shift_text)}: expected a signed integer of at most "
+                          f"{MAX_DIGITS} digits", shift_column)  # fmt: skip
     shift = int(shift_text)
     if shift == 0:
         raise where.error("shift must not be zero", shift_column)

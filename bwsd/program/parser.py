@@ -10,6 +10,7 @@ from bwsd.twin.instructions import Axis, Instruction, Program, Shift, TakeUp, We
 
 # A bound on the expanded program, so that nested REPEATs cannot exhaust memory.
 MAX_INSTRUCTIONS = 1_000_000
+MAX_NESTING = 32  # REPEAT blocks inside one another
 FILL_CASE = frozenset("Xx")
 FILL_EMPTY = "."
 _WEFT_KEYS = ("x", "y", "z", "angle", "length")
@@ -194,6 +195,8 @@ class _Parser:
         count = integer(rest[0].text, rest[0].column, where, "count")
         if count < 1:
             raise where.error("count must be at least 1", rest[0].column)
+        if len(self.stack) > MAX_NESTING:
+            raise where.error(f"REPEAT nested more than {MAX_NESTING} deep", keyword.column)
         block = _Repeat(count, where.line, keyword.column)
         self.stack[-1].body.append(block)
         self.stack.append(block)

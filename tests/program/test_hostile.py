@@ -1,0 +1,58 @@
+"""Hostile programs: the only exception a program can raise is a ProgramError naming line:col.
+
+The fixed cases are the ones found by probing (an integer of thousands of digits, REPEATs
+nested hundreds deep, digits of other scripts); the fuzz builds programs from the language's
+own words and from arbitrary text.
+"""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bwsd.errors import ProgramError
+from bwsd.program import parse_program
+from bwsd.program.lexer import MAX_DIGITS
+from bwsd.program.parser import MAX_NESTING
+
+FILL = "FILL row=0 col=0\nXX\nEND\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "words"),
+    [
+        ("REPEAT " + "9" * 5000 + "\nTAKEUP 1\nEND\n", "1:8", f"more than {MAX_DIGITS}"),
+        (FILL + "ROW 0:+" + "9" * 5000 + "\n", "4:7", "(5001 characters)"),
+        (FILL + "ROW " + "9" * 5000 + ":+1\n", "4:5", "(5000 characters)"),
+        ("REPEAT 2\n" * 600 + "TAKEUP 1\n" + "END\n" * 600, f"{MAX_NESTING + 1}:1",
+         f"nested more than {MAX_NESTING} deep"),
+        (FILL + "ROW 0:+\u0661\n", "4:7", "bad shift"),
+        ("REPEAT \u0662\nTAKEUP 1\nEND\n", "1:8", "expected an integer"),
+        ("TAKEUP \u0661\n", "1:8", "expected a number"),
+        ("TAKEUP 1e999\n", "1:8", "cannot be kept exactly"),
+        ("WEFT x=0 y=0 z=1 angle=1e999 length=1\n", "1:24", "cannot be kept exactly"),
+    ],
+)  # fmt: skip
+def test_each_probe_is_a_program_error_at_its_place(text, where, words):
+    with pytest.raises(ProgramError) as caught:
+        parse_program(text)
+    message = str(caught.value)
+    assert f"<program>:{where}:" in message and words in message, message
+    assert len(message) < 300  # a short excerpt, never the input back whole
+
+
+WORDS = ["YARN", "FILL", "ROW", "COL", "TAKEUP", "WEFT", "REPEAT", "END", "diameter=1",
+         "row=0", "col=0", "X", ".", "XX", "0:+1", "1:-1", "0:+", ":", "x=0", "y=0", "z=1",
+         "angle=30", "length=5", "1", "0", "-1", "2.5", "1e999", "nan", "inf", "9" * 40,
+         "\u0661", "#", "=", "\t"]  # fmt: skip
+lines = st.lists(st.sampled_from(WORDS), max_size=6).map(" ".join)
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.lists(lines, max_size=12).map("\n".join) | st.text(max_size=200))
+def test_any_program_parses_or_is_a_program_error(text):
+    try:
+        parse_program(text)
+    except ProgramError as exc:
+        assert exc.line >= 0 and exc.column >= 0
