@@ -118,15 +118,20 @@ class ControlServer:
             self._server = None
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        """JSON lines, one answer each; a line that is not a JSON object ends the connection
+        unanswered (a browser's cross-origin POST starts with ``POST / HTTP/1.1``: its body,
+        which may look like a request, is never read)."""
         try:
             while line := await reader.readline():
                 try:
-                    answer = handle(self.loom, json.loads(line))
-                except json.JSONDecodeError as exc:
-                    answer = {"ok": False, "error": f"not JSON: {exc.msg}"}
-                writer.write(json.dumps(answer).encode() + b"\n")
+                    request = json.loads(line)
+                except (json.JSONDecodeError, UnicodeDecodeError):
+                    return
+                if not isinstance(request, dict):
+                    return
+                writer.write(json.dumps(handle(self.loom, request)).encode() + b"\n")
                 await writer.drain()
-        except ConnectionError:
+        except (ConnectionError, ValueError):  # ValueError: a line beyond the stream's limit
             pass
         finally:
             writer.close()

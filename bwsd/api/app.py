@@ -51,8 +51,10 @@ def create_app(
     hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
     metrics.clients.set_function(lambda: float(hub.clients))
     ctx = Context(controller, SkeletonView(controller), metrics, hub)
+    # No /docs or /redoc: FastAPI's pages load their scripts from a public CDN at a floating
+    # version, on the origin that holds the tokens. /openapi.json serves the schema.
     app = FastAPI(title="bwsd", version=__version__, description=DESCRIPTION,
-                  lifespan=_lifespan(ctx))  # fmt: skip
+                  lifespan=_lifespan(ctx), docs_url=None, redoc_url=None)  # fmt: skip
     app.state.ctx = ctx
     app.state.auth = Auth(tokens, open_reads)
     problems.install(app, refused_token)

@@ -132,8 +132,10 @@ def test_reads_need_a_viewer_token_unless_open(live):
             assert answered.status_code == 200, (path, answered.text)
         assert client.get(live.base + "/metrics").status_code == 401
         assert client.get(live.base + "/metrics", headers=live.headers("viewer")).status_code == 200
-        for open_path in ("/healthz", "/openapi.json", "/docs"):
+        for open_path in ("/healthz", "/openapi.json"):
             assert client.get(live.base + open_path).status_code == 200
+        for cdn_page in ("/docs", "/redoc"):  # they would load scripts from a public CDN
+            assert client.get(live.base + cdn_page).status_code == 404
         assert client.get(live.base + "/healthz").json() == {"ok": True, "open_reads": False}
 
 

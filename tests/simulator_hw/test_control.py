@@ -48,8 +48,33 @@ def test_server_answers_json_lines():
             reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
             writer.write(b"{not json\n")
             await writer.drain()
-            assert b"not JSON" in await reader.readline()
+            assert await reader.readline() == b""  # dropped, unanswered
             writer.close()
+        finally:
+            await server.stop()
+
+    asyncio.run(scenario())
+
+
+def test_a_browsers_cross_origin_post_never_reaches_the_loom():
+    """What a page on any origin can send with ``fetch(..., {mode: "no-cors"})``: an HTTP
+    request whose body is a valid control request. The first line is not JSON: dropped."""
+
+    async def scenario() -> None:
+        loom = Loom(MACHINE, [(1, 1)], Speeds())
+        server = ControlServer(loom, "127.0.0.1", 0)
+        await server.start()
+        try:
+            body = b'{"cmd": "estop", "pressed": true}\n'
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            head = (b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n"
+                    b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n")  # fmt: skip
+            writer.write(head + body)
+            await writer.drain()
+            answered = await asyncio.wait_for(reader.read(), 10)  # until the loom closes it
+            assert answered == b""  # closed, nothing answered
+            writer.close()
+            assert loom.estop is False
         finally:
             await server.stop()
 
