@@ -91,6 +91,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "port": Num(int, 0, 65535, 8080),
         "tokens_file": Text("tokens.json"),
         "open_reads": Flag(False),
+        "origins": Text(""),
         "web_root": Text(""),
     },
     "plc": {

@@ -90,7 +90,8 @@ async def _serve_api(daemon: Daemon) -> None:
     table = daemon.config.table("api")
     tokens = TokenStore.load(tokens_file(daemon.config, daemon.state_dir))
     web_root = daemon.state_dir / table["web_root"] if table["web_root"] else WEB_ROOT
-    app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root)
+    app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root,
+                     origins=table["origins"].split())  # fmt: skip
     server = uvicorn.Server(uvicorn.Config(app, host=table["host"], port=table["port"],
                                            log_level="warning", lifespan="off"))  # fmt: skip
     where = f"{table['host']}:{table['port']}"

@@ -10,7 +10,7 @@ import asyncio
 import json
 import logging
 import re
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager, suppress
 from pathlib import Path
 from typing import Any
@@ -41,7 +41,7 @@ operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the 
 
 def create_app(
     controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
-    queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT,
+    queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT, origins: Iterable[str] = (),
 ) -> FastAPI:  # fmt: skip
     """The API of ``controller`` and the page at ``/`` (from ``web_root``).
 
@@ -57,6 +57,7 @@ def create_app(
                   lifespan=_lifespan(ctx), docs_url=None, redoc_url=None)  # fmt: skip
     app.state.ctx = ctx
     app.state.auth = Auth(tokens, open_reads)
+    app.state.origins = frozenset(o.rstrip("/") for o in origins)
     problems.install(app, refused_token)
     app.add_middleware(problems.BodyLimit, limit=MAX_BODY_BYTES)
     app.add_middleware(RequestTimer, metrics=metrics)
@@ -133,6 +134,7 @@ def _events(ctx: Context) -> Callable[[WebSocket], Any]:
         token = websocket.query_params.get("token") or _bearer(websocket)
         auth: Auth = websocket.app.state.auth
         try:
+            _check_origin(websocket)
             auth.authorize(token, "viewer")
         except ApiError as exc:
             await _deny(websocket, exc)
@@ -146,6 +148,19 @@ def _events(ctx: Context) -> Callable[[WebSocket], Any]:
             ctx.hub.unsubscribe(sub)
 
     return events
+
+
+def _check_origin(websocket: WebSocket) -> None:
+    """A browser's handshake must come from the page's own origin or one the config lists
+    (``[api] origins``): otherwise a page on any origin could read the events (and with
+    ``open_reads`` it would need no token). Clients that send no ``Origin`` are not browsers."""
+    origin = websocket.headers.get("origin")
+    if origin is None:
+        return
+    host = websocket.headers.get("host", "")
+    if origin.rstrip("/") in {f"http://{host}", f"https://{host}"} | websocket.app.state.origins:
+        return
+    raise ApiError(403, f"origin {origin[:100]!r} is not allowed ([api] origins)")
 
 
 def _bearer(websocket: WebSocket) -> str | None:

@@ -166,6 +166,17 @@ def test_the_event_socket_checks_the_token_like_a_read(live, open_live):
             assert hello["event"] == "hello" and hello["name"] == "Stopped"
 
 
+def test_the_event_socket_refuses_a_page_on_another_origin(open_live):
+    """With open reads, a page on any origin could otherwise read the live events."""
+    with pytest.raises(InvalidStatus) as refused:
+        connect(open_live.ws, open_timeout=WAIT, origin="http://evil.example")
+    assert refused.value.response.status_code == 403
+    assert b"origin 'http://evil.example' is not allowed" in refused.value.response.body
+    own = open_live.base  # the page the daemon serves itself
+    with connect(open_live.ws, open_timeout=WAIT, origin=own) as ws:
+        assert json.loads(ws.recv(timeout=WAIT))["event"] == "hello"
+
+
 def _load(server) -> None:
     with server.client("operator") as client:
         answer = client.post("/programs", json={"name": "braid.bws", "text": BRAID})
