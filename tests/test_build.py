@@ -42,3 +42,24 @@ def test_the_compiled_kernel_has_no_fused_multiply_add():
                           check=True).stdout  # fmt: skip
     assert "cvtsi2sd" in code or "scvtf" in code  # it is the float code we think it is
     assert not re.search(r"\b(v?fn?m(add|sub)\w*)\b", code)
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_its_type_information(tmp_path):
+    """``py.typed`` and the kernel's stub ship in the wheel, so the hints reach users."""
+    import zipfile
+
+    tree = tmp_path / "tree"  # a clean copy: no build/ folder left by an earlier build
+    tree.mkdir()
+    for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in"):
+        shutil.copy(ROOT / name, tree / name)
+    skip = shutil.ignore_patterns("*.so", "node_modules", "__pycache__")
+    for package in ("bwsd", "simulator_hw"):
+        shutil.copytree(ROOT / package, tree / package, ignore=skip)
+    run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
+                          str(tmp_path), str(tree)], capture_output=True, text=True,
+                         timeout=600)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    (wheel,) = tmp_path.glob("bwsd-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert {"bwsd/py.typed", "bwsd/twin/_kernel.pyi"} <= names
