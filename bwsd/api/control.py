@@ -9,7 +9,7 @@ from fastapi import Depends
 
 from bwsd.controller.errors import ControllerError
 from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
-from bwsd.controller.programs import instruction_dict
+from bwsd.controller.programs import instruction_dict, step_dict
 from bwsd.controller.runner import Controller
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
@@ -41,7 +41,6 @@ from .models import (
 )
 from .problems import ApiError, describe
 from .routing import RouteTable
-from .view import wire_step
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]
@@ -84,7 +83,7 @@ async def get_state(ctx: Ctx) -> StateOut:
             differs=list(bus.differs),
         ),
         last_fault=ctx.last_fault,
-        next=_next_out(wire_step(st.next)),
+        next=_next_out(step_dict(st.next)),
     )
 
 

@@ -8,9 +8,7 @@ in a worker thread as well (``bwsd.export.skeleton_json.delta_to_dict``).
 from __future__ import annotations
 
 import asyncio
-from typing import Any
 
-from bwsd.controller.programs import instruction_dict
 from bwsd.controller.runner import Controller
 from bwsd.twin import SkeletonData
 
@@ -38,10 +36,3 @@ class SkeletonView:
             self._key, self._copy = (id(twin), copy.instructions), copy
             return copy
         return self._copy
-
-
-def wire_step(step: dict[str, Any] | None) -> dict[str, Any] | None:
-    """``Controller.next_step()`` as JSON: the instruction as a dict."""
-    if step is None:
-        return None
-    return {**step, "instruction": instruction_dict(step["instruction"])}

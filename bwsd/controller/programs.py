@@ -39,6 +39,13 @@ def instruction_dict(instruction: Instruction) -> dict[str, Any]:
     return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
 
 
+def step_dict(step: dict[str, Any] | None) -> dict[str, Any] | None:
+    """``Controller.next_step()`` as JSON (the instruction as a dict); None stays None."""
+    if step is None:
+        return None
+    return {**step, "instruction": instruction_dict(step["instruction"])}
+
+
 def rebuild(machine: Machine, program: Program, done: int,
              snap: tuple[int, bytes] | None) -> Twin:  # fmt: skip
     """The twin after ``done`` instructions: from the snapshot if there is one, then replay."""

@@ -32,7 +32,7 @@ from bwsd.controller.errors import Busy, Cancelled, ControllerError
 from bwsd.controller.machine import MachineView
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
-from bwsd.controller.programs import DryRun, check_program, instruction_dict, rebuild
+from bwsd.controller.programs import DryRun, check_program, rebuild, step_dict
 from bwsd.controller.recovery import Before, Settle, settle
 from bwsd.controller.status import (
     EventStream,
@@ -255,11 +255,10 @@ class Controller:
         if program is None or twin is None:
             raise ControllerError("no program is loaded")
         while True:
-            done = twin.done
-            if done >= len(program.instructions):
+            step = self.next_step()
+            if step is None:
                 raise ControllerError(f"all {len(program.instructions)} instructions are done")
-            instruction = program.instructions[done]
-            line = program.lines[done] if done < len(program.lines) else 0
+            done, line, instruction = step["index"] - 1, step["line"], step["instruction"]
             try:
                 pred = await asyncio.to_thread(twin.predict, instruction)
             except TwinError as exc:
@@ -316,10 +315,8 @@ class Controller:
 
     def _refusal(self, command: Command) -> str | None:
         """Why the controller refuses ``command`` beyond PackML's own table (None: it does not)."""
-        if self._recovering and command is not Command.ABORT:
-            return f"recovering: {self._recovering}"
-        if self._recovering and self.twin is None:
-            return f"recovering: {self._recovering}"
+        if self._recovering and (command is not Command.ABORT or self.twin is None):
+            return f"recovering: {self._recovering}"  # Abort once the twin is back
         if command is Command.START:
             if self.program is None:
                 return "no program is loaded"
@@ -533,11 +530,10 @@ class Controller:
         self.last = pred
         self._p.journaled, self._p.pending = None, None
         self._p.unjournaled = (index, {"contacts": len(pred.contacts)})
-        step = self.next_step()
-        wire = {**step, "instruction": instruction_dict(step["instruction"])} if step else None
         timing, self._p.timing = self._p.timing, {}
+        step = step_dict(self.next_step())
         self.events.publish(InstructionDone(pid, index, len(pred.contacts), len(pred.inserted),
-                                            timing, delta, wire))  # fmt: skip
+                                            timing, delta, step))  # fmt: skip
         if self.settings.snapshot_every and index - self._p.snapped >= self.settings.snapshot_every:
             await self._flush()
             await self._snapshot()
@@ -708,7 +704,7 @@ class Controller:
             return said
         assert self._recovery is not None
         await asyncio.wait({self._recovery})
-        if self._p.journaled is not None and self._lock.locked() is False:
+        if self._p.journaled is not None:
             async with self._lock:
                 try:
                     await self._settle_pending(await self.read_machine())
@@ -756,11 +752,6 @@ class Controller:
             except Exception as exc:
                 log.error("the journal cannot record a %s: %s", getattr(fn, "__name__", fn), exc)
 
-        try:
-            asyncio.get_running_loop()
-        except RuntimeError:
-            fn(*args)
-            return
         self._tasks.spawn(write(), "journal")
 
     async def close(self) -> None:
