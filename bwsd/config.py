@@ -93,6 +93,11 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "open_reads": Flag(False),
         "origins": Text(""),
         "web_root": Text(""),
+        "max_connections": Num(int, 1, 100_000, 64),
+        "max_connections_per_client": Num(int, 1, 100_000, 16),
+        "body_timeout": Num(float, 0.1, 3600.0, 10.0),
+        "certfile": Text(""),
+        "keyfile": Text(""),
     },
     "plc": {
         "enabled": Flag(True),

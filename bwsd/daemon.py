@@ -85,15 +85,18 @@ async def start(config: Config, state_dir: Path) -> Daemon:
 async def _serve_api(daemon: Daemon) -> None:
     from bwsd.api.app import create_app
     from bwsd.api.auth import TokenStore
+    from bwsd.api.doors import Doors, check_tls, server_config
     from bwsd.api.web import WEB_ROOT
 
     table = daemon.config.table("api")
     tokens = TokenStore.load(tokens_file(daemon.config, daemon.state_dir))
     web_root = daemon.state_dir / table["web_root"] if table["web_root"] else WEB_ROOT
+    doors = Doors.from_table(table, Path(daemon.config.path).parent)
+    check_tls(doors)
     app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root,
-                     origins=table["origins"].split())  # fmt: skip
-    server = uvicorn.Server(uvicorn.Config(app, host=table["host"], port=table["port"],
-                                           log_level="warning", lifespan="off"))  # fmt: skip
+                     origins=table["origins"].split(), doors=doors)  # fmt: skip
+    server = uvicorn.Server(server_config(app, doors, host=table["host"], port=table["port"],
+                                          log_level="warning", lifespan="off"))  # fmt: skip
     where = f"{table['host']}:{table['port']}"
     family = socket.AF_INET6 if ":" in table["host"] else socket.AF_INET
     try:  # bound here, so that a port in use is an error of ours, not the server's exit
@@ -111,7 +114,7 @@ async def _serve_api(daemon: Daemon) -> None:
             raise ConfigError(f"[api] the server on {where} stopped at start")
         await asyncio.sleep(0.02)
     port = server.servers[0].sockets[0].getsockname()[1]
-    daemon.urls["api"] = f"http://{table['host']}:{port}"
+    daemon.urls["api"] = f"{doors.scheme}://{table['host']}:{port}"
     daemon._tasks.append(task)
     daemon._closers.append(lambda: setattr(server, "should_exit", True))
 

@@ -10,7 +10,9 @@ controller logs the failure in its own words).
 from __future__ import annotations
 
 import logging
+import math
 import sys
+import time
 
 FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 QUIET = ("pymodbus", "canopen", "can.")
@@ -38,3 +40,34 @@ def setup(level: int = logging.INFO) -> None:
     root.handlers[:] = [handler]
     root.setLevel(level)
     logging.getLogger("pymodbus").setLevel(logging.WARNING)
+
+
+class Summary:
+    """One INFO line for the first of a kind of event, then at most one per ``every`` s.
+
+    For what a hostile or broken client can repeat at will (refused logins, refused
+    connections, garbage on a port): the log stays readable and small. A line after a
+    quiet spell says how many like it went unlogged since the last one.
+    """
+
+    def __init__(self, logger: logging.Logger, kind: str, every: float = 60.0) -> None:
+        self.logger = logger
+        self.kind = kind
+        self.every = every
+        self._last = -math.inf
+        self._unlogged = 0
+
+    def reset(self) -> None:
+        """Forget the last line: the next event is logged at once."""
+        self._last, self._unlogged = -math.inf, 0
+
+    def note(self, message: str, *args: object) -> None:
+        now = time.monotonic()
+        if now - self._last < self.every:
+            self._unlogged += 1
+            return
+        if self._unlogged:
+            message += f" (and {self._unlogged} more {self.kind} unlogged in the last %.0f s)"
+            args = (*args, now - self._last)
+        self.logger.info(message, *args)
+        self._last, self._unlogged = now, 0

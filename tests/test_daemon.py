@@ -304,3 +304,40 @@ def test_a_damaged_journal_stops_the_start_with_the_reason(rig):
     assert done.returncode != 0 and done.stdout == ""  # never ready
     assert "journal.db" in done.stderr and "damaged" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_serve_speaks_tls_with_the_configured_files_relative_to_the_config(rig):
+    import ssl
+
+    import trustme
+
+    config, state, token, _ = rig
+    ca = trustme.CA()
+    cert = ca.issue_cert("127.0.0.1")
+    cert.private_key_and_cert_chain_pem.write_to_path(config.parent / "api.pem")
+    config.write_text(config.read_text().replace("[api]\n", '[api]\ncertfile = "api.pem"\n', 1))
+    served = Served(config, state, token)
+    try:
+        assert str(served.http.base_url).startswith("https://127.0.0.1:")
+        context = ssl.create_default_context()
+        ca.configure_trust(context)
+        with httpx.Client(base_url=served.http.base_url, verify=context, timeout=10,
+                          headers={"Authorization": f"Bearer {token}"}) as client:  # fmt: skip
+            assert client.get("/state").json()["name"] == "Stopped"
+    finally:
+        served.stop()
+
+
+def test_a_tls_file_that_cannot_serve_is_a_clear_error(rig):
+    config, state, _, _ = rig
+    (config.parent / "api.pem").write_text("not a certificate\n")
+    config.write_text(config.read_text().replace("[api]\n", '[api]\ncertfile = "api.pem"\n', 1))
+    done = subprocess.run(
+        [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
+         "--state-dir", str(state)],
+        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 2 and done.stdout == "", done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("bwsd: error: [api.certfile]: cannot serve TLS with "), last
+    assert "Traceback" not in done.stderr

@@ -25,6 +25,7 @@ from bwsd.controller.runner import Controller
 from . import control, data, problems, web
 from .auth import Auth, TokenStore, refused_token, require
 from .context import Context
+from .doors import DEFAULT_DOORS, LOGINS, BodyDeadline, Doors, TokenFirst, server_config
 from .events import QUEUE_SIZE, EventHub, Subscriber
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer
 from .models import MAX_BODY_BYTES, Error, Health
@@ -42,6 +43,7 @@ operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the 
 def create_app(
     controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
     queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT, origins: Iterable[str] = (),
+    doors: Doors = DEFAULT_DOORS,
 ) -> FastAPI:  # fmt: skip
     """The API of ``controller`` and the page at ``/`` (from ``web_root``).
 
@@ -59,7 +61,10 @@ def create_app(
     app.state.auth = Auth(tokens, open_reads)
     app.state.origins = frozenset(o.rstrip("/") for o in origins)
     problems.install(app, refused_token)
+    # Outermost last: time it, check the token, then judge the body's size and pace.
+    app.add_middleware(BodyDeadline, seconds=doors.body_timeout)
     app.add_middleware(problems.BodyLimit, limit=MAX_BODY_BYTES)
+    app.add_middleware(TokenFirst, routes=app.router.routes)
     app.add_middleware(RequestTimer, metrics=metrics)
     control.router.install(app, PREFIX, ["machine"], MAX_BODY_BYTES)
     data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
@@ -76,11 +81,21 @@ def create_app(
     return app
 
 
-def server(app: FastAPI, host: str = "127.0.0.1", port: int = 8080) -> uvicorn.Server:
-    """A uvicorn server for ``app``; run ``await server.serve()`` on the controller's loop."""
-    config = uvicorn.Config(app, host=host, port=port, lifespan="on", log_level="info",
-                            access_log=False)  # fmt: skip
-    return uvicorn.Server(config)
+def server(app: FastAPI, host: str = "127.0.0.1", port: int = 8080, doors: Doors = DEFAULT_DOORS,
+           **options: Any) -> uvicorn.Server:  # fmt: skip
+    """A uvicorn server for ``app`` behind ``doors``; run ``await server.serve()`` on the
+    controller's loop (``options`` go to ``uvicorn.Config``)."""
+    settings: dict[str, Any] = {"lifespan": "on", "log_level": "info", "access_log": False}
+    return uvicorn.Server(server_config(app, doors, host=host, port=port,
+                                        **(settings | options)))  # fmt: skip
+
+
+class HandshakeRefused(logging.Filter):
+    """Drops uvicorn's ERROR line after a refused WebSocket handshake (``_deny`` has logged
+    the refusal, rate-limited): refusing a login is not a server error."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.msg != "ASGI callable returned without completing handshake."
 
 
 class RedactTokens(logging.Filter):
@@ -100,8 +115,9 @@ class RedactTokens(logging.Filter):
 def _redact_server_logs() -> None:
     for name in ("uvicorn.error", "uvicorn.access"):
         logger = logging.getLogger(name)
-        if not any(isinstance(f, RedactTokens) for f in logger.filters):
-            logger.addFilter(RedactTokens())
+        for kind in (RedactTokens, HandshakeRefused):
+            if not any(isinstance(f, kind) for f in logger.filters):
+                logger.addFilter(kind())
 
 
 def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[None]]:
@@ -170,6 +186,8 @@ def _bearer(websocket: WebSocket) -> str | None:
 
 async def _deny(websocket: WebSocket, exc: ApiError) -> None:
     """Refuse the handshake with the HTTP status and JSON body (or close 1008 where unsupported)."""
+    client = websocket.client.host if websocket.client else "an unknown client"
+    LOGINS.note("refused an event stream to %s: %s", client, exc.detail)
     if "websocket.http.response" in websocket.scope.get("extensions", {}):
         body = error_body(str(exc.detail), **exc.extra)
         await websocket.send_denial_response(

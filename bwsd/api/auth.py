@@ -285,12 +285,16 @@ def refused_token(request: Request) -> ApiError | None:
 
     FastAPI judges a body before the dependencies run; this keeps "who are you" first.
     """
+    auth: Auth = request.app.state.auth
     dependant = getattr(request.scope.get("route"), "dependant", None)
+    return refusal(auth, dependant, request.headers.get("authorization", ""))
+
+
+def refusal(auth: Auth, dependant: Any, header: str) -> ApiError | None:
+    """The 401/403 that a route's ``Require`` dependencies give for this Authorization header."""
     checks = [d.call for d in dependant.dependencies] if dependant is not None else []
-    header = request.headers.get("authorization", "")
     scheme, _, token = header.partition(" ")
     clear = token.strip() if scheme.lower() == "bearer" else None
-    auth: Auth = request.app.state.auth
     for check in checks:
         if isinstance(check, Require):
             try:

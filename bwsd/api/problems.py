@@ -49,13 +49,18 @@ Gate = Callable[[Request], HTTPException | None]
 
 def _invalid_request(gate: Gate) -> Callable[[Request, Exception], Any]:
     async def handler(request: Request, exc: Exception) -> JSONResponse:
-        """422 naming the first bad field, unless the token is refused (then 401/403)."""
+        """422 naming the first bad field (400 for a body that is not JSON), unless the token
+        is refused (then 401/403)."""
         assert isinstance(exc, RequestValidationError)
         refused = gate(request)
         if refused is not None:
             return await _http_error(request, refused)
         errors = [_short(e) for e in exc.errors()]
         first = errors[0] if errors else {}
+        if first.get("type") == "json_invalid":  # not a malformed request: no JSON at all
+            at = first.get("loc", ())[-1]
+            return JSONResponse(error_body(f"the body is not valid JSON (at character {at})"),
+                                status_code=400)  # fmt: skip
         where = _where(first.get("loc", ()))
         message = f"invalid request: {where}: {first.get('msg', 'invalid')}"
         return JSONResponse(error_body(message, details=jsonable_encoder(errors)), status_code=422)

@@ -15,7 +15,8 @@ import httpx
 import pytest
 import uvicorn
 
-from bwsd.api import ROLES, TokenStore, create_app
+from bwsd.api import ROLES, TokenStore, create_app, server
+from bwsd.api.doors import DEFAULT_DOORS, Doors
 from bwsd.controller.runner import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
@@ -61,9 +62,9 @@ class Live:
 
 
 class _Thread(threading.Thread):
-    def __init__(self, mock: Mock, folder: Path, open_reads: bool) -> None:
+    def __init__(self, mock: Mock, folder: Path, open_reads: bool, doors: Doors) -> None:
         super().__init__(daemon=True, name="live-api")
-        self.mock, self.folder, self.open_reads = mock, folder, open_reads
+        self.mock, self.folder, self.open_reads, self.doors = mock, folder, open_reads, doors
         self.ready = threading.Event()
         self.live: Live | None = None
         self.error: BaseException | None = None
@@ -90,12 +91,12 @@ class _Thread(threading.Thread):
     async def _serve(self, controller: Controller, journal: Journal) -> None:
         store = TokenStore.load(self.folder / "tokens.json")
         tokens = {role: store.add(f"{role}-token", role) for role in ROLES}
-        app = create_app(controller, store, self.open_reads)
+        app = create_app(controller, store, self.open_reads, doors=self.doors)
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as the daemon's listener
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-        self.server = uvicorn.Server(uvicorn.Config(app, lifespan="on", log_level="warning"))
+        self.server = server(app, doors=self.doors, log_level="warning")
         serving = asyncio.create_task(self.server.serve(sockets=[sock]))
         async with asyncio.timeout(WAIT):
             while not self.server.started:
@@ -103,7 +104,9 @@ class _Thread(threading.Thread):
                     await serving
                 await asyncio.sleep(0.01)
         loop = asyncio.get_running_loop()
-        self.live = Live(f"http://127.0.0.1:{port}", controller, journal, app, tokens, loop)
+        self.live = Live(
+            f"{self.doors.scheme}://127.0.0.1:{port}", controller, journal, app, tokens, loop
+        )
         self.ready.set()
         await serving
 
@@ -113,10 +116,12 @@ class _Thread(threading.Thread):
         self.join(WAIT)
 
 
-def start_live(mock: Mock, folder: Path, open_reads: bool = False) -> Iterator[Live]:
+def start_live(mock: Mock, folder: Path, open_reads: bool = False,
+               doors: Doors = DEFAULT_DOORS) -> Iterator[Live]:  # fmt: skip
+    """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given)."""
     folder = folder / ("open" if open_reads else "closed")
     folder.mkdir()
-    thread = _Thread(mock, folder, open_reads)
+    thread = _Thread(mock, folder, open_reads, doors)
     thread.start()
     if not thread.ready.wait(WAIT):
         raise RuntimeError("the API did not start")
