@@ -104,6 +104,8 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "host": Text("127.0.0.1"),
         "port": Num(int, 0, 65535, 15502),
         "device_id": Num(int, 0, 247, 1),
+        "allow": Text("127.0.0.1 ::1"),
+        "read_only": Flag(False),
     },
     "simulator": {
         "host": Text("127.0.0.1"),

@@ -120,12 +120,12 @@ async def _serve_api(daemon: Daemon) -> None:
 
 
 async def _serve_plc(daemon: Daemon) -> None:
-    table = daemon.config.table("plc")
-    if not table["enabled"]:
-        return
-    from bwsd.plc.tags import PlcTags
+    from bwsd.plc.tags import plc_tags
 
-    tags = PlcTags(daemon.controller, table["host"], table["port"], table["device_id"])
+    table = daemon.config.table("plc")
+    tags = plc_tags(daemon.controller, daemon.config)
+    if tags is None:
+        return
     await tags.start()
     daemon.urls["plc"] = f"modbus-tcp://{table['host']}:{tags.port}"
     daemon._closers.append(tags.stop)

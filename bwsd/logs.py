@@ -4,13 +4,15 @@ Every command (with the token name, or ``plc``, that gave it), every state chang
 cause, holds, aborts and recovery decisions are logged at INFO or above by
 ``bwsd.controller``. Library records keep their first line only: pymodbus appends the raw
 frames of a failed transaction to its error, which is noise in an operator's log (the
-controller logs the failure in its own words).
+controller logs the failure in its own words); and a kind of library record is logged at
+most once a minute, with a count, so garbage sent to a port cannot fill the log.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import re
 import sys
 import time
 
@@ -19,14 +21,36 @@ QUIET = ("pymodbus", "canopen", "can.")
 
 
 class FirstLine(logging.Filter):
-    """Keeps a library record's first line and drops its traceback."""
+    """Keeps a library record's first line, drops its traceback, and lets through at most
+    one record of a kind per ``every`` seconds (garbage on a port is a record per frame).
+
+    A kind is the library and the first line with its numbers blanked; the next record of
+    a kind after a quiet spell says how many went unlogged.
+    """
+
+    KINDS = 256  # kinds remembered; more are forgotten all at once
+
+    def __init__(self, every: float = 60.0) -> None:
+        super().__init__()
+        self.every = every
+        self._kinds: dict[str, tuple[float, int]] = {}
 
     def filter(self, record: logging.LogRecord) -> bool:
         if not record.name.startswith(QUIET):
             return True
-        text = record.getMessage()
-        if "\n" in text:
-            record.msg, record.args = text.split("\n", 1)[0], None
+        text = record.getMessage().split("\n", 1)[0]
+        kind = record.name.split(".", 1)[0] + ":" + re.sub(r"\d+", "#", text)[:60]
+        now = time.monotonic()
+        last, unlogged = self._kinds.get(kind, (-math.inf, 0))
+        if now - last < self.every:
+            self._kinds[kind] = (last, unlogged + 1)
+            return False
+        if unlogged:
+            text += f" (and {unlogged} more like it in the last {now - last:.0f} s)"
+        if len(self._kinds) >= self.KINDS and kind not in self._kinds:
+            self._kinds.clear()
+        self._kinds[kind] = (now, 0)
+        record.msg, record.args = text, None
         record.exc_info, record.exc_text, record.stack_info = None, None, None
         return True
 

@@ -67,7 +67,7 @@ class Served:
         if not line.startswith("ready "):
             self.proc.kill()
             raise RuntimeError(f"daemon did not start: {line!r} {self.log.read_text()[-2000:]!r}")
-        urls = dict(part.split("=", 1) for part in line.split()[1:])
+        self.urls = urls = dict(part.split("=", 1) for part in line.split()[1:])
         self.http = httpx.Client(base_url=urls["api"] + "/api/v1", timeout=30,
                                  headers={"Authorization": f"Bearer {token}"})  # fmt: skip
 

@@ -10,18 +10,22 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import logging
-from typing import cast
+from collections.abc import Iterable
+from typing import Any, cast
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
 
 from bwsd.config import Config
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, StateChanged
-from bwsd.errors import BwsdError
+from bwsd.errors import BwsdError, ConfigError
+from bwsd.logs import Summary
 from bwsd.plc.registers import (
     MAP_VERSION,
     REG_CMD_CHANGE_REQUEST,
@@ -45,7 +49,11 @@ HEARTBEAT_PERIOD = 1.0  # s
 PLC_REASON = "by the PLC"  # the reason given with the PLC's Stop, Hold and Abort
 PLC_WHO = "plc"  # who gave a command, in the log
 
+LOOPBACK = ("127.0.0.1", "::1")  # the default allow list
 Request = tuple[int, int]  # (request register, the number asked for)
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+REFUSED = Summary(log, "refused PLC connections")
+READ_ONLY = Summary(log, "refused PLC writes")
 
 
 class PlcError(BwsdError):
@@ -64,8 +72,59 @@ def build_device(device_id: int, action: SimAction) -> SimDevice:
     return SimDevice(id=device_id, simdata=holding, action=action)
 
 
+def networks(allow: Iterable[str]) -> tuple[Network, ...]:
+    """The allow list's addresses and networks (``10.0.0.5``, ``10.0.0.0/24``, ``::1``)."""
+    found = []
+    for entry in allow:
+        try:
+            found.append(ipaddress.ip_network(entry, strict=False))
+        except ValueError:
+            raise ConfigError(f"{entry[:60]!r} is not an IP address or network",
+                              table="plc", key="allow") from None  # fmt: skip
+    return tuple(found)
+
+
+class _Handler(ServerRequestHandler):
+    """One PLC connection; one from an address the allow list lacks is closed at once."""
+
+    server: _Server
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        peer = transport.get_extra_info("peername")
+        if not self.server.admits(peer[0] if peer else None):
+            REFUSED.note("PLC: refused a connection from %s: not in [plc] allow",
+                         peer[0] if peer else "an unknown address")  # fmt: skip
+            transport.close()
+
+
+class _Server(ModbusTcpServer):
+    """pymodbus's Modbus TCP server, admitting only clients of the allow list."""
+
+    def __init__(self, device: SimDevice, address: tuple[str, int],
+                 allow: tuple[Network, ...]) -> None:  # fmt: skip
+        super().__init__(device, address=address)
+        self.allow = allow
+
+    def admits(self, host: str | None) -> bool:
+        try:
+            address = ipaddress.ip_address((host or "").split("%", 1)[0])
+        except ValueError:
+            return False
+        if address.version == 6 and address.ipv4_mapped is not None:
+            address = address.ipv4_mapped
+        return any(address in network for network in self.allow)
+
+    def callback_new_connection(self) -> Any:
+        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)  # type: ignore[no-untyped-call]
+
+
 class PlcTags:
-    """Serve a controller's PackML tags on (host, port) as unit ``device_id``; port 0: any."""
+    """Serve a controller's PackML tags on (host, port) as unit ``device_id``; port 0: any.
+
+    Only clients whose address is in ``allow`` (addresses or networks; loopback by default)
+    are served; with ``read_only`` every write is refused (a monitoring tap).
+    """
 
     def __init__(
         self,
@@ -74,9 +133,13 @@ class PlcTags:
         port: int = 15502,
         device_id: int = 1,
         *,
+        allow: Iterable[str] = LOOPBACK,
+        read_only: bool = False,
         heartbeat_period: float = HEARTBEAT_PERIOD,
     ) -> None:
         self.controller = controller
+        self.allow = networks(allow)
+        self.read_only = read_only
         self.host = host
         self.port = port
         self.device_id = device_id
@@ -89,7 +152,7 @@ class PlcTags:
         self._beat = 0
         self._closing = False
         self._queue: asyncio.Queue[Request | None] = asyncio.Queue()
-        self._server: ModbusTcpServer | None = None
+        self._server: _Server | None = None
         self._worker: asyncio.Task[None] | None = None
         self._beater: asyncio.Task[None] | None = None
 
@@ -98,8 +161,8 @@ class PlcTags:
         """Listen (the actual port is in ``port`` afterwards), then take requests."""
         if self._server is not None:
             raise RuntimeError(f"the PLC tags on port {self.port} are already served")
-        server = ModbusTcpServer(build_device(self.device_id, self._action),
-                                 address=(self.host, self.port))  # fmt: skip
+        server = _Server(build_device(self.device_id, self._action), (self.host, self.port),
+                         self.allow)  # fmt: skip
         try:
             await server.serve_forever(background=True)
         except RuntimeError as exc:
@@ -164,6 +227,9 @@ class PlcTags:
         if func_code not in HOLDING_FUNCTIONS:
             return ExcCodes.ILLEGAL_FUNCTION
         if values is not None:
+            if self.read_only:
+                READ_ONLY.note("PLC: refused a write to register %d: [plc] read_only", address)
+                return ExcCodes.ILLEGAL_FUNCTION
             return self._write(address, cast(list[int], values))
         registers[REG_MAP_VERSION - start : REG_COUNT - start] = encode(self.tags())
         return None
@@ -234,4 +300,5 @@ def plc_tags(controller: Controller, config: Config) -> PlcTags | None:
     table = config.table("plc")
     if not table["enabled"]:
         return None
-    return PlcTags(controller, table["host"], table["port"], table["device_id"])
+    return PlcTags(controller, table["host"], table["port"], table["device_id"],
+                   allow=table["allow"].split(), read_only=table["read_only"])  # fmt: skip

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -11,11 +12,13 @@ from typing import Any
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 from bwsd.config import parse_config
 from bwsd.controller.packml import PackML, State, UnitMode
 from bwsd.controller.plan import Limits
 from bwsd.controller.runner import Controller
+from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.plc import REG_COUNT, PlcError, PlcTags, StopReason, Tags, decode, plc_tags
@@ -83,8 +86,9 @@ async def rig(mock, tmp_path, **kw) -> AsyncIterator[tuple[Controller, Journal, 
     bus = open_bus(config)
     await bus.connect()
     journal = Journal.open(tmp_path / "journal.db")
+    doors = {key: kw.pop(key) for key in ("allow", "read_only") if key in kw}
     ctl = Controller(config.machine, bus, journal, **kw)
-    tags = PlcTags(ctl, port=0, device_id=DEVICE)
+    tags = PlcTags(ctl, port=0, device_id=DEVICE, **doors)
     await tags.start()
     plc = Plc(tags.port)
     assert await plc.client.connect()
@@ -293,3 +297,59 @@ def test_a_port_in_use_is_a_plc_error_naming_it(mock, tmp_path):
             assert (await plc.tags()).state_current == State.STOPPED  # the first one still serves
 
     run(scenario())
+
+
+# ----- the doors -----
+def test_an_address_outside_the_allow_list_is_not_served(mock, tmp_path):
+    """The tag server took writes from anyone who could reach it: a write did a Reset."""
+
+    async def scenario() -> None:
+        async with rig(mock, tmp_path, allow=["127.0.0.1"]) as (ctl, _, plc):
+            stranger = AsyncModbusTcpClient("127.0.0.2", port=plc.port, timeout=1, retries=0,
+                                            source_address=("127.0.0.2", 0))  # fmt: skip
+            await stranger.connect()
+            answer = None
+            with contextlib.suppress(ModbusException):
+                answer = await stranger.write_registers(REG_CNTRL_CMD, [RESET, 1],
+                                                        device_id=DEVICE)  # fmt: skip
+            stranger.close()
+            assert answer is None or answer.isError()
+            await asyncio.sleep(0.2)
+            assert ctl.packml.state is State.STOPPED  # nothing was done
+            assert (await plc.command(RESET)).state_current == State.IDLE  # the PLC is served
+
+    run(scenario())
+
+
+def test_a_network_in_the_allow_list_admits_its_addresses(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path, allow=["127.0.0.0/30"]) as (_, _, plc):
+            other = AsyncModbusTcpClient("127.0.0.1", port=plc.port, timeout=2, retries=0,
+                                         source_address=("127.0.0.2", 0))  # fmt: skip
+            assert await other.connect()
+            answer = await other.read_holding_registers(0, count=REG_COUNT, device_id=DEVICE)
+            other.close()
+            assert not answer.isError()
+
+    run(scenario())
+
+
+def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path, read_only=True) as (ctl, _, plc):
+            answer = await plc.client.write_registers(REG_CNTRL_CMD, [RESET, 1],
+                                                      device_id=DEVICE)  # fmt: skip
+            assert answer.isError() and answer.exception_code == 1  # illegal function
+            await asyncio.sleep(0.2)
+            tags = await plc.tags()
+            assert (tags.state_current, tags.cntrl_cmd, tags.cmd_change_request) == (
+                State.STOPPED, 0, 0)  # fmt: skip
+            assert ctl.packml.state is State.STOPPED
+
+    run(scenario())
+
+
+def test_a_bad_allow_entry_is_a_config_error_naming_the_key(mock, tmp_path):
+    config = parse_config({"machine": MACHINE, "plc": {"allow": "127.0.0.1 plc-3"}}, "bwsd.toml")
+    with pytest.raises(ConfigError, match=r"\[plc\.allow\]: 'plc-3' is not an IP address"):
+        plc_tags(SimpleNamespace(), config)  # type: ignore[arg-type]
