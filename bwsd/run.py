@@ -44,8 +44,9 @@ def load_and_simulate(
     """Load config and program, run the program; a refused instruction names its line."""
     from bwsd.program.validate import load_program
 
-    machine = load_config(config_path).machine
-    program = load_program(program_path, machine)
+    config = load_config(config_path)
+    machine = config.machine
+    program = load_program(program_path, machine, config.table("controller")["max_instructions"])
     try:
         twin = simulate(machine, program, progress, timings)
     except TwinError as exc:
@@ -120,7 +121,7 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
     _write_exports(twin, args.skeleton, args.export)
     summary = _summary(twin, seconds, timings)
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary, allow_nan=False))  # never NaN or Infinity
     else:
         ms = summary.pop("predict_ms")
         print(", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "

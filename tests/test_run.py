@@ -129,3 +129,13 @@ def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     assert b"simulating" in b"".join(chunks)  # rich drew its bar on the terminal
     piped = bwsd("simulate", program, "--config", config)
     assert piped.stderr == ""
+
+
+def test_simulate_takes_the_expansion_limit_from_the_config(tmp_path):
+    program, config = example("braid-2x2")
+    limited = tmp_path / "limited.toml"
+    limited.write_text(Path(config).read_text() + "\n[controller]\nmax_instructions = 20\n")
+    done = bwsd("simulate", program, "--config", str(limited), "--json")
+    assert done.returncode == 2 and done.stdout == ""
+    assert f"{program}:11:1: the program expands to more than 20 instructions" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -15,7 +15,7 @@ from typing import Any
 
 from bwsd.controller.errors import Cancelled, ControllerError
 from bwsd.controller.plan import Limits, RefusedMove, check_limits
-from bwsd.errors import BwsdError, ProgramError, TwinError
+from bwsd.errors import BwsdError, TwinError
 from bwsd.program import parse_program, validate
 from bwsd.twin import Machine, Program, Snapshot, Twin
 from bwsd.twin.instructions import Instruction
@@ -65,12 +65,7 @@ def rebuild(machine: Machine, program: Program, done: int,
 def check_program(machine: Machine, limits: Limits, most: int, name: str, text: str,
            cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
     """Parse, validate, bound and dry-run a program (in a worker thread)."""
-    program = parse_program(text, name)
-    count = len(program.instructions)
-    if count > most:
-        raise ProgramError(f"the program expands to {count} instructions, more than this "
-                           f"daemon's limit of {most} ([controller] max_instructions)",
-                           source=name)  # fmt: skip
+    program = parse_program(text, name, most)
     validate(program, machine, name)
     twin = Twin.from_program(machine, program)
     predict = bool(limits.max_contacts or limits.tensioner_stroke)
@@ -88,5 +83,6 @@ def check_program(machine: Machine, limits: Limits, most: int, name: str, text: 
         raise ControllerError(f"{name}: {exc}") from exc
     except RefusedMove as exc:
         raise ControllerError(f"{name}: {exc}") from TwinError(str(exc), instruction=pred.index)
+    count = len(program.instructions)
     return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
                            twin.takeup)  # fmt: skip

@@ -52,8 +52,9 @@ def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
     from bwsd.program.validate import load_program
     from bwsd.twin import simulate
 
-    machine = load_config(config).machine
-    parsed = load_program(program, machine)
+    loaded = load_config(config)
+    machine = loaded.machine
+    parsed = load_program(program, machine, loaded.table("controller")["max_instructions"])
     return simulate(machine, parsed).skeleton(), parsed
 
 
@@ -75,7 +76,7 @@ def run_metrics(args: argparse.Namespace) -> int:
     cycle = args.cycle_length if args.cycle_length is not None else program.cycle_length
     result = metrics(sk, cycle)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(json.dumps(result, indent=2, allow_nan=False))  # never NaN or Infinity
     else:
         print_metrics(result, Console())
     return 0

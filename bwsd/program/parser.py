@@ -247,14 +247,15 @@ _HANDLERS = {
 }
 
 
-def _size(node: _Statement | _Repeat, source: str) -> int:
-    """Expanded instruction count of a node; refuses programs beyond MAX_INSTRUCTIONS."""
+def _size(node: _Statement | _Repeat, source: str, most: int = MAX_INSTRUCTIONS) -> int:
+    """Expanded instruction count of a node; refuses programs beyond ``most``, at the
+    REPEAT that passes it (before anything is expanded)."""
     if isinstance(node, _Statement):
         return 1
-    total = node.count * sum(_size(child, source) for child in node.body)
-    if total > MAX_INSTRUCTIONS:
+    total = node.count * sum(_size(child, source, most) for child in node.body)
+    if total > most:
         raise ProgramError(
-            f"program expands to more than {MAX_INSTRUCTIONS} instructions",
+            f"the program expands to more than {most} instructions ([controller] max_instructions)",
             line=node.line,
             column=node.column,
             source=source,
@@ -274,8 +275,12 @@ def _expand(body: list[_Statement | _Repeat], out: list[_Statement]) -> None:
 def parse_program_with_positions(
     text: str,
     source: str = "<program>",
+    most: int = MAX_INSTRUCTIONS,
 ) -> tuple[Program, SourceMap]:
-    """Parse a .bws program; also return where each instruction and filled cell was written."""
+    """Parse a .bws program; also return where each instruction and filled cell was written.
+
+    A program that expands to more than ``most`` instructions is refused.
+    """
     parser = _Parser(source)
     # Only "\n" ends a line (with an optional "\r" before it), as in every editor.
     lines = text.split("\n")
@@ -284,7 +289,7 @@ def parse_program_with_positions(
     for lineno, line in enumerate(lines, start=1):
         parser.feed(lineno, line.removesuffix("\r"))
     root = parser.finish()
-    _size(root, source)
+    _size(root, source, most)
     flat: list[_Statement] = []
     _expand(root.body, flat)
     cells = sorted(parser.fills)
@@ -305,6 +310,6 @@ def parse_program_with_positions(
     return program, where
 
 
-def parse_program(text: str, source: str = "<program>") -> Program:
+def parse_program(text: str, source: str = "<program>", most: int = MAX_INSTRUCTIONS) -> Program:
     """Parse a .bws program (see docs/program.md); raises ProgramError at the fault."""
-    return parse_program_with_positions(text, source)[0]
+    return parse_program_with_positions(text, source, most)[0]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bwsd.errors import ProgramError
-from bwsd.program.parser import SourceMap, parse_program_with_positions
+from bwsd.program.parser import MAX_INSTRUCTIONS, SourceMap, parse_program_with_positions
 from bwsd.twin.instructions import Program, Shift
 from bwsd.twin.machine import Machine
 
@@ -125,8 +125,8 @@ def validate(
                 raise _fail(fault[1], program, positions, source, i, fault[0])
 
 
-def load_program(path: str | Path, machine: Machine) -> Program:
-    """Read, parse and validate a .bws file for ``machine``."""
+def load_program(path: str | Path, machine: Machine, most: int = MAX_INSTRUCTIONS) -> Program:
+    """Read, parse and validate a .bws file for ``machine`` (at most ``most`` instructions)."""
     name = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -134,6 +134,6 @@ def load_program(path: str | Path, machine: Machine) -> Program:
         raise ProgramError(f"cannot read: {exc.strerror}", source=name) from exc
     except UnicodeDecodeError as exc:
         raise ProgramError(f"not UTF-8 text: {exc.reason}", source=name) from exc
-    program, positions = parse_program_with_positions(text, name)
+    program, positions = parse_program_with_positions(text, name, most)
     validate(program, machine, name, positions)
     return program

@@ -341,9 +341,9 @@ def test_a_shift_cut_between_its_lines_is_completed_line_by_line(mock, tmp_path)
 def test_a_program_beyond_the_instruction_limit_is_refused_at_check(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path, settings=Settings(max_instructions=10))
-        limit = r"expands to 15 instructions, more than this daemon's limit of 10 \(\["
+        limit = r"braid.bws:6:1: the program expands to more than 10 instructions \(\["
         with pytest.raises(ProgramError, match=limit + r"controller\] max_instructions\)"):
-            await ctl.check("braid.bws", TEXT)
+            await ctl.check("braid.bws", TEXT)  # at the REPEAT, before it is expanded
         assert journal.history() == []
         await ctl.close()
 

@@ -56,3 +56,13 @@ def test_any_program_parses_or_is_a_program_error(text):
         parse_program(text)
     except ProgramError as exc:
         assert exc.line >= 0 and exc.column >= 0
+
+
+def test_the_expansion_limit_is_the_callers_and_stops_before_expanding():
+    text = FILL + "REPEAT 1000\nREPEAT 1000\nREPEAT 1000\nTAKEUP 1\nEND\nEND\nEND\n"
+    with pytest.raises(ProgramError, match=r"<program>:4:1: the program expands to more than "
+                                           r"1000000 instructions"):  # fmt: skip
+        parse_program(text)
+    with pytest.raises(ProgramError, match=r"<program>:4:1: .* more than 50 instructions"):
+        parse_program(FILL + "REPEAT 10\nREPEAT 10\nTAKEUP 1\nEND\nEND\n", most=50)
+    assert len(parse_program(FILL + "REPEAT 50\nTAKEUP 1\nEND\n", most=50).instructions) == 50
