@@ -16,6 +16,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bwsd.api.cli import configure as configure_token
     from bwsd.export.cli import configure as configure_export
     from bwsd.fieldbus.cli import configure as configure_hw
+    from bwsd.journal.cli import configure as configure_journal
     from bwsd.program.cli import configure as configure_program
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
@@ -27,6 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     configure_program(sub)
     configure_export(sub)
     configure_hw(sub)
+    configure_journal(sub)
     return parser
 
 

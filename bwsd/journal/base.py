@@ -6,10 +6,12 @@ the one connection may be used from any thread.
 
 from __future__ import annotations
 
+import logging
 import os
 import sqlite3
 import threading
 import time
+import weakref
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
@@ -18,26 +20,37 @@ from typing import Any, Self
 
 from bwsd.journal import codec
 from bwsd.journal.check import damage, invariants
+from bwsd.journal.files import close_keeping_wal
 from bwsd.journal.records import JournalError
-from bwsd.journal.schema import connect, lock
+from bwsd.journal.schema import begin_session, connect, end_session, lock
 
 Clock = Callable[[], float]
+_log = logging.getLogger(__name__)
 
 
 class Store:
     """An open journal file: opening, closing, reads, transactions and errors naming it."""
 
-    def __init__(self, conn: sqlite3.Connection, path: Path, lock_fd: int, clock: Clock) -> None:
+    def __init__(
+        self, conn: sqlite3.Connection, path: Path, lock_fd: int, clock: Clock, session: int
+    ) -> None:
         """Use ``open``."""
         self._conn: sqlite3.Connection | None = conn
         self._path = path
-        self._lock_fd = lock_fd
         self._clock = clock
         self._mutex = threading.Lock()
+        # Closes as ``close`` does when the journal is dropped unclosed or the interpreter
+        # exits with it open (an exception out of the daemon): SQLite would fold the log in
+        # at exit all the same, and the end recorded first keeps the next start from taking
+        # the file for one whose log was lost.
+        self._closer = weakref.finalize(self, _close, conn, path, lock_fd, session)
 
     @classmethod
     def open(cls, path: str | Path, *, clock: Clock = time.time) -> Self:
-        """Open the journal at ``path``, creating it (and its folders) if it does not exist."""
+        """Open the journal at ``path``, creating it (and its folders) if it does not exist.
+
+        Records the opening (a session) in the main file itself; ``close`` records its end.
+        """
         where = Path(path)
         try:
             where.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
@@ -51,7 +64,13 @@ class Store:
         except BaseException:
             os.close(lock_fd)
             raise
-        return cls(conn, where, lock_fd, clock)
+        try:
+            session = begin_session(conn, str(where))
+        except BaseException:
+            close_keeping_wal(conn, where)
+            os.close(lock_fd)
+            raise
+        return cls(conn, where, lock_fd, clock, session)
 
     @property
     def path(self) -> Path:
@@ -59,13 +78,13 @@ class Store:
         return self._path
 
     def close(self) -> None:
-        """Close the file and release the writer's lock; closing twice is harmless."""
+        """Record the session's end, close the file (SQLite folds the log into it) and
+        release the writer's lock; closing twice is harmless."""
         with self._mutex:
             if self._conn is None:
                 return
-            self._conn.close()
             self._conn = None
-            os.close(self._lock_fd)
+            self._closer()
 
     def __enter__(self) -> Self:
         return self
@@ -146,3 +165,16 @@ class Store:
         if self._conn is None:
             raise self._error("the journal is closed")
         return self._conn
+
+
+def _close(conn: sqlite3.Connection, path: Path, lock_fd: int, session: int) -> None:
+    """End the session, then close: the last connection's close folds the log in."""
+    try:
+        end_session(conn, session)
+    except sqlite3.Error as exc:  # the log is kept: the next start recovers from it
+        _log.warning("%s: cannot record the end of this session: %s", path, exc)
+        close_keeping_wal(conn, path)
+    else:
+        conn.close()
+    finally:
+        os.close(lock_fd)

@@ -1,4 +1,5 @@
-"""The journal's invariants, checked against the file itself (for start-up and tests).
+"""The journal's invariants, checked against the file itself (for start-up, tests and
+`bwsd journal check`).
 
 Cheap enough for every start-up: one ``quick_check`` pass over the file's pages (it skips
 ``integrity_check``'s index-to-table cross-checks) and one scan of the instructions.
@@ -11,6 +12,7 @@ import sqlite3
 from bwsd.journal.records import ACTIVE, COMPLETE, LOADED
 
 QUICK_CHECK_LINES = 5  # the first messages of a damaged file are enough to name the damage
+INTEGRITY_CHECK_LINES = 20  # `bwsd journal check`: the full check, for support
 
 _PER_PROGRAM = """
 SELECT p.id, p.outcome, p.instructions, p.done,
@@ -40,6 +42,17 @@ def damage(conn: sqlite3.Connection) -> list[str]:
     May raise ``sqlite3.DatabaseError`` instead, when the damage stops the check itself.
     """
     rows = conn.execute(f"PRAGMA quick_check({QUICK_CHECK_LINES})").fetchall()
+    found = [" ".join(str(row[0]).split()) for row in rows]
+    return [] if found == ["ok"] else found
+
+
+def integrity(conn: sqlite3.Connection) -> list[str]:
+    """What SQLite's full integrity check finds wrong (indexes against their tables too);
+    empty when the file is whole. Slower than ``damage``: for `bwsd journal check`.
+
+    May raise ``sqlite3.DatabaseError`` instead, when the damage stops the check itself.
+    """
+    rows = conn.execute(f"PRAGMA integrity_check({INTEGRITY_CHECK_LINES})").fetchall()
     found = [" ".join(str(row[0]).split()) for row in rows]
     return [] if found == ["ok"] else found
 

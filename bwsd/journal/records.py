@@ -108,3 +108,18 @@ class StateRecord:
     state: int
     name: str
     reason: str
+
+
+@dataclass(frozen=True)
+class SessionRecord:
+    """One opening of the journal by a writer (a daemon's start), and its clean close.
+
+    ``closed`` is None while it is open, and stays None when the writer was killed or the
+    power cut: the next opening then recovers the writes from the write-ahead log.
+    """
+
+    id: int
+    opened: float
+    closed: float | None
+    pid: int
+    version: str

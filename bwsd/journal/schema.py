@@ -1,4 +1,5 @@
-"""The journal's file: schema, identification, durability settings and the writer's lock."""
+"""The journal's file: schema, identification, durability settings, the writer's lock and
+its sessions (each opening by a writer, recorded in the main file itself)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,14 @@ import contextlib
 import fcntl
 import os
 import sqlite3
+import time
 from pathlib import Path
 
+from bwsd import __version__
+from bwsd.journal.files import WAL, beside, close_keeping_wal, lost_wal, wal_holds_a_commit
 from bwsd.journal.records import ACTIVE, FINAL, OUTCOMES, JournalError
 
-SCHEMA_VERSION = 2  # PRAGMA user_version; a version-1 file is upgraded in place on open
+SCHEMA_VERSION = 3  # PRAGMA user_version; an older file is upgraded in place on open
 APPLICATION_ID = 0x62777364  # PRAGMA application_id: "bwsd" in ASCII
 BUSY_TIMEOUT_MS = 5000  # readers in other processes may hold the WAL briefly
 
@@ -95,11 +99,23 @@ WHEN NEW.idx > (SELECT done FROM programs WHERE id = NEW.program_id)
     OR coalesce((SELECT outcome FROM programs WHERE id = NEW.program_id), '') NOT IN ({_ACTIVE})
 BEGIN SELECT RAISE(ABORT, 'snapshot beyond the instructions done or outside a run'); END;
 """
-SCHEMA = _BASE + _SNAPSHOTS
+# Version 3: the writer's sessions. Opening records one and makes the main file itself say
+# so (a checkpoint); a clean close records its end. A session without an end and a log that
+# is gone means writes were lost with the log: the journal refuses to open (files.lost_wal).
+_SESSIONS = """
+CREATE TABLE sessions (
+    id INTEGER PRIMARY KEY,
+    opened REAL NOT NULL,
+    closed REAL,
+    pid INTEGER NOT NULL,
+    version TEXT NOT NULL
+);
+"""
+SCHEMA = _BASE + _SNAPSHOTS + _SESSIONS
 # The script that takes a file from version N to N + 1, and the tables each version added.
-UPGRADES = {1: _SNAPSHOTS}
-ADDED = {2: ("snapshots",)}
-TABLES = ("events", "instructions", "programs", "snapshots", "states")
+UPGRADES = {1: _SNAPSHOTS, 2: _SESSIONS}
+ADDED = {2: ("snapshots",), 3: ("sessions",)}
+TABLES = ("events", "instructions", "programs", "sessions", "snapshots", "states")
 
 
 def lock(path: Path) -> int:
@@ -122,12 +138,21 @@ def connect(path: Path) -> sqlite3.Connection:
 
     A new journal is made whole beside its place and renamed into it, private (0600; SQLite
     gives its -wal and -shm the same mode): a journal file is never empty, so an empty one is
-    refused, not taken as new.
+    refused, not taken as new. A journal whose writer never closed it and whose log is gone
+    is refused (files.lost_wal), and so is a log without its journal. A refused file is
+    left as it was, its log included.
     """
     where = str(path)
     if path.is_dir():
         raise JournalError("is a folder, not a journal file", path=where)
+    wal = beside(path, WAL)
     if not path.exists():
+        if wal_holds_a_commit(wal):  # SQLite would replay it into the new file
+            raise JournalError(
+                f"is missing, but its write-ahead log {wal.name} is here: put the journal back "
+                f"beside it, or move {wal.name} (and {path.name}-shm) away to start a new one",
+                path=where,
+            )
         _create_file(path)
     elif path.stat().st_size == 0:
         raise JournalError(
@@ -135,21 +160,62 @@ def connect(path: Path) -> sqlite3.Connection:
             "this file away to start a new one",
             path=where,
         )
+    elif problem := lost_wal(path, APPLICATION_ID):
+        raise JournalError(problem, path=where)
     conn = _open(path)
     try:
-        version = _identify(conn, where)
+        version = identify(conn, where)
         _configure(conn, where)
         if version == 0:  # an SQLite file with nothing in it
             _create(conn)
         elif version < SCHEMA_VERSION:
-            _upgrade(conn, version, where)
+            upgrade(conn, version, where)
     except sqlite3.Error as exc:
-        conn.close()
+        close_keeping_wal(conn, path)
         raise JournalError(f"not a usable journal: {exc}", path=where) from exc
     except JournalError:
-        conn.close()
+        close_keeping_wal(conn, path)
         raise
     return conn
+
+
+def begin_session(conn: sqlite3.Connection, where: str) -> int:
+    """Record that a writer opened the journal, in the main file itself; the session's id.
+
+    The row is committed, then a full checkpoint brings it (and any log a crash left) into
+    the main file, so that from here on the main file alone says "open": were the log lost
+    now, the next opening would know (files.lost_wal).
+    """
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        cur = conn.execute(
+            "INSERT INTO sessions (opened, pid, version) VALUES (?, ?, ?)",
+            (time.time(), os.getpid(), __version__),
+        )
+        conn.execute("COMMIT")
+        assert cur.lastrowid is not None
+        busy, log, done = conn.execute("PRAGMA wal_checkpoint(FULL)").fetchone()
+    except sqlite3.Error as exc:
+        if conn.in_transaction:
+            with contextlib.suppress(sqlite3.Error):
+                conn.execute("ROLLBACK")
+        if isinstance(exc, sqlite3.OperationalError):  # busy, disk full, I/O error
+            raise JournalError(f"cannot record this opening: {exc}", path=where) from exc
+        raise JournalError(f"not a usable journal: {exc}", path=where) from exc
+    if busy or log != done:
+        with contextlib.suppress(sqlite3.Error):
+            end_session(conn, cur.lastrowid)
+        raise JournalError(
+            "cannot record this opening in the journal file itself: another process keeps a "
+            "read transaction open on it (an SQLite tool?); end it and start again",
+            path=where,
+        )
+    return cur.lastrowid
+
+
+def end_session(conn: sqlite3.Connection, session: int) -> None:
+    """Record that the session ended cleanly: the log is about to be folded in."""
+    conn.execute("UPDATE sessions SET closed = ? WHERE id = ?", (time.time(), session))
 
 
 def _open(path: Path) -> sqlite3.Connection:
@@ -183,10 +249,10 @@ def _create_file(path: Path) -> None:
         with contextlib.suppress(FileNotFoundError):
             new.with_name(new.name + suffix).unlink()
     os.replace(new, path)
-    _sync_folder(path.parent)
+    sync_folder(path.parent)
 
 
-def _identify(conn: sqlite3.Connection, where: str) -> int:
+def identify(conn: sqlite3.Connection, where: str) -> int:
     """The file's schema version, 0 for an empty database; raise unless it is a journal of
     this schema or an older one this bwsd upgrades."""
     app_id = conn.execute("PRAGMA application_id").fetchone()[0]
@@ -232,7 +298,7 @@ def _create(conn: sqlite3.Connection) -> None:
         raise
 
 
-def _upgrade(conn: sqlite3.Connection, version: int, where: str) -> None:
+def upgrade(conn: sqlite3.Connection, version: int, where: str) -> None:
     """Bring a file of an older schema to this one in one transaction: a crash leaves it at
     its old version, whole, and the next open upgrades it again."""
     conn.execute("BEGIN IMMEDIATE")
@@ -268,7 +334,7 @@ def _statements(script: str) -> list[str]:
     return out
 
 
-def _sync_folder(folder: Path) -> None:
+def sync_folder(folder: Path) -> None:
     """Make the new file's name durable too (its folder entry), best effort."""
     with contextlib.suppress(OSError):
         fd = os.open(folder, os.O_RDONLY)

@@ -428,7 +428,7 @@ def test_a_version_1_file_is_upgraded_in_place(path: Path) -> None:
     before = _rows(path)
     assert "snapshots" not in _tables(path)
     with Journal.open(path) as j:
-        assert j.pragmas()["user_version"] == SCHEMA_VERSION == 2
+        assert j.pragmas()["user_version"] == SCHEMA_VERSION == 3
         j.check()
         assert [p.name for p in j.history()] == ["part.bws", "done.bws"]
         pending = j.pending(2)
@@ -443,7 +443,7 @@ def test_a_version_1_file_is_upgraded_in_place(path: Path) -> None:
     assert after["programs"][0] == before["programs"][0]  # the finished program untouched
     assert after["instructions"][:2] == before["instructions"][:2]
     assert after["events"] == before["events"]
-    with Journal.open(path) as j:  # upgraded once; the next open finds version 2
+    with Journal.open(path) as j:  # upgraded once; the next open finds version 3
         assert j.latest_snapshot(2) == (2, blob(2))
 
 
@@ -480,8 +480,8 @@ def test_a_newer_file_is_refused_untouched(path: Path) -> None:
     conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
     conn.close()
     before = path.read_bytes()
-    with pytest.raises(JournalError, match=r"newer bwsd \(schema version 3; this bwsd reads "
-                       r"version 2\)") as err:  # fmt: skip
+    with pytest.raises(JournalError, match=r"newer bwsd \(schema version 4; this bwsd reads "
+                       r"version 3\)") as err:  # fmt: skip
         Journal.open(path)
     assert str(path) in str(err.value)
     assert path.read_bytes() == before

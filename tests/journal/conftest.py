@@ -1,0 +1,95 @@
+"""A journal writer in its own process, killed or stopped the ways a daemon is."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+DONE = 26  # instructions done when the writer is ready; the next one is started, not done
+TOTAL = 100
+
+# Opens the journal, runs a program to instruction 27 (started, not done), then per mode:
+# "kill" and "wait" say ready and wait to be killed; "held" finishes 27, holds the program
+# and closes (a daemon's SIGTERM); "raise" dies of an exception with the journal open (a
+# bug); "busy" says ready and writes on until killed, big events past the program's end, so
+# that SQLite checkpoints and restarts the log again and again.
+WRITER = f"""
+import sys, time
+from bwsd.journal import Journal
+
+path, mode = sys.argv[1], sys.argv[2]
+j = Journal.open(path)
+pid = j.add_program("part.bws", "FILL\\nX\\nEND\\n", {TOTAL})
+j.set_outcome(pid, "running")
+j.log_event("loaded", {{"name": "part.bws"}})
+j.log_state(6, "Execute", "start")
+for i in range(1, {DONE} + 1):
+    j.started(pid, i, {{"i": i}})
+    j.done(pid, i, {{"i": i}})
+j.started(pid, {DONE} + 1, {{"i": {DONE} + 1}})
+if mode == "held":
+    j.done(pid, {DONE} + 1, {{"i": {DONE} + 1}})
+    j.set_outcome(pid, "held", "daemon stopping")
+    j.close()
+    sys.exit(0)
+if mode == "raise":
+    raise RuntimeError("a bug, with the journal open")
+print("ready", flush=True)
+if mode == "busy":
+    for i in range({DONE} + 1, {TOTAL} + 1):
+        if i > {DONE} + 1:
+            j.started(pid, i, {{"i": i}})
+        j.done(pid, i, {{"i": i}})
+    j.set_outcome(pid, "complete")
+    n = 0
+    while True:
+        j.log_event("filler", {{"n": n, "pad": "x" * 6000}})
+        n += 1
+        time.sleep(0.001)
+time.sleep(600)
+"""
+
+
+def files(folder: Path) -> dict[str, bytes]:
+    """Every file of the folder and its bytes: to show that nothing changed."""
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+@pytest.fixture
+def writer() -> Iterator[Callable[[Path, str], subprocess.Popen[str]]]:
+    """Run the writer on a journal: "kill" returns once it was SIGKILLed mid-program,
+    "held" and "raise" once it ended; "wait" and "busy" return it alive, journal open."""
+    alive: list[subprocess.Popen[str]] = []
+
+    def run(path: Path, mode: str) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
+            [sys.executable, "-c", WRITER, str(path), mode],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+        )  # fmt: skip
+        alive.append(proc)
+        assert proc.stdout is not None and proc.stderr is not None
+        if mode in ("held", "raise"):
+            proc.wait(timeout=60)
+            errors = proc.stderr.read()
+            assert (proc.returncode, "a bug" in errors) == ({"held": 0, "raise": 1}[mode],
+                                                            mode == "raise"), errors  # fmt: skip
+            return proc
+        assert proc.stdout.readline() == "ready\n", proc.stderr.read()
+        if mode == "kill":
+            proc.send_signal(signal.SIGKILL)
+            assert proc.wait(timeout=60) == -signal.SIGKILL
+        return proc
+
+    yield run
+    for proc in alive:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
