@@ -46,3 +46,7 @@ class MoveError(TwinError):
 
 class ShedClosedError(TwinError):
     """A weft would pass within one yarn diameter of another yarn."""
+
+
+class ExtraMissingError(BwsdError):
+    """A command needs an optional library that is not installed: names the extra to install."""

@@ -6,11 +6,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bwsd.export.errors import ExportError
+from bwsd.extras import VTK, needs
 from bwsd.twin.skeleton import SkeletonData
 
 __all__ = ["FORMATS", "ExportError", "export"]
 
-# Suffix -> what it writes; the writers are imported on use (pytexgen, VTK and meshio are large).
+# Suffix -> what it writes. The writers are imported on use: pytexgen and VTK are large,
+# and they come with the package's `export` extra (a missing one is an ExportError naming it).
 FORMATS: dict[str, str] = {
     ".json": "skeleton JSON (docs/skeleton-json.md)",
     ".tg3": "TexGen model",
@@ -25,16 +27,17 @@ def _writer(suffix: str) -> Callable[[SkeletonData, Path], None]:
 
         return write_skeleton_json
     if suffix == ".tg3":
-        from bwsd.export.texgen import write_tg3
+        from bwsd.export.texgen import write_tg3  # pytexgen is imported when it writes
 
         return write_tg3
-    if suffix == ".vtp":
-        from bwsd.export.vtp import write_vtp
+    with needs(VTK, f"writing {suffix}", ExportError):
+        if suffix == ".vtp":
+            from bwsd.export.vtp import write_vtp
 
-        return write_vtp
-    from bwsd.export.vtk import write_vtu
+            return write_vtp
+        from bwsd.export.vtk import write_vtu
 
-    return write_vtu
+        return write_vtu
 
 
 def export(sk: SkeletonData, path: str | Path) -> None:

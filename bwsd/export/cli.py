@@ -60,7 +60,11 @@ def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
 
 def run_slice(args: argparse.Namespace) -> int:
     """`bwsd slice`: write the cross-section image, report the crossings."""
-    from bwsd.export.slice import draw_slice
+    from bwsd.export.errors import ExportError
+    from bwsd.extras import MATPLOTLIB, needs
+
+    with needs(MATPLOTLIB, "drawing a slice", ExportError):  # before the simulation
+        from bwsd.export.slice import draw_slice
 
     sk, _ = simulate_program(args.config, args.program)
     count = draw_slice(sk, args.z, args.output)

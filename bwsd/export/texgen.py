@@ -12,6 +12,7 @@ import numpy as np
 
 from bwsd.export._quiet import NATIVE_LOCK, quiet_stdout
 from bwsd.export.errors import ExportError
+from bwsd.extras import TEXGEN, needs
 from bwsd.twin.skeleton import FloatArray, SkeletonData
 
 # TexGen needs a section of non-zero size; a centreline-only skeleton (d = 0) gets this one (mm).
@@ -21,9 +22,9 @@ _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])
 
 
-def _texgen() -> Any:
-    """pytexgen.Core, imported on first use (it is large and untyped)."""
-    with quiet_stdout():
+def _texgen(what: str) -> Any:
+    """pytexgen.Core, imported on first use (it is large and untyped; the `export` extra)."""
+    with needs(TEXGEN, what, ExportError), quiet_stdout():
         return importlib.import_module("pytexgen.Core")
 
 
@@ -105,7 +106,7 @@ def write_tg3(sk: SkeletonData, path: str | Path, name: str = "bwsd") -> None:
 
 
 def _save(sk: SkeletonData, tmp: str, name: str) -> None:
-    tg = _texgen()
+    tg = _texgen("writing .tg3")
     with NATIVE_LOCK, quiet_stdout():
         if name in list(tg.GetTextiles()):
             raise ExportError(f"a TexGen textile named {name!r} is already loaded")
@@ -132,7 +133,7 @@ def read_tg3(path: str | Path) -> list[FloatArray]:
     """
     if not Path(path).is_file():
         raise ExportError("no such file", path=str(path))
-    tg = _texgen()
+    tg = _texgen("reading .tg3")
     with NATIVE_LOCK, quiet_stdout():
         before = set(tg.GetTextiles())
         loaded = bool(tg.ReadFromXML(str(path)))

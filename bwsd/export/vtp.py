@@ -20,8 +20,8 @@ from vtkmodules.vtkCommonCore import (
     vtkPoints,
     vtkTypeInt64Array,
 )
-from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
-from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkDataObject, vtkPolyData
+from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter, vtkXMLWriter
 
 from bwsd.export.errors import ExportError
 from bwsd.export.families import family_codes
@@ -38,7 +38,7 @@ from bwsd.twin.skeleton import IntArray, SkeletonData
 A = TypeVar("A", bound=vtkDataArray)
 
 
-def _fill(array: A, values: npt.NDArray[np.generic], name: str = "") -> A:
+def fill(array: A, values: npt.NDArray[np.generic], name: str = "") -> A:
     """``array`` sized like ``values`` (one row per tuple) and holding a copy of them."""
     if name:
         array.SetName(name)
@@ -59,7 +59,7 @@ def _lines(sk: SkeletonData, links: IntArray) -> vtkCellArray:
     n_points = sum(len(y.node_ids) for y in sk.yarns)
     connectivity = np.concatenate([np.arange(n_points, dtype=np.int64), links.reshape(-1)])
     cells = vtkCellArray()
-    cells.SetData(_fill(vtkIdTypeArray(), offsets), _fill(vtkIdTypeArray(), connectivity))
+    cells.SetData(fill(vtkIdTypeArray(), offsets), fill(vtkIdTypeArray(), connectivity))
     return cells
 
 
@@ -81,38 +81,37 @@ def skeleton_polydata(sk: SkeletonData) -> vtkPolyData:
     codes = family_codes(sk)
     links, info = contact_links(sk, codes)
     points = vtkPoints()
-    points.SetData(_fill(vtkDoubleArray(), node_points(sk)))
+    points.SetData(fill(vtkDoubleArray(), node_points(sk)))
     poly = vtkPolyData()
     poly.SetPoints(points)
     poly.SetLines(_lines(sk, links))
     for name, values in point_arrays(sk).items():
-        poly.GetPointData().AddArray(_fill(vtkTypeInt64Array(), values, name))
+        poly.GetPointData().AddArray(fill(vtkTypeInt64Array(), values, name))
     for name, values in _cell_arrays(sk, codes, info).items():
-        poly.GetCellData().AddArray(_fill(vtkTypeInt64Array(), values, name))
+        poly.GetCellData().AddArray(fill(vtkTypeInt64Array(), values, name))
     return poly
 
 
-def polydata_xml(poly: vtkPolyData) -> bytes:
-    """``poly`` as a VTK XML PolyData document: binary (base64), zlib-compressed arrays."""
-    writer = vtkXMLPolyDataWriter()
-    writer.SetInputData(poly)
+def xml(writer: vtkXMLWriter, data: vtkDataObject, what: str) -> bytes:
+    """``data`` as a VTK XML document by ``writer``: binary (base64), zlib-compressed arrays."""
+    writer.SetInputData(data)
     writer.SetDataModeToBinary()
     writer.SetCompressorTypeToZLib()
     writer.SetHeaderTypeToUInt64()
     writer.SetWriteToOutputString(True)
     if not writer.Write():
-        raise ExportError("VTK could not write the PolyData")
+        raise ExportError(f"VTK could not write the {what}")
     return writer.GetOutputString().encode("utf-8")
 
 
-def write_vtp(sk: SkeletonData, path: str | Path) -> None:
-    """Write ``skeleton_polydata(sk)`` as a VTK XML PolyData file (.vtp).
+def polydata_xml(poly: vtkPolyData) -> bytes:
+    """``poly`` as a VTK XML PolyData document: binary (base64), zlib-compressed arrays."""
+    return xml(vtkXMLPolyDataWriter(), poly, "PolyData")
 
-    The file is written next to ``path`` and renamed into place, so a failed write
-    leaves any previous file untouched.
-    """
-    target = Path(path)
-    data = polydata_xml(skeleton_polydata(sk))
+
+def write_file(target: Path, data: bytes) -> None:
+    """Write ``data`` next to ``target`` and rename it into place: a failed write leaves any
+    previous file untouched."""
     tmp = target.with_name(f".{target.name}.{os.getpid()}-{threading.get_ident()}.tmp")
     try:
         tmp.write_bytes(data)
@@ -121,3 +120,12 @@ def write_vtp(sk: SkeletonData, path: str | Path) -> None:
         raise ExportError(f"cannot write: {exc.strerror}", path=str(target)) from exc
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def write_vtp(sk: SkeletonData, path: str | Path) -> None:
+    """Write ``skeleton_polydata(sk)`` as a VTK XML PolyData file (.vtp).
+
+    The file is written next to ``path`` and renamed into place, so a failed write
+    leaves any previous file untouched.
+    """
+    write_file(Path(path), polydata_xml(skeleton_polydata(sk)))

@@ -7,9 +7,12 @@ when it is used, so a missing bus library only matters to the bus that needs it.
 from __future__ import annotations
 
 import importlib
+from contextlib import nullcontext
+from functools import partial
 
 from bwsd.config import Config
 from bwsd.errors import ConfigError
+from bwsd.extras import CANOPEN, needs
 from bwsd.fieldbus.base import (
     AxisMove,
     BusSettings,
@@ -24,9 +27,12 @@ from bwsd.fieldbus.base import (
 
 BACKENDS = {"modbus": ("bwsd.fieldbus.modbus", "ModbusBus"),
             "canopen": ("bwsd.fieldbus.canopen", "CanopenBus")}  # fmt: skip
+# The optional libraries a backend needs (the package's extras); Modbus is in the core.
+BACKEND_LIBRARIES = {"canopen": CANOPEN}
 
 __all__ = [
     "BACKENDS",
+    "BACKEND_LIBRARIES",
     "AxisMove",
     "BusSettings",
     "DriveFault",
@@ -55,8 +61,11 @@ def open_bus(config: Config) -> Fieldbus:
     except KeyError:
         raise ConfigError(f"unknown backend {name!r}", path=config.path, table="fieldbus",
                           key="backend") from None  # fmt: skip
+    library = BACKEND_LIBRARIES.get(name)
+    missing = partial(ConfigError, path=config.path, table="fieldbus", key="backend")
     try:
-        module = importlib.import_module(module_name)
+        with needs(library, f"backend {name!r}", missing) if library else nullcontext():
+            module = importlib.import_module(module_name)
     except ImportError as exc:
         raise ConfigError(f"backend {name!r} cannot be loaded: {exc}", path=config.path,
                           table="fieldbus", key="backend") from exc  # fmt: skip

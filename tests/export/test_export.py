@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 
-import meshio
 import pytest
 from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from bwsd.errors import BwsdError
 from bwsd.export import FORMATS, ExportError, export
 from bwsd.export.texgen import read_tg3
+
+from .test_vtk import read_vtu
 
 
 def test_json(small, tmp_path):
@@ -25,7 +26,7 @@ def test_tg3(small, tmp_path):
 
 def test_vtu(small, tmp_path):
     export(small, str(tmp_path / "s.vtu"))
-    assert len(meshio.read(tmp_path / "s.vtu").points) == 13
+    assert len(read_vtu(tmp_path / "s.vtu").points) == 13
 
 
 def test_vtp(small, tmp_path):

@@ -1,10 +1,19 @@
-"""VTK .vtu through meshio: points, line cells, cell and point data."""
+"""VTK .vtu, written by VTK itself: points, line cells, cell and point data."""
 
 from __future__ import annotations
 
-import meshio
+import errno
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 import pytest
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkCommonDataModel import VTK_LINE, vtkUnstructuredGrid
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
 
 from bwsd.export.errors import ExportError
 from bwsd.export.families import family_codes
@@ -13,12 +22,56 @@ from bwsd.export.vtk import KIND_CONTACT, KIND_SEGMENT, write_vtu
 from .conftest import build, warp, weft
 
 
+@dataclass
+class Block:
+    type: str
+    data: np.ndarray
+
+
+@dataclass
+class Mesh:
+    """What a .vtu holds, read back by VTK's own reader, laid out by cell block."""
+
+    points: np.ndarray
+    cells: list[Block]
+    point_data: dict[str, np.ndarray]
+    cell_data: dict[str, list[np.ndarray]]
+
+
+def read_grid(path: Path) -> vtkUnstructuredGrid:
+    reader = vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    return reader.GetOutput()
+
+
+def read_vtu(path: Path) -> Mesh:
+    grid = read_grid(path)
+    types = {int(t) for t in vtk_to_numpy(grid.GetCellTypes())}
+    assert types == {VTK_LINE}
+    cells = grid.GetCells()
+    assert (vtk_to_numpy(cells.GetOffsetsArray())[1:] % 2 == 0).all()
+    lines = vtk_to_numpy(cells.GetConnectivityArray()).reshape(-1, 2)
+    pd, cd = grid.GetPointData(), grid.GetCellData()
+    return Mesh(
+        points=vtk_to_numpy(grid.GetPoints().GetData()),
+        cells=[Block("line", lines)],
+        point_data={
+            pd.GetArrayName(i): vtk_to_numpy(pd.GetArray(i)) for i in range(pd.GetNumberOfArrays())
+        },
+        cell_data={
+            cd.GetArrayName(i): [vtk_to_numpy(cd.GetArray(i))]
+            for i in range(cd.GetNumberOfArrays())
+        },
+    )
+
+
 @pytest.fixture
 def mesh(small, tmp_path):
     path = tmp_path / "skeleton.vtu"
     write_vtu(small, path)
     assert path.read_bytes().startswith(b"<?xml")
-    return meshio.read(path)
+    return read_vtu(path)
 
 
 def test_points_and_node_ids(small, mesh):
@@ -73,3 +126,43 @@ def test_unknown_contact_node(tmp_path):
 def test_empty_skeleton(tmp_path):
     with pytest.raises(ExportError, match="no yarns"):
         write_vtu(build([]), tmp_path / "x.vtu")
+
+
+def test_arrays_are_64_bit_integers_and_points_doubles(small, tmp_path):
+    write_vtu(small, tmp_path / "x.vtu")
+    grid = read_grid(tmp_path / "x.vtu")
+    assert grid.GetPoints().GetData().GetDataTypeAsString() == "double"
+    for data in (grid.GetPointData(), grid.GetCellData()):
+        for i in range(data.GetNumberOfArrays()):
+            assert data.GetArray(i).GetDataTypeSize() == 8, data.GetArrayName(i)
+    text = (tmp_path / "x.vtu").read_text()
+    assert 'compressor="vtkZLibDataCompressor"' in text
+    assert 'header_type="UInt64"' in text
+
+
+def test_failed_write_keeps_the_previous_file(small, tmp_path, monkeypatch):
+    target = tmp_path / "x.vtu"
+    target.write_text("previous")
+
+    def refuse(src, dst):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    with pytest.raises(ExportError, match="Permission denied"):
+        write_vtu(small, target)
+    assert target.read_text() == "previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["x.vtu"]
+
+
+def test_writes_through_vtk_without_meshio_or_rendering():
+    """The .vtu comes from VTK's own XML writer: meshio is not needed any more."""
+    code = (
+        "import sys\n"
+        "sys.modules['meshio'] = None\n"
+        "import bwsd.export.vtk\n"
+        "bad = sorted(m for m in sys.modules if 'Rendering' in m or m == 'vtk')\n"
+        "print(bad)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[]"

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import meshio
 from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from bwsd.export import export
@@ -13,6 +12,7 @@ from bwsd.export.texgen import read_tg3
 from bwsd.twin.skeleton import SkeletonData
 
 from .conftest import MACHINE
+from .test_vtk import read_vtu
 
 
 def worked_example() -> SkeletonData:
@@ -39,7 +39,7 @@ def test_all_exports_of_the_worked_example(tmp_path):
     tg3 = read_tg3(tmp_path / "example.tg3")
     assert [len(n) for n in tg3] == [len(y.nodes) for y in sk.yarns]
     assert all(abs(a - y.nodes).max() < 1e-9 for a, y in zip(tg3, sk.yarns, strict=True))
-    mesh = meshio.read(tmp_path / "example.vtu")
+    mesh = read_vtu(tmp_path / "example.vtu")
     assert len(mesh.cells[0].data) == (34 - 2) + 15
     reader = vtkXMLPolyDataReader()
     reader.SetFileName(str(tmp_path / "example.vtp"))
