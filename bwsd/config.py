@@ -7,6 +7,7 @@ loom. Every key of every table is documented in docs/config.md.
 
 from __future__ import annotations
 
+import argparse
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -262,3 +263,17 @@ def load_config(path: str | Path) -> Config:
     except RecursionError:
         raise ConfigError("not valid TOML: nested too deeply", path=text_path) from None
     return parse_config(data, text_path)
+
+
+def port_option(text: str) -> int:
+    """A port given on the command line in place of a config's: 0 (any free port) to 65535.
+
+    For ``argparse``'s ``type=``: a bad one is an ``ArgumentTypeError`` naming the option.
+    """
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"a port lies in 0..65535 (0: any free one), got {port}")
+    return port

@@ -1,30 +1,51 @@
 """`python -m simulator_hw --config CONFIG [--program PROGRAM]`: run the mock loom until stopped.
 
 Prints one line ``ready modbus=P socketcand=P control=P`` on stdout once every server
-listens, then runs until SIGINT or SIGTERM.
+listens, then runs until SIGINT or SIGTERM. ``--modbus-port``, ``--socketcand-port`` and
+``--control-port`` override the config's ``[simulator]`` ports (0: any free port; the line
+gives the ports taken). The socketcand hub with the CANopen drives needs the package's
+``canopen`` extra: without it the mock loom serves Modbus only (and says so on stderr),
+unless the config's ``[fieldbus] backend`` is ``"canopen"``, which makes it an error.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import signal
 import sys
 from collections.abc import Sequence
 
-from bwsd.config import load_config
+from bwsd.config import Config, load_config, port_option
 from bwsd.errors import BwsdError
-from simulator_hw.app import MockLoom
+from bwsd.extras import CANOPEN, missing_message
+from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_installed
+
+PORT_OPTIONS = ("modbus_port", "socketcand_port", "control_port")
 
 
-async def serve(config_path: str, program_path: str | None) -> None:
-    config = load_config(config_path)
+def with_ports(config: Config, ports: dict[str, int]) -> Config:
+    """``config`` with the ``[simulator]`` ports of ``ports`` (keys as in that table)."""
+    if not ports:
+        return config
+    simulator = {**config.table("simulator"), **ports}
+    return dataclasses.replace(config, tables={**config.tables, "simulator": simulator})
+
+
+async def serve(config_path: str, program_path: str | None,
+                ports: dict[str, int] | None = None) -> None:  # fmt: skip
+    config = with_ports(load_config(config_path), ports or {})
     fill: tuple[tuple[int, int], ...] = ()
     if program_path:
         from bwsd.program import load_program
 
         fill = load_program(program_path, config.machine).fill
-    mock = MockLoom(config, fill)
+    required = config.table("fieldbus")["backend"] == "canopen"
+    if not required and not canopen_installed():
+        note = missing_message(CANOPEN_PART, CANOPEN)
+        print(f"simulator_hw: serving Modbus only: {note}", file=sys.stderr, flush=True)
+    mock = MockLoom(config, fill, canopen=True if required else None)
     await mock.start()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -38,12 +59,20 @@ async def serve(config_path: str, program_path: str | None) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m simulator_hw", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="python -m simulator_hw",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--config", required=True, help="machine config (TOML)")
     parser.add_argument("--program", help="a .bws program whose FILL places the cases")
+    for option in PORT_OPTIONS:
+        parser.add_argument(f"--{option.replace('_', '-')}", type=port_option, metavar="PORT",
+                            help=f"instead of [simulator] {option} (0: any free port)")  # fmt: skip
     args = parser.parse_args(argv)
+    ports = {k: getattr(args, k) for k in PORT_OPTIONS if getattr(args, k) is not None}
     try:
-        asyncio.run(serve(args.config, args.program))
+        asyncio.run(serve(args.config, args.program, ports))
     except BwsdError as exc:
         print(f"simulator_hw: error: {exc}", file=sys.stderr)
         return 2

@@ -3,14 +3,30 @@
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 from bwsd.config import Config
-from simulator_hw.canopen_drives import CanopenLoom
+from bwsd.errors import ExtraMissingError
+from bwsd.extras import CANOPEN, missing_message
 from simulator_hw.control import ControlServer
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
-from simulator_hw.socketcand_hub import SocketcandHub
+
+if TYPE_CHECKING:
+    from simulator_hw.canopen_drives import CanopenLoom
+    from simulator_hw.socketcand_hub import SocketcandHub
+
+CANOPEN_PART = "the CANopen side of the mock loom"
+
+
+def canopen_installed() -> bool:
+    """Whether the libraries of the CANopen drives (the ``canopen`` extra) can be imported."""
+    try:
+        return all(importlib.util.find_spec(name) is not None for name in CANOPEN.modules)
+    except (ImportError, ValueError):  # a module blocked in sys.modules, or a broken one
+        return False
 
 
 class MockLoom:
@@ -18,9 +34,15 @@ class MockLoom:
 
     The CANopen node ids and the Modbus unit id are those of ``[fieldbus.canopen]`` and
     ``[fieldbus.modbus]``, so the daemon and the mock loom read the same config.
+
+    ``canopen``: serve the socketcand hub with the CANopen drives. ``None`` (the default)
+    serves them when their libraries (the package's ``canopen`` extra) are installed; ``True``
+    requires them (``ExtraMissingError`` without); ``False`` serves Modbus only.
     """
 
-    def __init__(self, config: Config, fill: Iterable[tuple[int, int]]) -> None:
+    def __init__(
+        self, config: Config, fill: Iterable[tuple[int, int]], *, canopen: bool | None = None
+    ) -> None:
         sim = config.table("simulator")
         speeds = Speeds(sim["stroke_speed"], sim["takeup_speed"], sim["weft_speed"])
         self.config = config
@@ -28,7 +50,15 @@ class MockLoom:
         host = sim["host"]
         unit = config.table("fieldbus.modbus")["device_id"]
         self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], unit)
-        self.hub = SocketcandHub(host, sim["socketcand_port"], faults=self.loom.faults)
+        if canopen is None:
+            canopen = canopen_installed()
+        elif canopen and not canopen_installed():
+            raise ExtraMissingError(missing_message(CANOPEN_PART, CANOPEN))
+        self.hub: SocketcandHub | None = None
+        if canopen:  # imported only here: python-can and canopen are an extra
+            from simulator_hw.socketcand_hub import SocketcandHub
+
+            self.hub = SocketcandHub(host, sim["socketcand_port"], faults=self.loom.faults)
         self.control = ControlServer(self.loom, host, sim["control_port"])
         self.drives: CanopenLoom | None = None
 
@@ -36,11 +66,15 @@ class MockLoom:
         can = self.config.table("fieldbus.canopen")
         sim = self.config.table("simulator")
         await self.modbus.start()
-        await self.hub.start()
-        self.drives = CanopenLoom(self.loom, self.hub.local_channel, node_base=can["node_base"],
-                                  io_node=can["io_node"], heartbeat_ms=sim["heartbeat_ms"],
-                                  loop=asyncio.get_running_loop())  # fmt: skip
-        self.drives.start()
+        if self.hub is not None:
+            from simulator_hw.canopen_drives import CanopenLoom
+
+            await self.hub.start()
+            self.drives = CanopenLoom(self.loom, self.hub.local_channel,
+                                      node_base=can["node_base"], io_node=can["io_node"],
+                                      heartbeat_ms=sim["heartbeat_ms"],
+                                      loop=asyncio.get_running_loop())  # fmt: skip
+            self.drives.start()
         await self.control.start()
 
     async def stop(self) -> None:
@@ -48,11 +82,16 @@ class MockLoom:
         if self.drives is not None:
             await asyncio.to_thread(self.drives.stop)
             self.drives = None
-        await self.hub.stop()
+        if self.hub is not None:
+            await self.hub.stop()
         await self.modbus.stop()
 
     @property
     def ports(self) -> dict[str, int]:
-        """The ports actually listened on (a configured 0 picks a free one)."""
-        return {"modbus": self.modbus.port, "socketcand": self.hub.port,
-                "control": self.control.port}  # fmt: skip
+        """The ports actually listened on (a configured 0 picks a free one); ``socketcand``
+        only when the CANopen drives are served."""
+        ports = {"modbus": self.modbus.port}
+        if self.hub is not None:
+            ports["socketcand"] = self.hub.port
+        ports["control"] = self.control.port
+        return ports

@@ -7,9 +7,12 @@ import re
 import shutil
 import subprocess
 import sys
+import tomllib
+import zipfile
 from pathlib import Path
 
 import pytest
+from packaging.version import Version
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,22 +47,184 @@ def test_the_compiled_kernel_has_no_fused_multiply_add():
     assert not re.search(r"\b(v?fn?m(add|sub)\w*)\b", code)
 
 
-@pytest.mark.slow
-def test_the_wheel_carries_its_type_information(tmp_path):
-    """``py.typed`` and the kernel's stub ship in the wheel, so the hints reach users."""
-    import zipfile
+# The files of three.js the preview page imports (docs/preview.md), shipped in the wheel when
+# `npm ci` has put them in bwsd/web/node_modules before the build.
+THREE = ("LICENSE", "package.json", "build/three.module.js", "build/three.core.js",
+         "examples/jsm/controls/OrbitControls.js")  # fmt: skip
+THREE_ROOT = ROOT / "bwsd" / "web" / "node_modules" / "three"
+# The extras' distributions, and meshio, which nothing needs any more.
+NOT_CORE = ("vtk", "pytexgen", "matplotlib", "canopen", "python-can", "meshio")
+ALL_FREE = ["--api-port", "0", "--plc-port", "0", "--modbus-port", "0", "--socketcand-port",
+            "0", "--control-port", "0"]  # fmt: skip
+_OFFLINE = ("NewConnectionError", "Temporary failure in name resolution", "Network is unreachable",
+            "ConnectTimeout", "ReadTimeout", "Could not fetch URL")  # fmt: skip
 
-    tree = tmp_path / "tree"  # a clean copy: no build/ folder left by an earlier build
+
+def unavailable(message: str) -> None:
+    """Skip for want of something the machine lacks; under CI (``CI=true``) that fails."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(message)
+    pytest.skip(message)
+
+
+def clean_tree(tree: Path) -> Path:
+    """A copy of what a checkout holds (no build/ left by an earlier build, no compiled
+    kernel), with the three.js files the page needs when ``npm ci`` has installed them."""
     tree.mkdir()
     for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in"):
         shutil.copy(ROOT / name, tree / name)
     skip = shutil.ignore_patterns("*.so", "node_modules", "__pycache__")
-    for package in ("bwsd", "simulator_hw"):
-        shutil.copytree(ROOT / package, tree / package, ignore=skip)
+    for folder in ("bwsd", "simulator_hw", "config", "examples"):
+        shutil.copytree(ROOT / folder, tree / folder, ignore=skip, symlinks=True)
+    for name in THREE:
+        if (THREE_ROOT / name).is_file():
+            target = tree / "bwsd" / "web" / "node_modules" / "three" / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(THREE_ROOT / name, target)
+    return tree
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The wheel built from a clean copy of the tree, once for this module."""
+    where = tmp_path_factory.mktemp("wheel")
+    tree = clean_tree(where / "tree")
     run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
-                          str(tmp_path), str(tree)], capture_output=True, text=True,
+                          str(where), str(tree)], capture_output=True, text=True,
                          timeout=600)  # fmt: skip
     assert run.returncode == 0, run.stderr[-2000:]
-    (wheel,) = tmp_path.glob("bwsd-*.whl")
+    (built,) = where.glob("bwsd-*.whl")
+    return built
+
+
+def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
+    """A new venv at ``folder`` with ``install`` put in by pip from the package index; its
+    bin folder and an environment that leaves this test run's Python out of it."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}  # fmt: skip
+    env.update(PIP_DISABLE_PIP_VERSION_CHECK="1", PIP_NO_INPUT="1", PYTHONUNBUFFERED="1")
+    made = subprocess.run([sys.executable, "-m", "venv", str(folder)], capture_output=True,
+                          text=True, timeout=300, env=env)  # fmt: skip
+    if made.returncode != 0:
+        unavailable(f"python -m venv failed: {made.stderr.strip()[-500:]}")
+    bin_dir = folder / "bin"
+    pip_install(bin_dir, env, *install)
+    return bin_dir, env
+
+
+def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
+    run = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", *install],
+                         capture_output=True, text=True, timeout=900, env=env)  # fmt: skip
+    if run.returncode != 0 and any(sign in run.stderr for sign in _OFFLINE):
+        unavailable(f"the package index cannot be reached: {run.stderr.strip()[-500:]}")
+    assert run.returncode == 0, run.stderr[-3000:]
+
+
+def installed(bin_dir: Path, env: dict[str, str]) -> dict[str, str]:
+    """Name -> version of every distribution in the venv."""
+    code = ("import importlib.metadata as m\n"
+            "for d in m.distributions(): print(d.metadata['Name'].lower(), d.version)")  # fmt: skip
+    out = subprocess.run([str(bin_dir / "python"), "-c", code], capture_output=True, text=True,
+                         timeout=60, env=env, check=True).stdout  # fmt: skip
+    return {_normal(name): version for name, version in (line.split() for line in out.splitlines())}
+
+
+def _normal(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
+    """``bwsd demo --exit-when-done`` on free ports in ``cwd``: its output, once it completed."""
+    cwd.mkdir()
+    done = subprocess.run([str(bin_dir / "bwsd"), "demo", "--exit-when-done", *ALL_FREE],
+                          capture_output=True, text=True, timeout=300, env=env,
+                          cwd=cwd)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert re.search(r"^mock loom: modbus=127\.0\.0\.1:\d+ .*control=127\.0\.0\.1:\d+$",
+                     done.stdout, re.MULTILINE), done.stdout  # fmt: skip
+    assert re.search(r"^api: http://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
+    assert re.search(r"^plc: modbus-tcp://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
+    assert "Complete: 50 instructions done, 73 contacts" in done.stdout
+    assert sorted(p.name for p in cwd.iterdir()) == ["out"]  # its journal, nothing else
+    return done.stdout
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_its_type_information(wheel):
+    """``py.typed`` and the kernel's stub ship in the wheel, so the hints reach users."""
     names = set(zipfile.ZipFile(wheel).namelist())
     assert {"bwsd/py.typed", "bwsd/twin/_kernel.pyi"} <= names
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_the_demo_and_the_page(wheel):
+    """config/ and examples/ as package data (``bwsd demo`` runs them), the page, and the
+    files of three.js it imports when ``npm ci`` had installed them before the build."""
+    names = set(zipfile.ZipFile(wheel).namelist())
+    shipped = {f"bwsd/shipped/config/{p.name}" for p in (ROOT / "config").glob("*.toml")}
+    shipped |= {f"bwsd/shipped/examples/{p.name}" for p in (ROOT / "examples").glob("*.bws")}
+    assert len(shipped) >= 2 and shipped <= names
+    page = {f"bwsd/web/static/{p.name}" for p in (ROOT / "bwsd/web/static").iterdir()}
+    assert page | {"bwsd/web/index.html"} <= names
+    three = {f"bwsd/web/node_modules/three/{name}" for name in THREE}
+    if not (THREE_ROOT / "build" / "three.module.js").is_file():
+        assert not three & names
+        unavailable("three.js is not installed: run npm ci --prefix bwsd/web")
+    assert three <= names
+    assert not {n for n in names if "node_modules" in n} - three  # nothing else of it
+
+
+@pytest.mark.slow
+def test_the_wheel_runs_the_demo_in_a_fresh_venv_from_an_empty_folder(wheel, tmp_path):
+    """Installed with pip and its core dependencies only, from nothing but the wheel."""
+    bin_dir, env = fresh_venv(tmp_path / "venv", str(wheel))
+    assert not set(installed(bin_dir, env)) & {_normal(name) for name in NOT_CORE}
+    run_demo(bin_dir, env, tmp_path / "empty")
+    export = subprocess.run([str(bin_dir / "bwsd"), "simulate", str(ROOT / "examples/twist.bws"),
+                             "--config", str(ROOT / "config/twist.toml"), "--export", "x.vtu"],
+                            capture_output=True, text=True, timeout=120, env=env,
+                            cwd=tmp_path)  # fmt: skip
+    assert export.returncode == 2
+    assert export.stderr == "bwsd: error: writing .vtu needs VTK: pip install 'bwsd[export]'\n"
+    page = subprocess.run([str(bin_dir / "python"), "-c", "from bwsd.api.web import WEB_ROOT, "
+                           "missing; print(WEB_ROOT, missing(WEB_ROOT))"], capture_output=True,
+                          text=True, timeout=60, env=env, cwd=tmp_path, check=True)  # fmt: skip
+    root, lacking = page.stdout.split(" ", 1)
+    assert Path(root).is_relative_to(tmp_path / "venv")
+    if (THREE_ROOT / "build" / "three.module.js").is_file():
+        assert lacking.strip() == "[]"
+
+
+def _lower_bounds() -> list[str]:
+    """``name==X`` for every core dependency, X the lowest version pyproject.toml admits."""
+    pins = []
+    for requirement in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "dependencies"
+    ]:
+        match = re.fullmatch(r"([A-Za-z0-9_.-]+)(\[[^\]]*\])?\s*(>=|~=|==)\s*([0-9][^,;\s]*)",
+                             requirement.strip())  # fmt: skip
+        assert match, f"no lower bound in {requirement!r}"
+        pins.append(f"{match[1]}=={match[4]}")
+    return pins
+
+
+@pytest.mark.slow
+def test_the_wheel_runs_on_the_lowest_versions_it_admits(wheel, tmp_path):
+    """Every core dependency at its lower bound, and Starlette at the lowest that FastAPI
+    admits: the demo (daemon, API, PLC tags, mock loom) still runs to complete."""
+    pins = _lower_bounds()
+    constraints = tmp_path / "lowest.txt"
+    constraints.write_text("\n".join(pins) + "\n")
+    bin_dir, env = fresh_venv(tmp_path / "venv", "-c", str(constraints), str(wheel))
+    code = ("import importlib.metadata as m, re\n"
+            "print(next(re.search(r'>=\\s*([0-9][^,;\\s]*)', r)[1] for r in m.requires('fastapi')"
+            " if re.match(r'starlette\\b', r)))")  # fmt: skip
+    found = subprocess.run([str(bin_dir / "python"), "-c", code], capture_output=True,
+                           text=True, timeout=60, env=env, check=True)  # fmt: skip
+    starlette = found.stdout.strip()
+    pip_install(bin_dir, env, "-c", str(constraints), f"starlette=={starlette}")
+    versions = installed(bin_dir, env)
+    for pin in [*pins, f"starlette=={starlette}"]:
+        name, version = pin.split("==")
+        assert Version(versions[_normal(name)]) == Version(version), (pin, versions)
+    run_demo(bin_dir, env, tmp_path / "empty")
