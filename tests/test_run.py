@@ -139,3 +139,18 @@ def test_simulate_takes_the_expansion_limit_from_the_config(tmp_path):
     assert done.returncode == 2 and done.stdout == ""
     assert f"{program}:11:1: the program expands to more than 20 instructions" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("line", "where"),
+    [("TAKEUP 1e999", "6:8"), ("WEFT x=5 y=5 z=1 angle=1e999 length=5", "6:24"),
+     ("WEFT x=5 y=5 z=1 angle=0 length=1e999", "6:33"), ("TAKEUP \u0661", "6:8")],
+)  # fmt: skip
+def test_simulate_json_refuses_hostile_numbers_at_their_place(tmp_path, line, where):
+    """Once infinity, a traceback or ``Infinity`` on stdout; now one line naming line:col."""
+    program = tmp_path / "p.bws"
+    program.write_text(f"YARN diameter=1\nFILL row=0 col=0\nX.\n.X\nEND\n{line}\n")
+    done = bwsd("simulate", str(program), "--config", example("twist")[1], "--json")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.startswith(f"bwsd: error: {program}:{where}: "), done.stderr
+    assert done.stderr.count("\n") == 1

@@ -32,6 +32,10 @@ FILL = "FILL row=0 col=0\nXX\nEND\n"
         ("TAKEUP \u0661\n", "1:8", "expected a number"),
         ("TAKEUP 1e999\n", "1:8", "cannot be kept exactly"),
         ("WEFT x=0 y=0 z=1 angle=1e999 length=1\n", "1:24", "cannot be kept exactly"),
+        ("WEFT x=0 y=0 z=1 angle=30 length=1e999\n", "1:34", "cannot be kept exactly"),
+        ("YARN diameter=1e999\n", "1:15", "cannot be kept exactly"),
+        ("YARN diameter=inf\n", "1:15", "expected a number"),
+        ("TAKEUP \u00b9\n", "1:8", "expected a number"),
     ],
 )  # fmt: skip
 def test_each_probe_is_a_program_error_at_its_place(text, where, words):
