@@ -8,16 +8,17 @@ loom. Every key of every table is documented in docs/config.md.
 from __future__ import annotations
 
 import argparse
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from decimal import Decimal
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from bwsd.errors import ConfigError, TwinError
 from bwsd.twin.exact import MIN_LENGTH, decimal_float
-from bwsd.twin.machine import Machine
+from bwsd.twin.machine import Machine, Segment
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,18 @@ class Flag:
     default: bool
 
 
-Spec = Num | Text | Flag
+@dataclass(frozen=True)
+class Segments:
+    """A list of line segments, each written as in a program: ``"ROW 3[0..3]"``."""
+
+    default: tuple[Segment, ...] = ()
+
+
+Spec = Num | Text | Flag | Segments
+_SEGMENT = re.compile(
+    r"\s*(row|col)\s+([0-9]{1,6})\s*\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\]\s*",
+    re.IGNORECASE | re.ASCII,
+)
 
 SCHEMA: dict[str, dict[str, Spec]] = {
     "machine": {
@@ -55,6 +67,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "pitch_y": Num(float, 1e-3, 1e4),
         "d_mat": Num(float, 1e-3, 1e5),
         "c_mat": Num(float, 0.0, 1.0),
+        "segments": Segments(),
     },
     "yarn": {"diameter": Num(float, 0.0, 1e3, 0.0)},
     "fieldbus": {
@@ -138,6 +151,8 @@ class Config:
 
 def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
     path, table, key = where
+    if isinstance(spec, Segments):
+        return _segments(where, value)
     if isinstance(spec, Flag):
         if not isinstance(value, bool):
             raise ConfigError(f"must be true or false, got {value!r}", path=path, table=table,
@@ -160,6 +175,23 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
         raise ConfigError(f"must lie in [{spec.low:g}, {spec.high:g}], got {value!r}",
                           path=path, table=table, key=key)  # fmt: skip
     return spec.kind(value)
+
+
+def _segments(where: tuple[str, str, str], value: Any) -> tuple[Segment, ...]:
+    path, table, key = where
+    if not isinstance(value, list):
+        raise ConfigError('must be a list of segments like "ROW 3[0..3]"', path=path,
+                          table=table, key=key)  # fmt: skip
+    found = []
+    for i, text in enumerate(value):
+        match = _SEGMENT.fullmatch(text) if isinstance(text, str) else None
+        if match is None:
+            raise ConfigError(f'entry {i + 1}: {str(text)[:40]!r} is not a segment like '
+                              '"ROW 3[0..3]" or "COL 2[4..9]"', path=path, table=table,
+                              key=key)  # fmt: skip
+        axis: Literal["row", "col"] = "row" if match[1].lower() == "row" else "col"
+        found.append(Segment(axis, int(match[2]), int(match[3]), int(match[4])))
+    return tuple(found)
 
 
 def _exact_number(where: tuple[str, str, str], value: Decimal | float) -> float:
@@ -211,7 +243,10 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
         if name not in data:
             raise ConfigError("missing table", path=path, table=name)
     tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
-    machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+    try:
+        machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+    except ValueError as exc:  # the segments: each key alone is in range
+        raise ConfigError(str(exc), path=path, table="machine", key="segments") from None
     _check_geometry(machine, path)
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)

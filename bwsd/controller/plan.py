@@ -60,8 +60,9 @@ def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
     """
     if isinstance(instruction, Shift):
         step = []
-        for line, k in instruction.moves:
-            axis = axis_by_name(machine, f"{instruction.axis}{line}")
+        for line, k, span in instruction.moves:
+            where = "" if span is None else f"[{span[0]}..{span[1]}]"  # a segment's own axis
+            axis = axis_by_name(machine, f"{instruction.axis}{line}{where}")
             step.append(AxisMove(axis.index, shift_stroke_um(machine, axis, k)))
         return [step]
     if isinstance(instruction, TakeUp):

@@ -18,7 +18,7 @@ from bwsd.controller.plan import Limits, RefusedMove, check_limits
 from bwsd.errors import BwsdError, TwinError
 from bwsd.program import parse_program, validate
 from bwsd.twin import Machine, Program, Snapshot, Twin
-from bwsd.twin.instructions import Instruction
+from bwsd.twin.instructions import Instruction, Shift
 
 log = logging.getLogger("bwsd.controller")
 
@@ -36,6 +36,9 @@ class DryRun:
 
 def instruction_dict(instruction: Instruction) -> dict[str, Any]:
     """``{"kind": "shift" | "takeup" | "weft", ...its fields}``."""
+    if isinstance(instruction, Shift):  # a move: [line, k], or [line, k, first, last] on a segment
+        moves = [[m.line, m.k, *(m.span or ())] for m in instruction.moves]
+        return {"kind": "shift", "axis": instruction.axis, "moves": moves}
     return {"kind": type(instruction).__name__.lower(), **asdict(instruction)}
 
 

@@ -75,21 +75,24 @@ def _shows(machine: MachineState, takeup_um: int, occupancy: BoolGrid, want_um: 
 
 def lines_left(instruction: Instruction, machine: BoolGrid, before: BoolGrid,
                after: BoolGrid) -> Shift | None:  # fmt: skip
-    """The entries of a shift whose line is still as before, when every other listed line
-    shows its predicted result and no other line moved; None otherwise (or for no shift)."""
+    """The entries of a shift whose line (or segment) is still as before, when every other
+    entry shows its predicted result and nothing else moved; None otherwise (or for no
+    shift). Each entry is its own actuator, so a cut shift stops between entries."""
     if not isinstance(instruction, Shift) or machine.shape != before.shape:
         return None
     if instruction.axis == "col":  # work on columns as rows
         machine, before, after = machine.T, before.T, after.T
     rest = []
-    for line, k in instruction.moves:
-        if (machine[line] == before[line]).all():
-            rest.append((line, k))
-        elif not (machine[line] == after[line]).all():
+    covered = np.zeros(machine.shape, dtype=bool)
+    for move in instruction.moves:
+        lo, hi = move.span if move.span is not None else (0, machine.shape[1] - 1)
+        cells = (move.line, slice(lo, hi + 1))
+        covered[cells] = True
+        if (machine[cells] == before[cells]).all():
+            rest.append(move)
+        elif not (machine[cells] == after[cells]).all():
             return None
-    listed = {line for line, _ in instruction.moves}
-    untouched = [i for i in range(machine.shape[0]) if i not in listed]
-    if not (machine[untouched] == before[untouched]).all():
+    if not (machine[~covered] == before[~covered]).all():
         return None
     return Shift(instruction.axis, tuple(rest)) if rest else None
 

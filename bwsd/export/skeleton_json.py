@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +48,7 @@ def skeleton_to_dict(sk: SkeletonData) -> dict[str, Any]:
         "version": VERSION,
         "frame": "preform",
         "units": "mm",
-        "machine": asdict(sk.machine),
+        "machine": sk.machine.as_dict(),
         "diameter": sk.diameter,
         "takeup": sk.takeup,
         "instructions": sk.instructions,
@@ -153,7 +152,7 @@ def _contact_from_dict(d: Mapping[str, Any]) -> ContactData:
 def _skeleton_from_dict(d: Mapping[str, Any], machine: Machine | None) -> SkeletonData:
     if d.get("schema") != SCHEMA or d.get("version") != VERSION:
         raise ValueError(f"not a {SCHEMA} version {VERSION} document")
-    geometry = machine if machine is not None else Machine(**d["machine"])
+    geometry = machine if machine is not None else Machine.from_dict(d["machine"])
     return SkeletonData(
         machine=geometry,
         diameter=float(d["diameter"]),

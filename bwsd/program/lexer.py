@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from bwsd.errors import ProgramError
 from bwsd.twin.exact import decimal_float
+from bwsd.twin.instructions import Move
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _INDEX = re.compile(r"[0-9]{1,18}")
@@ -103,19 +104,35 @@ def key_values(
     return found
 
 
-def shift_entry(tok: Token, where: Where, axis: str) -> tuple[int, int, int]:
-    """Parse an ``i:k`` entry: returns (line index, shift, column of the index)."""
-    index_text, sep, shift_text = tok.text.partition(":")
+_SPAN = re.compile(r"([0-9]{1,18})\.\.([0-9]{1,18})")
+
+
+def shift_entry(tok: Token, where: Where, axis: str) -> tuple[Move, int]:
+    """Parse an ``i:k`` or ``i[a..b]:k`` entry: returns the move and the column of the index."""
+    head, sep, shift_text = tok.text.partition(":")
     if not sep:
-        raise where.error(f"malformed entry {tok.text!r}: expected {axis}:shift", tok.column)
+        raise where.error(f"malformed entry {_shown(tok.text)}: expected {axis}:shift or "
+                          f"{axis}[first..last]:shift", tok.column)  # fmt: skip
+    index_text, bracket, span_text = head.partition("[")
     if not _INDEX.fullmatch(index_text):
         raise where.error(f"bad {axis} index {_shown(index_text)}: expected an integer >= 0",
                           tok.column)  # fmt: skip
-    shift_column = tok.column + len(index_text) + 1
+    span = None
+    if bracket:
+        span_column = tok.column + len(index_text) + 1
+        match = _SPAN.fullmatch(span_text.removesuffix("]")) if span_text.endswith("]") else None
+        if match is None:
+            raise where.error(f"bad segment [{_shown(span_text)}: expected "
+                              "[first..last], cells along the line", span_column)  # fmt: skip
+        span = (int(match[1]), int(match[2]))
+        if span[0] >= span[1]:
+            raise where.error(f"bad segment [{span_text}: the first cell must come before the "
+                              "last", span_column)  # fmt: skip
+    shift_column = tok.column + len(head) + 1
     if not _SHIFT.fullmatch(shift_text):
         raise where.error(f"bad shift {_shown(shift_text)}: expected a signed integer of at most "
                           f"{MAX_DIGITS} digits", shift_column)  # fmt: skip
     shift = int(shift_text)
     if shift == 0:
         raise where.error("shift must not be zero", shift_column)
-    return int(index_text), shift, tok.column
+    return Move(int(index_text), shift, span), tok.column

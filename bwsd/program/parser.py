@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from bwsd.errors import ProgramError
 from bwsd.program.lexer import Token, Where, integer, key_values, number, shift_entry, tokenize
-from bwsd.twin.instructions import Axis, Instruction, Program, Shift, TakeUp, Weft
+from bwsd.twin.instructions import Axis, Instruction, Move, Program, Shift, TakeUp, Weft
 
 # A bound on the expanded program, so that nested REPEATs cannot exhaust memory.
 MAX_INSTRUCTIONS = 1_000_000
@@ -158,15 +158,15 @@ class _Parser:
             raise where.error(
                 f"{keyword.text} needs at least one {axis}:shift entry", keyword.column
             )
-        moves: list[tuple[int, int]] = []
+        moves: list[Move] = []
         columns: list[int] = []
-        seen: set[int] = set()
         for tok in rest:
-            index, shift, column = shift_entry(tok, where, axis)
-            if index in seen:
-                raise where.error(f"{axis} {index} listed twice", column)
-            seen.add(index)
-            moves.append((index, shift))
+            move, column = shift_entry(tok, where, axis)
+            for other in moves:
+                if other.line == move.line and _overlap(other, move):
+                    raise where.error(f"{axis} {move.line} listed twice (as {other.text()} "
+                                      f"and {move.text()})", column)  # fmt: skip
+            moves.append(move)
             columns.append(column)
         self._add(Shift(axis, tuple(moves)), where, keyword, tuple(columns))
 
@@ -228,6 +228,13 @@ class _Parser:
     ) -> None:
         self.started = True
         self.stack[-1].body.append(_Statement(instruction, where.line, keyword.column, entries))
+
+
+def _overlap(a: Move, b: Move) -> bool:
+    """Two entries of one line that would move the same cells (a whole line overlaps all)."""
+    if a.span is None or b.span is None:
+        return True
+    return a.span[0] <= b.span[1] and b.span[0] <= a.span[1]
 
 
 def _no_more(where: Where, extra: list[Token]) -> None:

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import cast
 
+from bwsd.twin.instructions import Axis, Move, Shift, as_moves
 from bwsd.twin.machine import Machine
 
 Cell = tuple[int, int]
@@ -57,6 +59,10 @@ def config_toml(machine: Machine, title: str) -> str:
     out = [f"# {line}".rstrip() for line in title.splitlines()]
     out += ["", "[machine]"]
     out += [f"{f'{k} = {v}':<{width}}# {why}" for k, v, why in rows]
+    if m.segments:
+        listed = ", ".join(f'"{seg.text()}"' for seg in m.segments)
+        out += ["# line segments with an actuator of their own (ROW r[a..b]:k, COL c[a..b]:k)",
+                f"segments = [{listed}]"]  # fmt: skip
     yarn = f"diameter = {_toml_float(m.yarn_diameter)}"
     out += ["", "[yarn]", f"{yarn:<{width}}# mm, yarn diameter (a program's YARN overrides it)"]
     return "\n".join(out) + "\n"
@@ -84,9 +90,9 @@ def fill_block(rows: int, cols: int, cells: Iterable[Cell]) -> list[str]:
     return lines
 
 
-def shift(axis: str, moves: Iterable[tuple[int, int]]) -> str:
-    """A ROW or COL statement."""
-    return " ".join([axis.upper(), *(f"{i}:{k:+d}" for i, k in moves)])
+def shift(axis: str, moves: Iterable[tuple[int, ...] | Move]) -> str:
+    """A ROW or COL statement: entries ``(line, k)``, ``(line, k, first, last)`` or Moves."""
+    return Shift(cast(Axis, axis), as_moves(moves)).text()
 
 
 def weft(x: float, y: float, z: float, angle: float, length: float) -> str:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 from bwsd.errors import ProgramError
 from bwsd.program.parser import MAX_INSTRUCTIONS, SourceMap, parse_program_with_positions
-from bwsd.twin.instructions import Program, Shift
-from bwsd.twin.machine import Machine
+from bwsd.twin.instructions import Program, Shift, Span
+from bwsd.twin.machine import Machine, unknown_segment
 
 Cell = tuple[int, int]
 
@@ -47,17 +47,28 @@ class Occupancy:
         """How many lines of ``axis`` the matrix has."""
         return self.rows if axis == "row" else self.cols
 
-    def shift(self, axis: str, index: int, k: int) -> str | None:
-        """Shift every case of one line by k cells, the leading case first (docs/twin.md)."""
+    def shift(self, axis: str, index: int, k: int, span: Span | None = None) -> str | None:
+        """Shift every case of one line (or of its cells ``span``) by k cells, the leading
+        case first (docs/twin.md); a case of a span must stay on it."""
+        along = self.cols if axis == "row" else self.rows
+        lo, hi = span if span is not None else (0, along - 1)
         if axis == "row":
-            line = [(index, c) for c in range(self.cols)]
+            line = [(index, c) for c in range(lo, hi + 1)]
             step = (0, k)
         else:
-            line = [(r, index) for r in range(self.rows)]
+            line = [(r, index) for r in range(lo, hi + 1)]
             step = (k, 0)
         cases = [cell for cell in line if cell in self.cells]
         for src in reversed(cases) if k > 0 else cases:
-            reason = self.move(src, (src[0] + step[0], src[1] + step[1]))
+            dst = (src[0] + step[0], src[1] + step[1])
+            if (
+                span is not None
+                and self.inside(dst)
+                and not lo <= dst[1 if axis == "row" else 0] <= hi
+            ):
+                return (f"the case in {src} would leave the segment {axis.upper()} "
+                        f"{index}[{lo}..{hi}] (to {dst})")  # fmt: skip
+            reason = self.move(src, dst)
             if reason is not None:
                 return reason
         return None
@@ -93,13 +104,15 @@ def _check_fill(
             raise ProgramError(reason, line=line, column=column, source=source)
 
 
-def _check_shift(shift: Shift, grid: Occupancy) -> tuple[int, str] | None:
+def _check_shift(shift: Shift, grid: Occupancy, machine: Machine) -> tuple[int, str] | None:
     """Apply one ROW/COL to the grid; returns (entry, reason) of the first fault."""
     size = grid.line_size(shift.axis)
-    for entry, (index, k) in enumerate(shift.moves):
+    for entry, (index, k, span) in enumerate(shift.moves):
         if not 0 <= index < size:
             return entry, f"{shift.axis} {index} is outside the matrix (0 to {size - 1})"
-        reason = grid.shift(shift.axis, index, k)
+        if span is not None and machine.segment(shift.axis, index, span) is None:
+            return entry, unknown_segment(machine, shift.axis, index, span)
+        reason = grid.shift(shift.axis, index, k, span)
         if reason is not None:
             return entry, reason
     return None
@@ -120,7 +133,7 @@ def validate(
     _check_fill(program, grid, positions, source)
     for i, instruction in enumerate(program.instructions):
         if isinstance(instruction, Shift):
-            fault = _check_shift(instruction, grid)
+            fault = _check_shift(instruction, grid, machine)
             if fault is not None:
                 raise _fail(fault[1], program, positions, source, i, fault[0])
 

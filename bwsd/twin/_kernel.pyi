@@ -9,6 +9,7 @@ E_CONTACTS: int
 E_MOVE_OUT: int
 E_MOVE_BUSY: int
 E_LINE: int
+E_MOVE_SPAN: int
 
 class KernelError(Exception): ...
 

@@ -2,22 +2,63 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 Axis = Literal["row", "col"]
+Span = tuple[int, int]  # the first and last cell of a line segment, along the line
+
+
+class Move(NamedTuple):
+    """One entry of a ROW or COL: line ``line`` shifts its cases by ``k`` cells.
+
+    ``span`` None moves the whole line. A span ``(a, b)`` moves only the cases on cells
+    a..b of the line (a separately actuated segment of it, declared by the machine), and
+    none of them may leave those cells.
+    """
+
+    line: int
+    k: int
+    span: Span | None = None
+
+    def text(self) -> str:
+        """As written in a program: ``3:+1`` or ``3[0..3]:+1``."""
+        where = "" if self.span is None else f"[{self.span[0]}..{self.span[1]}]"
+        return f"{self.line}{where}:{self.k:+d}"
+
+
+def as_moves(entries: Iterable[tuple[int, ...] | Move]) -> tuple[Move, ...]:
+    """Entries as Moves: ``(line, k)``, ``(line, k, span)`` or ``(line, k, a, b)``."""
+    out = []
+    for entry in entries:
+        if isinstance(entry, Move):
+            out.append(entry)
+        elif len(entry) == 4:
+            out.append(Move(entry[0], entry[1], (entry[2], entry[3])))
+        else:
+            out.append(Move(*entry))  # type: ignore[arg-type]
+    return tuple(out)
 
 
 @dataclass(frozen=True)
 class Shift:
-    """ROW or COL: each listed line (index, k) shifts all its cases by k cells.
+    """ROW or COL: each listed line (or line segment) shifts its cases by k cells.
 
     For ``axis == "row"`` the cases move along x (their column changes); for ``"col"``
-    along y (their row changes). Entries are resolved in the order written.
+    along y (their row changes). Entries are resolved in the order written. ``moves`` may
+    be given as plain ``(line, k)`` tuples; they are kept as :class:`Move`.
     """
 
     axis: Axis
-    moves: tuple[tuple[int, int], ...]
+    moves: tuple[Move, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "moves", as_moves(self.moves))
+
+    def text(self) -> str:
+        """As written in a program: ``ROW 1:+1 3[0..3]:-1``."""
+        return " ".join([self.axis.upper(), *(m.text() for m in self.moves)])
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,31 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+
+@dataclass(frozen=True, order=True)
+class Segment:
+    """A separately actuated part of a row or column: its cells ``lo``..``hi`` along the line.
+
+    A ROW (COL) entry ``line[lo..hi]:k`` moves only the cases on those cells, by its own
+    actuator, and keeps them there. Written ``ROW 3[0..3]`` in configs and messages.
+    """
+
+    axis: Literal["row", "col"]
+    line: int
+    lo: int
+    hi: int
+
+    def text(self) -> str:
+        return f"{self.axis.upper()} {self.line}[{self.lo}..{self.hi}]"
+
+    def overlaps(self, other: Segment) -> bool:
+        """True when both are on the same line and share a cell."""
+        same = (self.axis, self.line) == (other.axis, other.line)
+        return same and self.lo <= other.hi and other.lo <= self.hi
 
 
 @dataclass(frozen=True)
@@ -19,6 +43,7 @@ class Machine:
     d_mat: float
     c_mat: float
     yarn_diameter: float = 0.0
+    segments: tuple[Segment, ...] = ()
 
     def __post_init__(self) -> None:
         if self.rows < 1 or self.cols < 1:
@@ -31,6 +56,43 @@ class Machine:
             raise ValueError("c_mat must lie in [0, 1]")
         if self.yarn_diameter < 0:
             raise ValueError("yarn diameter must not be negative")
+        object.__setattr__(self, "segments", tuple(self.segments))
+        for i, seg in enumerate(self.segments):
+            self._check_segment(seg, self.segments[:i])
+
+    def _check_segment(self, seg: Segment, before: tuple[Segment, ...]) -> None:
+        lines, along = (self.rows, self.cols) if seg.axis == "row" else (self.cols, self.rows)
+        if not 0 <= seg.line < lines:
+            raise ValueError(f"segment {seg.text()}: {seg.axis} {seg.line} is outside the "
+                             f"matrix (0 to {lines - 1})")  # fmt: skip
+        if not 0 <= seg.lo < seg.hi < along:
+            raise ValueError(f"segment {seg.text()}: needs 0 <= first < last <= {along - 1}")
+        for other in before:
+            if seg.overlaps(other):
+                raise ValueError(f"segment {seg.text()} overlaps {other.text()}")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The machine as plain data (snapshots, skeleton JSON); ``segments`` only when it
+        has some, so that files of a machine without them read as before."""
+        data = asdict(self)
+        data["segments"] = [asdict(seg) for seg in self.segments]  # lists, as JSON reads back
+        if not self.segments:
+            del data["segments"]
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Machine:
+        """The inverse of ``as_dict``."""
+        fields = dict(data)
+        fields["segments"] = tuple(Segment(**seg) for seg in fields.get("segments", ()))
+        return cls(**fields)
+
+    def segment(self, axis: str, line: int, span: tuple[int, int]) -> Segment | None:
+        """The declared segment of ``axis`` ``line`` over exactly ``span``, or None."""
+        for seg in self.segments:
+            if (seg.axis, seg.line, seg.lo, seg.hi) == (axis, line, *span):
+                return seg
+        return None
 
     def inside(self, row: int, col: int) -> bool:
         """True when (row, col) is a cell of the matrix."""
@@ -49,3 +111,10 @@ class Machine:
         ox, oy = self.convergence_xy()
         gx, gy = self.guide_xy(row, col)
         return ox + self.c_mat * (gx - ox), oy + self.c_mat * (gy - oy)
+
+
+def unknown_segment(machine: Machine, axis: str, line: int, span: tuple[int, int]) -> str:
+    """Why ``axis line[span]`` cannot move on ``machine``: it declares no such segment."""
+    declared = ", ".join(seg.text() for seg in machine.segments) or "none"
+    return (f"{axis.upper()} {line}[{span[0]}..{span[1]}] is not a segment of this machine "
+            f"(declared in [machine] segments: {declared})")  # fmt: skip

@@ -23,7 +23,7 @@ from bwsd.twin import _kernel
 from bwsd.twin.exact import MAX_DIAMETER, MIN_LENGTH, SCALE, as_bytes, exact
 from bwsd.twin.geometry import Geometry, Point, weft_ends
 from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp
-from bwsd.twin.machine import Machine
+from bwsd.twin.machine import Machine, unknown_segment
 from bwsd.twin.prediction import NodeInsert, Prediction, Snapshot, mm
 from bwsd.twin.shed import closest
 from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData
@@ -128,8 +128,8 @@ class Twin:
         angles: tuple[float, ...] = ()
         try:
             if isinstance(instruction, Shift):
+                moves = array("i", self._quads(instruction)).tobytes()
                 axis = 0 if instruction.axis == "row" else 1
-                moves = array("i", [v for move in instruction.moves for v in move]).tobytes()
                 result = self._kernel.shift(axis, moves, index, predict)
             elif isinstance(instruction, TakeUp):
                 takeup = self._takeup + exact(instruction.length)
@@ -146,6 +146,16 @@ class Twin:
                 raise
             raise type(exc)(exc.reason, instruction=index) from None
         return result, takeup, angles
+
+    def _quads(self, shift: Shift) -> list[int]:
+        """The kernel's (line, k, first, last) per entry; a span must be a declared segment."""
+        along = self.machine.cols if shift.axis == "row" else self.machine.rows
+        out: list[int] = []
+        for line, k, span in shift.moves:
+            if span is not None and self.machine.segment(shift.axis, line, span) is None:
+                raise MoveError(unknown_segment(self.machine, shift.axis, line, span))
+            out += [line, k, *(span if span is not None else (0, along - 1))]
+        return out
 
     def _check_shed(self, p0: Point, p1: Point) -> None:
         """Refuse a weft passing closer than the yarn diameter to a yarn (exactly d is fine)."""
@@ -278,6 +288,11 @@ def _refusal(args: tuple[int, ...], instruction: Instruction, index: int) -> Twi
         return MoveError(f"{axis} {b} is outside the matrix", instruction=index)
     if code == _kernel.E_MOVE_OUT:
         return MoveError(f"case of yarn {a} would leave the matrix at cell ({b}, {c})",
+                         instruction=index)  # fmt: skip
+    if code == _kernel.E_MOVE_SPAN and isinstance(instruction, Shift):
+        move = instruction.moves[d]
+        return MoveError(f"case of yarn {a} would leave the segment {instruction.axis.upper()} "
+                         f"{move.text().partition(':')[0]} at cell ({b}, {c})",
                          instruction=index)  # fmt: skip
     if code == _kernel.E_MOVE_BUSY:
         return MoveError(f"case of yarn {a} would land on cell ({b}, {c}), occupied by yarn {d}",

@@ -6,7 +6,7 @@ import json
 import struct
 import zlib
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import cached_property
 from typing import Any
@@ -135,7 +135,7 @@ class Snapshot:
     def make(cls, machine: Machine, diameter: float, fill: Sequence[tuple[int, int]],
              angles: Sequence[float | None], takeup: Fraction, done: int,
              kernel: bytes) -> Snapshot:  # fmt: skip
-        header = {"format": FORMAT, "machine": asdict(machine), "diameter": diameter,
+        header = {"format": FORMAT, "machine": machine.as_dict(), "diameter": diameter,
                   "fill": [list(c) for c in fill], "angles": list(angles),
                   "takeup": str(takeup), "done": done}  # fmt: skip
         text = json.dumps(header, sort_keys=True).encode()
@@ -182,5 +182,5 @@ class Snapshot:
     def check(self, machine: Machine, diameter: float) -> None:
         """Refuse a snapshot of another machine or yarn diameter."""
         header = self.header
-        if header["machine"] != asdict(machine) or header["diameter"] != diameter:
+        if header["machine"] != machine.as_dict() or header["diameter"] != diameter:
             raise TwinError("the snapshot is of another machine or yarn diameter")

@@ -16,11 +16,13 @@ def apply(cases: dict[int, Cell], shift: Shift, machine: Machine) -> dict[int, C
     """Yarn -> cell after one ROW/COL; AssertionError on a case outside or a clash."""
     out = dict(cases)
     axis = 0 if shift.axis == "row" else 1
-    for index, k in shift.moves:
+    for index, k, span in shift.moves:
+        lo, hi = span if span is not None else (0, max(machine.rows, machine.cols))
         for yarn, cell in cases.items():
-            if cell[axis] == index:
+            if cell[axis] == index and lo <= cell[1 - axis] <= hi:
                 moved = (cell[0], cell[1] + k) if axis == 0 else (cell[0] + k, cell[1])
                 assert machine.inside(*moved), f"{cell} leaves the matrix"
+                assert lo <= moved[1 - axis] <= hi, f"{cell} leaves its segment"
                 out[yarn] = moved
     assert len(set(out.values())) == len(out), "two cases in one cell"
     return out

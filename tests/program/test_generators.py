@@ -88,13 +88,13 @@ def test_rectangular_braid_carriers_and_alternation(m: int, n: int):
     assert body <= set(program.fill)
     rows, cols, back_rows, back_cols = program.instructions[:4]
     assert isinstance(rows, Shift) and isinstance(cols, Shift)
-    assert [i for i, _ in rows.moves] == list(range(1, m + 1))
-    assert [i for i, _ in cols.moves] == list(range(1, n + 1))
+    assert [m.line for m in rows.moves] == list(range(1, m + 1))
+    assert [m.line for m in cols.moves] == list(range(1, n + 1))
     for step in (rows, cols):
-        signs = [k for _, k in step.moves]
+        signs = [m.k for m in step.moves]
         assert all(a == -b for a, b in itertools.pairwise(signs))
-    assert back_rows == Shift("row", tuple((i, -k) for i, k in rows.moves))
-    assert back_cols == Shift("col", tuple((i, -k) for i, k in cols.moves))
+    assert back_rows == Shift("row", tuple((i, -k) for i, k, _ in rows.moves))
+    assert back_cols == Shift("col", tuple((i, -k) for i, k, _ in cols.moves))
 
 
 def test_braid_moves_yarns_to_new_cells_each_cycle():
@@ -204,7 +204,7 @@ def test_every_warp_line_sheds_in_every_pick():
     warp_rows = {r for r, _ in program.fill}
     warp_cols = {c for _, c in program.fill}
     for shed in opens:
-        lines = {i for i, _ in shed.moves}
+        lines = {m.line for m in shed.moves}
         assert lines == (warp_rows if shed.axis == "row" else warp_cols)
 
 

@@ -178,7 +178,7 @@ _instruction = st.one_of(
 
 def _text(item: Shift | TakeUp | Weft) -> str:
     if isinstance(item, Shift):
-        return " ".join([item.axis.upper(), *(f"{i}:{k:+d}" for i, k in item.moves)])
+        return " ".join([item.axis.upper(), *(f"{i}:{k:+d}" for i, k, _ in item.moves)])
     if isinstance(item, TakeUp):
         return f"TAKEUP {item.length!r}"
     return (

@@ -351,14 +351,19 @@ class RefTwin:
         # Resolve every move first, on a copy of the occupancy.
         occupied = dict(self.case_at)
         moves: list[tuple[int, tuple[int, int], tuple[int, int]]] = []
-        for line, k in shift.moves:
+        for line, k, span in shift.moves:
             size = rows if shift.axis == "row" else cols
             if not 0 <= line < size:
                 raise MoveRefused(f"{shift.axis} {line} is outside the matrix")
-            if shift.axis == "row":
-                cells = sorted((cell for cell in occupied if cell[0] == line), key=lambda c: c[1])
-            else:
-                cells = sorted((cell for cell in occupied if cell[1] == line), key=lambda c: c[0])
+            if span is not None and self.machine.segment(shift.axis, line, span) is None:
+                raise MoveRefused(f"{shift.axis} {line}{list(span)} is not a declared segment")
+            lo, hi = span if span is not None else (0, (cols if shift.axis == "row" else rows) - 1)
+            along = 1 if shift.axis == "row" else 0  # the coordinate that changes
+            cells = sorted(
+                (cell for cell in occupied
+                 if cell[1 - along] == line and lo <= cell[along] <= hi),
+                key=lambda c: c[along],
+            )  # fmt: skip
             if k > 0:
                 cells.reverse()  # the leading case first
             for cell in cells:
@@ -368,6 +373,11 @@ class RefTwin:
                     raise MoveRefused(
                         f"{shift.axis} {line}:{k:+d}: the case in cell {cell} would leave "
                         "the matrix"
+                    )
+                if not lo <= target[along] <= hi:
+                    raise MoveRefused(
+                        f"{shift.axis} {line}:{k:+d}: the case in cell {cell} would leave "
+                        "its segment"
                     )
                 yarn = occupied.pop(cell)
                 if target in occupied:  # unreachable with the leading case first; kept as a guard

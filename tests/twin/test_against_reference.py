@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
@@ -9,6 +11,7 @@ from hypothesis import strategies as st
 
 from bwsd.errors import ShedClosedError
 from bwsd.twin import Machine, Shift, TakeUp, Weft
+from bwsd.twin.machine import Segment
 from tests.twin.conftest import BRAID_CYCLE, BRAID_FILL, assert_same, run_both
 from tests.twin.reference import ShedClosed
 
@@ -20,21 +23,46 @@ SETTINGS = settings(
 
 
 def _valid(occupied: set[tuple[int, int]], machine: Machine, ins: Shift) -> set | None:
-    """Occupancy after ``ins``, or None if a case would leave the matrix or collide."""
+    """Occupancy after ``ins``, or None if a case would leave the matrix, its segment or
+    collide."""
     occ = set(occupied)
-    for line, k in ins.moves:
+    along = 1 if ins.axis == "row" else 0
+    for line, k, span in ins.moves:
+        lo, hi = span if span is not None else (0, 10**6)
         on_line = sorted(
-            (rc for rc in occ if (rc[0] if ins.axis == "row" else rc[1]) == line),
-            key=lambda rc: rc[1] if ins.axis == "row" else rc[0],
+            (rc for rc in occ if rc[1 - along] == line and lo <= rc[along] <= hi),
+            key=lambda rc: rc[along],
             reverse=k > 0,
         )
         for r, c in on_line:
             target = (r, c + k) if ins.axis == "row" else (r + k, c)
-            if not machine.inside(*target) or target in occ:
+            if not machine.inside(*target) or target in occ or not lo <= target[along] <= hi:
                 return None
             occ.remove((r, c))
             occ.add(target)
     return occ
+
+
+@st.composite
+def segments(draw, machine: Machine) -> Machine:
+    """``machine`` with a segment on some of its lines (cells first..last along the line)."""
+    found = []
+    for axis, lines, along in (("row", machine.rows, machine.cols), ("col", machine.cols,
+                                                                      machine.rows)):  # fmt: skip
+        for line in range(lines):
+            if draw(st.booleans()):
+                lo = draw(st.integers(0, along - 2))
+                found.append(Segment(axis, line, lo, draw(st.integers(lo + 1, along - 1))))
+    return dataclasses.replace(machine, segments=tuple(found))
+
+
+def _entry(draw, machine: Machine, axis: str, line: int) -> tuple[int, ...]:
+    """A move of ``line``: the whole line, or its segment when it has one (half the time)."""
+    k = draw(st.sampled_from([-1, 1, -1, 1, -2, 2]))
+    mine = [s for s in machine.segments if (s.axis, s.line) == (axis, line)]
+    if mine and draw(st.booleans()):
+        return (line, k, mine[0].lo, mine[0].hi)
+    return (line, k)
 
 
 @st.composite
@@ -57,6 +85,7 @@ def programs(draw, degenerate: bool):
             rows, cols, draw(f), draw(f), draw(st.floats(5.0, 200.0)), draw(st.floats(0.0, 1.0))
         )
         diameter = draw(st.one_of(st.just(0.0), st.floats(1e-3, 2.0)))
+    machine = draw(segments(machine))
     cells = [(r, c) for r in range(rows) for c in range(cols)]
     fill = sorted(
         draw(
@@ -93,9 +122,7 @@ def programs(draw, degenerate: bool):
         axis = 0 if kind == "row" else 1
         used = sorted({rc[axis] for rc in occupied})
         lines = draw(st.lists(st.sampled_from(used), min_size=1, max_size=len(used), unique=True))
-        ins = Shift(
-            kind, tuple((line, draw(st.sampled_from([-1, 1, -1, 1, -2, 2]))) for line in lines)
-        )
+        ins = Shift(kind, tuple(_entry(draw, machine, kind, line) for line in lines))
         after = _valid(occupied, machine, ins)
         if after is not None:
             occupied = after

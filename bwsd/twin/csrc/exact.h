@@ -28,6 +28,7 @@ enum {
     E_MOVE_OUT = 5,
     E_MOVE_BUSY = 6,
     E_LINE = 7,     /* a line index outside the matrix */
+    E_MOVE_SPAN = 8, /* a case would leave the segment it is moved on */
 };
 
 /* A signed value as the filter saw it: float value, its error bound, the exact sign, and

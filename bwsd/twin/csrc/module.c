@@ -227,7 +227,8 @@ static PyObject *finish(Kernel *k, int err, int predict, Moved *mv, Mark mk) {
     return res;
 }
 
-/* shift(axis, moves, instruction, predict): axis 0 row, 1 col; moves int32 (line, k) pairs.
+/* shift(axis, moves, instruction, predict): axis 0 row, 1 col; moves int32 (line, k, lo, hi)
+ * quads (cells lo..hi of the line move; 0..last for the whole line).
  * predict: return (record, contacts, new nodes, (moved, length changes), occupancy, first new
  * yarn, yarns) and leave the state as it was; otherwise keep the result and return None. */
 static PyObject *Kernel_shift(Kernel *k, PyObject *args) {
@@ -238,7 +239,7 @@ static PyObject *Kernel_shift(Kernel *k, PyObject *args) {
     int32_t *m = malloc(moves.len ? (size_t)moves.len : 1);
     if (!m) return PyBuffer_Release(&moves), k->busy = 0, PyErr_NoMemory();
     memcpy(m, moves.buf, (size_t)moves.len);
-    int32_t n = (int32_t)(moves.len / 8);
+    int32_t n = (int32_t)(moves.len / 16);
     PyBuffer_Release(&moves);
     State *s = &k->s;
     Mark mk = begin(s);
@@ -526,7 +527,8 @@ PyMODINIT_FUNC PyInit__kernel(void) {
         PyModule_AddIntConstant(m, "E_CONTACTS", E_CONTACTS) < 0 ||
         PyModule_AddIntConstant(m, "E_MOVE_OUT", E_MOVE_OUT) < 0 ||
         PyModule_AddIntConstant(m, "E_MOVE_BUSY", E_MOVE_BUSY) < 0 ||
-        PyModule_AddIntConstant(m, "E_LINE", E_LINE) < 0) {
+        PyModule_AddIntConstant(m, "E_LINE", E_LINE) < 0 ||
+        PyModule_AddIntConstant(m, "E_MOVE_SPAN", E_MOVE_SPAN) < 0) {
         Py_XDECREF(m);
         return NULL;
     }

@@ -251,28 +251,36 @@ static void note_moved(const State *s, Moved *mv, uint8_t *seen, int32_t w) {
     mv->before[mv->n++] = path_length(s, w);
 }
 
-/* Plan every case's move in execution order (logged), refusing before anything sweeps. */
+/* Plan every case's move in execution order (logged), refusing before anything sweeps.
+ * moves: (line, k, lo, hi) quads; only the cases on cells lo..hi of the line move, and each
+ * must stay on them (lo = 0, hi = the last cell for a whole line). */
 static int plan_shift(State *s, int axis, const int32_t *moves, int32_t nmoves, int32_t *plan,
                       int64_t *np) {
     int32_t limit = axis == 0 ? s->rows : s->cols, along = axis == 0 ? s->cols : s->rows;
     *np = 0;
     for (int32_t e = 0; e < nmoves; e++) {
-        int32_t line = moves[2 * e], k = moves[2 * e + 1];
-        if (line < 0 || line >= limit) {
+        int32_t line = moves[4 * e], k = moves[4 * e + 1], lo = moves[4 * e + 2],
+                hi = moves[4 * e + 3];
+        if (line < 0 || line >= limit || lo < 0 || hi >= along || lo > hi) {
             s->err[0] = e;
             s->err[1] = line;
             return E_LINE;
         }
-        for (int32_t i = 0; i < along; i++) {
-            int32_t pos = k > 0 ? along - 1 - i : i; /* the leading case first */
+        for (int32_t i = lo; i <= hi; i++) {
+            int32_t pos = k > 0 ? hi + lo - i : i; /* the leading case first */
             int32_t r = axis == 0 ? line : pos, c = axis == 0 ? pos : line;
             int32_t w = s->occ[(int64_t)r * s->cols + c];
             if (w < 0) continue;
             int32_t tr = axis == 0 ? r : r + k, tc = axis == 0 ? c + k : c;
+            int32_t to = axis == 0 ? tc : tr;
             s->err[0] = w;
             s->err[1] = tr;
             s->err[2] = tc;
             if (tr < 0 || tr >= s->rows || tc < 0 || tc >= s->cols) return E_MOVE_OUT;
+            if (to < lo || to > hi) {
+                s->err[3] = e;
+                return E_MOVE_SPAN;
+            }
             int32_t other = s->occ[(int64_t)tr * s->cols + tc];
             if (other >= 0) {
                 s->err[3] = other;
@@ -291,7 +299,7 @@ static int plan_shift(State *s, int axis, const int32_t *moves, int32_t nmoves, 
 }
 
 int run_shift(State *s, int axis, const int32_t *moves, int32_t nmoves, int32_t instr, Moved *mv) {
-    int64_t cap = (int64_t)nmoves * (axis == 0 ? s->cols : s->rows), np = 0;
+    int64_t cap = (int64_t)nmoves * (axis == 0 ? s->cols : s->rows), np = 0; /* at most */
     int32_t *plan = malloc(sizeof(int32_t) * 3 * (size_t)(cap ? cap : 1));
     uint8_t *seen = calloc((size_t)s->nw + 1, 1);
     mv->warps = malloc(sizeof(int32_t) * (size_t)(s->nw + 1));
