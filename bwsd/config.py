@@ -271,11 +271,14 @@ def _check_geometry(machine: Machine, path: str) -> None:
 
 
 def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:
-    last = table["node_base"] + machine.rows + machine.cols + 3 - 1
+    """A drive per axis (rows, cols, weft angle and insert, take-up, segments), node ids
+    from ``node_base``, all within 127 and apart from the I/O node."""
+    axes = machine.rows + machine.cols + 3 + len(machine.segments)
+    last = table["node_base"] + axes - 1
     if last > 127:
-        raise ConfigError(f"{machine.rows + machine.cols + 3} axes from node {table['node_base']} "
-                          "pass node id 127", path=path, table="fieldbus.canopen",
-                          key="node_base")  # fmt: skip
+        what = f" ({len(machine.segments)} of them segments)" if machine.segments else ""
+        raise ConfigError(f"{axes} axes{what} from node {table['node_base']} pass node id 127",
+                          path=path, table="fieldbus.canopen", key="node_base")  # fmt: skip
     if table["node_base"] <= table["io_node"] <= last:
         raise ConfigError(f"collides with the drives' node ids {table['node_base']}..{last}",
                           path=path, table="fieldbus.canopen", key="io_node")  # fmt: skip

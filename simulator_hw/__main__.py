@@ -4,8 +4,9 @@ Prints one line ``ready modbus=P socketcand=P control=P`` on stdout once every s
 listens, then runs until SIGINT or SIGTERM. ``--modbus-port``, ``--socketcand-port`` and
 ``--control-port`` override the config's ``[simulator]`` ports (0: any free port; the line
 gives the ports taken). The socketcand hub with the CANopen drives needs the package's
-``canopen`` extra: without it the mock loom serves Modbus only (and says so on stderr),
-unless the config's ``[fieldbus] backend`` is ``"canopen"``, which makes it an error.
+``canopen`` extra: without it, or when the machine has more axes than CANopen node ids, the
+mock loom serves Modbus only (and says so on stderr), unless the config's ``[fieldbus]
+backend`` is ``"canopen"``, which makes it an error.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from collections.abc import Sequence
 from bwsd.config import Config, load_config, port_option
 from bwsd.errors import BwsdError
 from bwsd.extras import CANOPEN, missing_message
-from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_installed
+from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_ids_problem, canopen_installed
 
 PORT_OPTIONS = ("modbus_port", "socketcand_port", "control_port")
 
@@ -42,9 +43,11 @@ async def serve(config_path: str, program_path: str | None,
 
         fill = load_program(program_path, config.machine).fill
     required = config.table("fieldbus")["backend"] == "canopen"
-    if not required and not canopen_installed():
-        note = missing_message(CANOPEN_PART, CANOPEN)
-        print(f"simulator_hw: serving Modbus only: {note}", file=sys.stderr, flush=True)
+    if not required:
+        installed = canopen_installed()
+        note = canopen_ids_problem(config) if installed else missing_message(CANOPEN_PART, CANOPEN)
+        if note:
+            print(f"simulator_hw: serving Modbus only: {note}", file=sys.stderr, flush=True)
     mock = MockLoom(config, fill, canopen=True if required else None)
     await mock.start()
     stop = asyncio.Event()

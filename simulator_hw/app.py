@@ -8,8 +8,9 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from bwsd.config import Config
-from bwsd.errors import ExtraMissingError
+from bwsd.errors import ConfigError, ExtraMissingError
 from bwsd.extras import CANOPEN, missing_message
+from bwsd.fieldbus.axes import machine_axes
 from simulator_hw.control import ControlServer
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
@@ -29,6 +30,18 @@ def canopen_installed() -> bool:
         return False
 
 
+def canopen_ids_problem(config: Config) -> str:
+    """Why the node ids of ``[fieldbus.canopen]`` cannot give every axis a drive ("" if they
+    can): a machine driven over Modbus may have more axes than CANopen has node ids."""
+    can = config.table("fieldbus.canopen")
+    base, io_node = can["node_base"], can["io_node"]
+    last = base + len(machine_axes(config.machine)) - 1
+    if last > 127 or base <= io_node <= last:
+        return (f"the drives of its {last - base + 1} axes (nodes {base}..{last}) and the "
+                f"I/O node {io_node} do not fit CANopen node ids 1..127")  # fmt: skip
+    return ""
+
+
 class MockLoom:
     """Every part of the mock loom on the ``[simulator]`` addresses of a config.
 
@@ -36,8 +49,9 @@ class MockLoom:
     ``[fieldbus.modbus]``, so the daemon and the mock loom read the same config.
 
     ``canopen``: serve the socketcand hub with the CANopen drives. ``None`` (the default)
-    serves them when their libraries (the package's ``canopen`` extra) are installed; ``True``
-    requires them (``ExtraMissingError`` without); ``False`` serves Modbus only.
+    serves them when their libraries (the package's ``canopen`` extra) are installed and the
+    node ids hold a drive per axis; ``True`` requires them (``ExtraMissingError`` without,
+    ``ConfigError`` when the ids do not fit); ``False`` serves Modbus only.
     """
 
     def __init__(
@@ -50,10 +64,13 @@ class MockLoom:
         host = sim["host"]
         unit = config.table("fieldbus.modbus")["device_id"]
         self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], unit)
+        ids = canopen_ids_problem(config)
         if canopen is None:
-            canopen = canopen_installed()
+            canopen = canopen_installed() and not ids
         elif canopen and not canopen_installed():
             raise ExtraMissingError(missing_message(CANOPEN_PART, CANOPEN))
+        elif canopen and ids:
+            raise ConfigError(ids, path=config.path, table="fieldbus.canopen", key="node_base")
         self.hub: SocketcandHub | None = None
         if canopen:  # imported only here: python-can and canopen are an extra
             from simulator_hw.socketcand_hub import SocketcandHub

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from bwsd.fieldbus.axes import MDEG_PER_DEG, UM_PER_MM, Axis, machine_axes
+from bwsd.fieldbus.axes import MDEG_PER_DEG, UM_PER_MM, Axis, machine_axes, moved_cells
 from bwsd.fieldbus.base import (
     FAULT_DRIVE,
     FAULT_ESTOP,
@@ -182,20 +182,24 @@ class Loom:
 
     # ----- the matrix -----
     def _cells(self, axis: Axis, target: int) -> tuple[int, list[int]]:
+        """The stroke in cells and the cases it carries: those on the cells the axis moves
+        (the whole line, or a segment's cells), as positions along the line."""
         m = self.machine
         pitch = m.pitch_x if axis.kind == "row" else m.pitch_y
         k = round(target / (pitch * UM_PER_MM))
         line = axis.line if axis.line is not None else 0
-        if axis.kind == "row":
-            at = [c for c in range(m.cols) if self.occupied[line][c]]
-        else:
-            at = [r for r in range(m.rows) if self.occupied[r][line]]
-        return k, at
+        lo, hi = moved_cells(m, axis)
+        return k, [i for i in range(lo, hi + 1) if self._get(axis.kind, line, i)]
 
     def _can_shift(self, axis: Axis, target: int) -> bool:
+        """A rigid stroke fails when a case would leave the cells the axis moves (the matrix
+        for a whole line, its cells for a segment) or land on a case that stays put."""
         k, at = self._cells(axis, target)
-        size = self.machine.cols if axis.kind == "row" else self.machine.rows
-        return all(0 <= i + k < size for i in at)  # a rigid line shift only fails at a bound
+        lo, hi = moved_cells(self.machine, axis)
+        line = axis.line if axis.line is not None else 0
+        carried = set(at)
+        return all(lo <= i + k <= hi and (i + k in carried or not self._get(axis.kind, line, i + k))
+                   for i in at)  # fmt: skip
 
     def _latch(self, sim: AxisSim) -> None:
         """The stroke reached its far end: the cases of the line sit in their new cells."""
@@ -209,6 +213,9 @@ class Loom:
             self._set(axis.kind, line, i, False)
         for i in at:
             self._set(axis.kind, line, i + k, True)
+
+    def _get(self, kind: str, line: int, i: int) -> bool:
+        return self.occupied[line][i] if kind == "row" else self.occupied[i][line]
 
     def _set(self, kind: str, line: int, i: int, value: bool) -> None:
         if kind == "row":

@@ -20,6 +20,7 @@ from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
 
+from bwsd.fieldbus.base import FieldbusError
 from bwsd.fieldbus.modbus import (
     AXIS_BASE,
     AXIS_BUSY,
@@ -36,13 +37,17 @@ from bwsd.fieldbus.modbus import (
     MAP_VERSION,
     OFF_LAST,
     OFF_SEQ,
+    OFF_SHAPE,
     OFF_STATUS,
     OFF_TARGET,
     REG_COMMAND,
     REG_STATUS,
     SEQ_MAX,
+    SHAPE_WORDS,
     axis_address,
+    axis_shape,
     int32_words,
+    map_problem,
     words_int32,
 )
 from simulator_hw.loom import AxisSim, Loom
@@ -92,11 +97,14 @@ def build_device(loom: Loom, device_id: int, action: SimAction) -> SimDevice:
                 datatype=DataType.REGISTERS, readonly=True),
         SimData(REG_COMMAND, values=CMD_NONE, datatype=DataType.REGISTERS),
     ]  # fmt: skip
-    for i in range(len(loom.axes)):
+    for i, sim in enumerate(loom.axes):
         base = axis_address(i)
+        # status .. last stroke are refreshed on every read; the shape never changes
+        read_only = [0] * (OFF_SHAPE - OFF_STATUS) + axis_shape(m, sim.axis)
+        read_only += [0] * (AXIS_STRIDE - OFF_SHAPE - SHAPE_WORDS)
         holding.append(SimData(base, count=OFF_STATUS, datatype=DataType.REGISTERS))
-        holding.append(SimData(base + OFF_STATUS, count=AXIS_STRIDE - OFF_STATUS,
-                               datatype=DataType.REGISTERS, readonly=True))  # fmt: skip
+        holding.append(SimData(base + OFF_STATUS, values=read_only, datatype=DataType.REGISTERS,
+                               readonly=True))  # fmt: skip
     inputs = [SimData(0, count=m.rows * m.cols + 1, values=False, datatype=DataType.BITS)]
     coils = [SimData(0, values=False, datatype=DataType.BITS, readonly=True)]
     no_input_registers = [SimData(0, datatype=DataType.INVALID)]
@@ -106,11 +114,17 @@ def build_device(loom: Loom, device_id: int, action: SimAction) -> SimDevice:
 
 
 class ModbusLoomServer:
-    """Serve ``loom`` over Modbus TCP on (host, port) as unit ``device_id``; port 0 picks one."""
+    """Serve ``loom`` over Modbus TCP on (host, port) as unit ``device_id``; port 0 picks one.
+
+    A machine the map cannot address (too many cells or axes) is a FieldbusError.
+    """
 
     def __init__(
         self, loom: Loom, host: str = "127.0.0.1", port: int = 15020, device_id: int = 1
     ) -> None:
+        problem = map_problem(loom.machine)
+        if problem:
+            raise FieldbusError(problem)
         self.loom = loom
         self.host = host
         self.port = port

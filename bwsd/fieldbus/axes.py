@@ -1,9 +1,11 @@
 """The machine's axes and their numbering on the wire (pure).
 
 One shift actuator per matrix row (moves that row's cases along x), one per column (along
-y), then the weft inserter's angle and insert axes, then the take-up. Axis i is numbered
-the same on every bus: rows 0..R-1, columns R..R+C-1, then ``weft_angle``, ``weft_insert``,
-``takeup``.
+y), then the weft inserter's angle and insert axes, then the take-up, then one shift
+actuator per line segment the machine declares (moves only the cases on its cells). Axis i
+is numbered the same on every bus: rows 0..R-1, columns R..R+C-1, then ``weft_angle``,
+``weft_insert``, ``takeup``, then the segments in the order of ``[machine] segments``
+(``row3[0..3]``...): a machine without segments keeps the numbering it always had.
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ MDEG_PER_DEG = 1000  # angles travel as integer millidegrees
 
 @dataclass(frozen=True)
 class Axis:
-    """One actuator: its wire index, name (``row3``, ``col0``, ``takeup``...) and kind."""
+    """One actuator: its wire index, name (``row3``, ``col0``, ``row3[0..3]``, ``takeup``...)
+    and kind."""
 
     index: int
     name: str
     kind: AxisKind
     line: int | None = None  # the row or column a shift axis moves
+    span: tuple[int, int] | None = None  # a segment's first and last cell; None: the whole line
 
     @property
     def relative(self) -> bool:
@@ -43,7 +47,24 @@ def machine_axes(machine: Machine) -> tuple[Axis, ...]:
         Axis(base + 1, "weft_insert", "weft_insert"),
         Axis(base + 2, "takeup", "takeup"),
     ]
+    axes += [
+        Axis(base + 3 + i, segment_axis_name(seg.axis, seg.line, (seg.lo, seg.hi)), seg.axis,
+             seg.line, (seg.lo, seg.hi))
+        for i, seg in enumerate(machine.segments)
+    ]  # fmt: skip
     return tuple(axes)
+
+
+def segment_axis_name(kind: str, line: int, span: tuple[int, int]) -> str:
+    """The axis name of a segment: ``row3[0..3]`` for ``ROW 3[0..3]``."""
+    return f"{kind}{line}[{span[0]}..{span[1]}]"
+
+
+def moved_cells(machine: Machine, axis: Axis) -> tuple[int, int]:
+    """The first and last cell (along its line) whose cases a shift axis moves."""
+    if axis.span is not None:
+        return axis.span
+    return 0, (machine.cols if axis.kind == "row" else machine.rows) - 1
 
 
 def axis_by_name(machine: Machine, name: str) -> Axis:
@@ -51,7 +72,9 @@ def axis_by_name(machine: Machine, name: str) -> Axis:
     for axis in machine_axes(machine):
         if axis.name == name:
             return axis
-    raise ValueError(f"no axis {name!r} (rows 0..{machine.rows - 1}, cols 0..{machine.cols - 1})")
+    segments = ", ".join(segment_axis_name(s.axis, s.line, (s.lo, s.hi)) for s in machine.segments)
+    raise ValueError(f"no axis {name!r} (rows 0..{machine.rows - 1}, cols 0..{machine.cols - 1}, "
+                     f"segments: {segments or 'none declared in [machine] segments'})")  # fmt: skip
 
 
 def shift_stroke_um(machine: Machine, axis: Axis, cells: int) -> int:

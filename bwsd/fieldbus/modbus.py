@@ -17,7 +17,8 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ModbusPDU
 
-from bwsd.fieldbus.axes import Axis
+from bwsd.errors import ConfigError
+from bwsd.fieldbus.axes import Axis, machine_axes, moved_cells
 from bwsd.fieldbus.base import (
     AxisState,
     BusSettings,
@@ -33,23 +34,48 @@ if TYPE_CHECKING:
     from bwsd.config import Config
 
 # ----- the register map (docs/fieldbus-modbus.md) -----
-MAP_VERSION = 1
+MAP_VERSION = 2  # 2: registers +10 .. +13 of a shift axis's block say which cells it moves
 REG_VERSION, REG_AXES, REG_ROWS, REG_COLS, REG_STATUS, REG_COMMAND = range(6)
 MACHINE_ESTOP, MACHINE_FAULTED, MACHINE_BUSY = 1, 2, 4  # bits of REG_STATUS
 CMD_NONE, CMD_RESET, CMD_QUICK_STOP, CMD_HOME = 0, 1, 2, 3
 AXIS_BASE, AXIS_STRIDE = 100, 16
 OFF_TARGET, OFF_SEQ, OFF_STATUS, OFF_POSITION, OFF_DONE, OFF_FAULT, OFF_LAST = 0, 2, 3, 4, 6, 7, 8
+OFF_SHAPE = 10  # +10 kind, +11 line, +12 first cell, +13 last cell (shift axes)
+SHAPE_WORDS = 4
+SHAPE_KINDS = {"row": 1, "col": 2}  # other axes read 0 in all four
 AXIS_BUSY, AXIS_FAULTED, AXIS_HOMED = 1, 2, 4  # bits of OFF_STATUS
 SEQ_MAX = 0x7FFF
 MAX_READ_REGISTERS = 125  # per request, by the Modbus specification
 MAX_READ_BITS = 2000
 MAX_CELLS = 0xFFFF  # discrete inputs 0 .. 65535 hold the cells and the e-stop
+MAX_AXES = (0x10000 - AXIS_BASE) // AXIS_STRIDE  # holding registers end at 65535
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
 
 def axis_address(index: int) -> int:
     """First holding register of axis ``index``'s block."""
     return AXIS_BASE + AXIS_STRIDE * index
+
+
+def map_problem(machine: Machine) -> str:
+    """Why ``machine`` does not fit this map ("" when it does)."""
+    cells, axes = machine.rows * machine.cols, len(machine_axes(machine))
+    if cells > MAX_CELLS:
+        return (f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
+                f"{machine.rows} x {machine.cols}")  # fmt: skip
+    if axes > MAX_AXES:
+        return (f"the Modbus map addresses at most {MAX_AXES} axes, the machine has {axes} "
+                f"({machine.rows} rows, {machine.cols} cols, 3 weft and take-up axes, "
+                f"{len(machine.segments)} segments)")  # fmt: skip
+    return ""
+
+
+def axis_shape(machine: Machine, axis: Axis) -> list[int]:
+    """Registers +10 .. +13 of an axis block: kind, line, first and last cell it moves."""
+    kind = SHAPE_KINDS.get(axis.kind, 0)
+    if not kind or axis.line is None:
+        return [0] * SHAPE_WORDS
+    return [kind, axis.line, *moved_cells(machine, axis)]
 
 
 def estop_input(machine: Machine) -> int:
@@ -108,11 +134,9 @@ class ModbusBus(Fieldbus):
     def __init__(
         self, machine: Machine, settings: BusSettings, host: str, port: int, device_id: int
     ) -> None:
-        if machine.rows * machine.cols > MAX_CELLS:
-            raise FieldbusError(
-                f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
-                f"{machine.rows} x {machine.cols}"
-            )
+        problem = map_problem(machine)
+        if problem:
+            raise FieldbusError(problem)
         super().__init__(machine, settings)
         self.host = host
         self.port = port
@@ -123,6 +147,9 @@ class ModbusBus(Fieldbus):
     @classmethod
     def from_config(cls, config: Config) -> ModbusBus:
         """Build the bus from the tables [fieldbus] and [fieldbus.modbus]."""
+        problem = map_problem(config.machine)
+        if problem:  # its cells are checked at load: more axes than the map has blocks
+            raise ConfigError(problem, path=config.path, table="machine", key="segments")
         bus, modbus = config.table("fieldbus"), config.table("fieldbus.modbus")
         settings = BusSettings(**{f.name: bus[f.name] for f in fields(BusSettings)})
         return cls(config.machine, settings, modbus["host"], modbus["port"], modbus["device_id"])
@@ -274,7 +301,7 @@ class ModbusBus(Fieldbus):
             client.close()
 
     async def _check_map(self) -> None:
-        """Refuse a server whose map or machine differs from ours."""
+        """Refuse a server whose map or machine differs from ours, segments included."""
         words = await self._read_registers(REG_VERSION, REG_COLS + 1)
         want = [MAP_VERSION, len(self.axes), self.machine.rows, self.machine.cols]
         if words != want:
@@ -282,6 +309,20 @@ class ModbusBus(Fieldbus):
             raise FieldbusError(
                 f"{self.where}: map version, axes, rows, cols are {words}, expected {want}"
             )
+        segments = [axis for axis in self.axes if axis.span is not None]
+        if not segments:
+            return
+        first = segments[0].index  # the segments are the last axes, one run of blocks
+        blocks = await self._read_registers(axis_address(first), AXIS_STRIDE * len(segments))
+        for axis in segments:
+            at = AXIS_STRIDE * (axis.index - first) + OFF_SHAPE
+            got, expected = blocks[at : at + SHAPE_WORDS], axis_shape(self.machine, axis)
+            if got != expected:
+                self._drop()
+                raise FieldbusError(
+                    f"{self.where}: axis {axis.index} moves kind, line, first, last cell "
+                    f"{got}, expected {expected} (segment {axis.name})"
+                )
 
     def _on_connect(self, client: AsyncModbusTcpClient, up: bool) -> None:
         if not up and client is self._client:

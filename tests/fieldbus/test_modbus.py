@@ -294,7 +294,7 @@ def test_a_loom_of_another_machine_is_refused():
     async def scenario() -> None:
         async with rig(Loom(other, [], Speeds())) as (_, server):
             bus = ModbusBus(MACHINE, SETTINGS, HOST, server.port, 1)
-            with pytest.raises(FieldbusError, match=r"expected \[1, 9, 3, 3\]"):
+            with pytest.raises(FieldbusError, match=r"expected \[2, 9, 3, 3\]"):
                 await bus.connect()
 
     asyncio.run(scenario())

@@ -12,7 +12,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusIOException
 
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_STALL
-from bwsd.fieldbus.modbus import axis_address, int32_words, words_int32
+from bwsd.fieldbus.modbus import MAP_VERSION, axis_address, int32_words, words_int32
 from bwsd.twin import Machine
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
@@ -89,7 +89,7 @@ async def until(check: Callable[[], Awaitable[bool]]) -> None:
 
 def test_machine_block_gives_version_and_counts():
     async def test(client: AsyncModbusTcpClient) -> None:
-        assert await regs(client, 0, 6) == [1, N, 2, 3, 0, 0]
+        assert await regs(client, 0, 6) == [MAP_VERSION, N, 2, 3, 0, 0]
         blocks = await regs(client, axis_address(0), 16 * N // 2)  # several axes in one read
         assert [blocks[16 * i + 3] for i in range(N // 2)] == [4] * (N // 2)  # homed, idle
 
@@ -210,7 +210,7 @@ def test_a_configured_unit_answers():
         loom = Loom(MACHINE, [], Speeds())
         async with serving(loom, device_id=7) as server, client_of(server) as client:
             response = await client.read_holding_registers(0, count=1, device_id=7)
-            assert response.registers == [1] and response.dev_id == 7
+            assert response.registers == [MAP_VERSION] and response.dev_id == 7
 
     asyncio.run(scenario())
 
@@ -226,7 +226,7 @@ def test_a_muted_loom_does_not_answer_and_keeps_the_connection():
             await set_point(client, ROW0, CELL_UM, 1)
         assert client.connected
         loom.faults.mute = False
-        assert await regs(client, 0, 1) == [1]
+        assert await regs(client, 0, 1) == [MAP_VERSION]
         assert (await axis(client, ROW0))[6] == 0 and loom.occupied[0][0]
 
     on_loom(loom, test)
@@ -237,7 +237,7 @@ def test_a_drop_closes_every_connection_and_new_ones_work():
 
     async def scenario() -> None:
         async with serving(loom) as server, client_of(server) as a, client_of(server) as b:
-            assert await regs(a, 0, 1) == await regs(b, 0, 1) == [1]
+            assert await regs(a, 0, 1) == await regs(b, 0, 1) == [MAP_VERSION]
             loom.faults.drops += 1
 
             async def both_closed() -> bool:
@@ -245,7 +245,7 @@ def test_a_drop_closes_every_connection_and_new_ones_work():
 
             await until(both_closed)
             async with client_of(server) as c:
-                assert await regs(c, 0, 1) == [1]
+                assert await regs(c, 0, 1) == [MAP_VERSION]
 
     asyncio.run(scenario())
 
