@@ -337,7 +337,10 @@ function describeNext(next) {
   const number = (value) => String(Number(Number(value).toFixed(3)));
   let what;
   if (i.kind === 'shift') {
-    what = `${String(i.axis).toUpperCase()} ${i.moves.map(([line, k]) => `${line}:${signed(k)}`).join(' ')}`;
+    // a move is [line, k], or [line, k, first, last] on a segment: "ROW 1:+1 3[0..3]:-1"
+    const move = ([line, k, first, last]) =>
+      `${line}${first === undefined ? '' : `[${first}..${last}]`}:${signed(k)}`;
+    what = `${String(i.axis).toUpperCase()} ${i.moves.map(move).join(' ')}`;
   } else if (i.kind === 'takeup') {
     what = `TAKEUP ${number(i.length)} mm`;
   } else if (i.kind === 'weft') {
