@@ -2,6 +2,7 @@
 
     bwsd hw status --config C          axes, positions, faults, occupancy grid, e-stop
     bwsd hw shift row|col LINE K --config C
+    bwsd hw shift row|col 'LINE[FIRST..LAST]' K --config C   a segment's own actuator
     bwsd hw takeup MM --config C       advance the take-up by MM millimetres
     bwsd hw reset --config C           clear faults and home the shift and weft axes
 
@@ -13,19 +14,40 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import re
 from collections.abc import Awaitable, Callable
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from bwsd.config import load_config
 from bwsd.fieldbus import AxisMove, Fieldbus, FieldbusError, MachineState, open_bus
-from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name, machine_axes, shift_stroke_um
+from bwsd.fieldbus.axes import (
+    UM_PER_MM,
+    axis_by_name,
+    machine_axes,
+    segment_axis_name,
+    shift_stroke_um,
+)
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.twin.machine import Machine
 
 Action = Callable[[Fieldbus, argparse.Namespace], Awaitable[MachineState]]
+_LINE = re.compile(r"\s*([0-9]{1,6})\s*(?:\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\])?\s*",
+                   re.ASCII)  # fmt: skip
+
+
+def shift_line(text: str) -> tuple[int, tuple[int, int] | None]:
+    """A LINE argument: ``3`` (the whole line) or ``3[0..3]`` (a segment of it)."""
+    match = _LINE.fullmatch(text)
+    if match is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a line (3) or a segment of one (3[0..3])"
+        )
+    span = None if match[2] is None else (int(match[2]), int(match[3]))
+    return int(match[1]), span
 
 
 def configure(sub: Any) -> None:
@@ -33,9 +55,14 @@ def configure(sub: Any) -> None:
     hw = sub.add_parser("hw", help="commissioning: talk to the loom's actuators directly")
     cmds = hw.add_subparsers(dest="hw_command", required=True)
     status = cmds.add_parser("status", help="axes, positions, faults and the occupancy grid")
-    shift = cmds.add_parser("shift", help="shift one row or column by K cells")
+    shift = cmds.add_parser("shift", help="shift one row or column, or a segment, by K cells")
     shift.add_argument("axis", choices=["row", "col"])
-    shift.add_argument("line", type=int)
+    shift.add_argument(
+        "line",
+        type=shift_line,
+        metavar="LINE",
+        help="a line (3) or a declared segment of one ('3[0..3]', quoted)",
+    )
     shift.add_argument("cells", type=int)
     takeup = cmds.add_parser("takeup", help="advance the take-up by MM millimetres")
     takeup.add_argument("mm", type=float)
@@ -70,7 +97,9 @@ async def _status(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
 
 
 async def _shift(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
-    axis = _axis(bus, f"{args.axis}{args.line}")
+    line, span = args.line
+    name = f"{args.axis}{line}" if span is None else segment_axis_name(args.axis, line, span)
+    axis = _axis(bus, name)
     if args.cells == 0:
         raise FieldbusError("a shift of 0 cells does nothing")
     stroke = shift_stroke_um(bus.machine, axis, args.cells)
@@ -104,7 +133,8 @@ def _print(machine: Machine, state: MachineState, console: Console) -> None:
     for axis, report in zip(machine_axes(machine), state.axes, strict=True):
         fault = FAULT_NAMES.get(report.fault, str(report.fault)) if report.fault else ""
         busy = "yes" if report.busy else ""
-        table.add_row(axis.name, str(report.position), busy, fault, str(report.last_stroke))
+        table.add_row(escape(axis.name), str(report.position), busy, fault,
+                      str(report.last_stroke))  # fmt: skip
     console.print(table)
     grid = "\n".join("".join("X" if v else "." for v in row) for row in state.occupancy)
     console.print(f"occupancy (row 0 first):\n{grid}")

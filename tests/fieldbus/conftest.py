@@ -29,9 +29,14 @@ def toml(data: dict[str, Any]) -> str:
     for table, values in data.items():
         lines.append(f"[{table}]")
         for key, value in values.items():
-            text = f'"{value}"' if isinstance(value, str) else str(value).lower()
-            lines.append(f"{key} = {text}")
+            lines.append(f"{key} = {_toml_value(value)}")
     return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return f'"{value}"' if isinstance(value, str) else str(value).lower()
 
 
 @dataclass
@@ -77,10 +82,11 @@ def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | Non
     return Mock(proc, {k: int(v) for k, v in found.items()}, config_path, program_path)
 
 
-def client_config(backend: str, ports: dict[str, int], **bus: Any) -> Config:
+def client_config(backend: str, ports: dict[str, int], *, machine: dict[str, Any] = MACHINE,
+                  **bus: Any) -> Config:  # fmt: skip
     """A config for bwsd's side, pointing at the mock loom's ports."""
     return parse_config({
-        "machine": MACHINE,
+        "machine": machine,
         "fieldbus": {"backend": backend, **BUS, **bus,
                      "modbus": {"port": ports["modbus"]},
                      "canopen": {"interface": "socketcand", "port": ports["socketcand"],

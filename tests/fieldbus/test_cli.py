@@ -7,19 +7,20 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, toml
+from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
 
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
 
-def hw_config(tmp: Path, mock: Mock, backend: str) -> Path:
+def hw_config(tmp: Path, mock: Mock, backend: str, machine: dict[str, Any] = MACHINE) -> Path:
     path = tmp / f"{backend}.toml"
     path.write_text(toml({
-        "machine": MACHINE,
+        "machine": machine,
         "fieldbus": {"backend": backend, **BUS},
         "fieldbus.modbus": {"port": mock.ports["modbus"]},
         "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
@@ -71,3 +72,26 @@ def test_bad_requests_and_configs_are_refused_by_name(tmp_path, mock):
     closed.write_text(config.read_text().replace(f"port = {mock.ports['modbus']}", "port = 1"))
     done = hw(closed, "status")
     assert done.returncode == 2 and "cannot reach the bus" in done.stderr
+
+
+@pytest.mark.parametrize("backend", ["modbus", "canopen"])
+def test_a_segment_is_shifted_by_its_own_axis(tmp_path, backend):
+    machine = {**MACHINE, "segments": ["ROW 1[0..2]"]}
+    mock = start_mock(tmp_path, {}, machine=machine, program="FILL row=1 col=0\nX..X\nEND\n")
+    try:
+        config = hw_config(tmp_path, mock, backend, machine)
+        status = hw(config, "status")
+        assert status.returncode == 0, status.stderr
+        assert "row1[0..2]" in status.stdout  # listed with the other axes
+        moved = hw(config, "shift", "row", "1[0..2]", "2")
+        assert moved.returncode == 0, moved.stderr
+        assert "....\n..XX\n...." in moved.stdout  # only (1, 0) moved; (1, 3) stayed
+        jam = hw(config, "shift", "row", "1 [0..2]", "1")  # (1, 2) would leave the segment
+        assert jam.returncode == 2 and "axis row1[0..2]: jam" in jam.stderr
+        unknown = hw(config, "shift", "row", "1[0..1]", "1")
+        assert unknown.returncode == 2 and "no axis 'row1[0..1]'" in unknown.stderr
+        assert "segments: row1[0..2]" in unknown.stderr
+        bad = hw(config, "shift", "row", "1[0..]", "1")
+        assert bad.returncode == 2 and "'1[0..]' is not a line (3) or a segment" in bad.stderr
+    finally:
+        mock.stop()
