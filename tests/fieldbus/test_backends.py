@@ -23,7 +23,7 @@ from bwsd.fieldbus.axes import axis_by_name, shift_stroke_um
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_POSITION, FAULT_STALL
 from bwsd.twin import Shift, Twin
 from simulator_hw.control import request
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
 
 FILL = [(1, 1), (1, 2), (2, 1), (2, 2)]
 
@@ -171,3 +171,83 @@ class TestBackendContract:
         bus = open_bus(client_config(backend, closed, reconnect_attempts=2))
         with pytest.raises(FieldbusConnectionError, match="cannot reach the bus"):
             run(bus.connect())
+
+
+# A 4 x 5 loom with a segment of row 1 (cells 0..2) and one of column 2 (cells 0..2); each
+# line also has a case outside its segment, (1, 4) and (3, 2), that a segment never moves.
+SEGMENTED = {**MACHINE, "cols": 5, "segments": ["ROW 1[0..2]", "COL 2[0..2]"]}
+SEGMENT_FILL = [(0, 2), (1, 0), (1, 1), (1, 4), (3, 2)]
+SEGMENT_PROGRAM = "FILL row=0 col=0\n..X..\nXX..X\n.....\n..X..\nEND\n"
+
+
+@pytest.fixture
+def segment_mock(tmp_path) -> Any:
+    running = start_mock(tmp_path, {}, machine=SEGMENTED, program=SEGMENT_PROGRAM)
+    yield running
+    running.stop()
+
+
+async def with_segment_bus(mock: Mock, backend: str,
+                           body: Callable[[Fieldbus], Awaitable[Any]]) -> Any:  # fmt: skip
+    bus = open_bus(client_config(backend, mock.ports, machine=SEGMENTED))
+    await bus.connect()
+    try:
+        return await body(bus)
+    finally:
+        await bus.close()
+
+
+async def loom_cells(mock: Mock) -> set[tuple[int, int]]:
+    occupancy = (await control(mock, {"cmd": "state"}))["occupancy"]
+    return {(r, c) for r, row in enumerate(occupancy) for c, v in enumerate(row) if v}
+
+
+class TestSegmentAxes:
+    def test_the_segment_axes_follow_the_take_up_on_the_bus(self, segment_mock, backend):
+        async def body(bus: Fieldbus) -> None:
+            names = [axis.name for axis in bus.axes]
+            assert names[9:] == ["weft_angle", "weft_insert", "takeup", "row1[0..2]",
+                                 "col2[0..2]"]  # fmt: skip
+            state = await bus.state()
+            assert len(state.axes) == 14 and not any(a.fault for a in state.axes)
+
+        run(with_segment_bus(segment_mock, backend, body))
+
+    def test_a_segment_stroke_moves_only_the_cases_on_the_segment(self, segment_mock, backend):
+        twin = Twin(client_config(backend, segment_mock.ports, machine=SEGMENTED).machine,
+                    SEGMENT_FILL)  # fmt: skip
+        strokes = [("row", 1, 1), ("col", 2, 1), ("row", 1, -1), ("col", 2, -2)]
+
+        async def body(bus: Fieldbus) -> None:
+            for kind, line, k in strokes:
+                name = f"{kind}{line}[0..2]"
+                twin.apply(Shift(kind, ((line, k, (0, 2)),)))
+                state = await bus.execute([stroke(bus, name, k)])
+                assert np.array_equal(state.occupancy, twin.occupancy >= 0), name
+                assert state.occupancy[1, 4] and state.occupancy[3, 2]  # outside: never moved
+                axis = axis_by_name(bus.machine, name)
+                assert state.axes[axis.index].position == 0
+                assert state.axes[axis.index].last_stroke == shift_stroke_um(bus.machine, axis, k)
+            assert await loom_cells(segment_mock) == set(SEGMENT_FILL)  # round trip
+
+        run(with_segment_bus(segment_mock, backend, body))
+
+    @pytest.mark.parametrize(
+        ("name", "k"),
+        [("row1[0..2]", 2),  # (1, 1) would leave the segment for the empty cell (1, 3)
+         ("col2[0..2]", 3),  # (0, 2) would leave it for (3, 2), where a case sits
+         ("col2[0..2]", -1)],  # (0, 2) would leave the matrix
+    )  # fmt: skip
+    def test_a_stroke_off_the_segment_is_a_jam_and_nothing_moves(self, segment_mock, backend,
+                                                                 name, k):  # fmt: skip
+        async def body(bus: Fieldbus) -> None:
+            with pytest.raises(DriveFault) as err:
+                await bus.execute([stroke(bus, name, k)])
+            assert err.value.code == FAULT_JAM and err.value.axis.name == name
+            assert await loom_cells(segment_mock) == set(SEGMENT_FILL)
+            await bus.reset_faults()
+            state = await bus.execute([stroke(bus, name, 1)])  # a stroke that fits still moves
+            assert np.count_nonzero(state.occupancy) == len(SEGMENT_FILL)
+            assert set(map(tuple, np.argwhere(state.occupancy).tolist())) != set(SEGMENT_FILL)
+
+        run(with_segment_bus(segment_mock, backend, body))

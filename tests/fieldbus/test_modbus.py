@@ -27,6 +27,7 @@ from bwsd.fieldbus.base import (
 )
 from bwsd.fieldbus.modbus import ModbusBus, int32_words, read_spans, words_int32
 from bwsd.twin import Machine
+from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
 
@@ -331,3 +332,26 @@ def test_a_machine_beyond_the_input_address_space_is_refused():
     huge = Machine(rows=300, cols=300, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5)
     with pytest.raises(FieldbusError, match="at most 65535 cells"):
         ModbusBus(huge, SETTINGS, HOST, 1502, 1)
+
+
+def test_a_loom_whose_segments_differ_is_refused():
+    ours = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5,
+                   segments=(Segment("row", 1, 0, 1),))  # fmt: skip
+    theirs = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5,
+                     segments=(Segment("row", 1, 1, 2),))  # fmt: skip
+
+    async def scenario() -> None:
+        async with rig(Loom(theirs, [], Speeds())) as (_, server):
+            bus = ModbusBus(ours, SETTINGS, HOST, server.port, 1)
+            with pytest.raises(FieldbusError, match=r"axis 9 moves kind, line, first, last cell "
+                               r"\[1, 1, 1, 2\], expected \[1, 1, 0, 1\] \(segment "
+                               r"row1\[0\.\.1\]\)"):  # fmt: skip
+                await bus.connect()
+        async with rig(Loom(ours, [(1, 0)], Speeds())) as (_, server):
+            bus = ModbusBus(ours, SETTINGS, HOST, server.port, 1)
+            await bus.connect()
+            state = await bus.execute([stroke("row1[0..1]", 1, ours)])
+            assert state.occupancy[1].tolist() == [False, True, False]
+            await bus.close()
+
+    asyncio.run(scenario())

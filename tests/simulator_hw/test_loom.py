@@ -6,6 +6,7 @@ import pytest
 
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_ESTOP, FAULT_JAM, FAULT_NONE, FAULT_STALL
 from bwsd.twin import Machine
+from bwsd.twin.machine import Segment
 from simulator_hw.loom import WRONG_POSITION_OFFSET, Loom, Speeds
 
 MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5)
@@ -95,3 +96,49 @@ def test_quick_stop_and_home(kind):
         loom.tick(10.0)
         loom.home(now=10.0)
         assert (loom.axes[ROW0].done_seq, loom.axes[ROW0].position) == (0, 0)
+
+
+# A 3 x 6 loom with segments of row 1 (cells 0..2) and column 4 (cells 0..1): axes 12, 13.
+SEGMENTED = Machine(rows=3, cols=6, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5,
+                    segments=(Segment("row", 1, 0, 2), Segment("col", 4, 0, 1)))  # fmt: skip
+ROW1_SEGMENT, COL4_SEGMENT = 12, 13
+
+
+def cells(loom: Loom) -> set[tuple[int, int]]:
+    m = loom.machine
+    return {(r, c) for r in range(m.rows) for c in range(m.cols) if loom.occupied[r][c]}
+
+
+def test_a_segment_stroke_latches_only_the_cases_on_its_cells():
+    loom = Loom(SEGMENTED, [(1, 0), (1, 1), (1, 4), (0, 4), (2, 4)], Speeds(stroke=100))
+    assert [sim.axis.name for sim in loom.axes[ROW1_SEGMENT:]] == ["row1[0..2]", "col4[0..1]"]
+    loom.command(ROW1_SEGMENT, 10_000, 1, now=0.0)
+    loom.tick(0.05)
+    assert loom.axes[ROW1_SEGMENT].busy and (1, 0) in cells(loom)  # not latched mid-stroke
+    loom.tick(0.25)
+    sim = loom.axes[ROW1_SEGMENT]
+    assert (sim.position, sim.busy, sim.done_seq, sim.last_stroke) == (0, False, 1, 10_000)
+    assert cells(loom) == {(1, 1), (1, 2), (1, 4), (0, 4), (2, 4)}  # (1, 4) stayed put
+    loom.command(COL4_SEGMENT, 20_000, 2, now=1.0)  # (0, 4) down to (1, 4)? occupied: a jam
+    assert loom.axes[COL4_SEGMENT].fault == FAULT_JAM
+
+
+@pytest.mark.parametrize(
+    ("fill", "axis", "cells_"),
+    [([(1, 2), (1, 3)], ROW1_SEGMENT, 1),  # (1, 2) would leave the segment for the empty (1, 3)
+     ([(1, 0)], ROW1_SEGMENT, -1),  # (1, 0) would leave the matrix
+     ([(1, 4), (2, 4)], COL4_SEGMENT, 1),  # (1, 4) would leave it onto the case at (2, 4)
+     ([(1, 4)], COL4_SEGMENT, 1)],  # (1, 4) would leave it for the empty (2, 4)
+)  # fmt: skip
+def test_a_segment_stroke_off_its_cells_jams_and_nothing_moves(fill, axis, cells_):
+    loom = Loom(SEGMENTED, fill, Speeds())
+    pitch = 10_000 if axis == ROW1_SEGMENT else 20_000
+    loom.command(axis, cells_ * pitch, 1, now=0.0)
+    assert loom.axes[axis].fault == FAULT_JAM
+    assert loom.axes[axis].done_seq == 0 and cells(loom) == set(fill)
+
+
+def test_a_whole_line_stroke_carries_the_cases_of_its_segments_too():
+    loom = Loom(SEGMENTED, [(1, 0), (1, 1), (1, 4)], Speeds())
+    loom.command(ROW1, 10_000, 1, now=0.0)
+    assert cells(loom) == {(1, 1), (1, 2), (1, 5)}

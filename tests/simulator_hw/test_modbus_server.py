@@ -11,9 +11,10 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusIOException
 
-from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_STALL
+from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_STALL, FieldbusError
 from bwsd.fieldbus.modbus import MAP_VERSION, axis_address, int32_words, words_int32
 from bwsd.twin import Machine
+from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
 
@@ -108,6 +109,33 @@ def test_a_shift_stroke_moves_the_cases_and_completes():
         assert await inputs(client) == [False, True, False, True, False, False, False]
 
     on_loom(Loom(MACHINE, [(0, 0), (1, 0)], Speeds()), test)
+
+
+def test_each_shift_axis_says_which_cells_it_moves():
+    segmented = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5,
+                        segments=(Segment("row", 1, 1, 2), Segment("col", 0, 0, 1)))  # fmt: skip
+
+    async def test(client: AsyncModbusTcpClient) -> None:
+        assert await regs(client, 1, 1) == [N + 2]
+        shapes = [(await axis(client, i))[10:16] for i in range(N + 2)]
+        assert shapes[ROW1] == [1, 1, 0, 2, 0, 0]  # kind row, line 1, cells 0..2
+        assert shapes[COL0] == [2, 0, 0, 1, 0, 0]  # kind col, line 0, cells 0..1
+        assert shapes[WEFT_ANGLE] == shapes[TAKEUP] == [0] * 6
+        assert shapes[N:] == [[1, 1, 1, 2, 0, 0], [2, 0, 0, 1, 0, 0]]  # the segments
+        refused = await client.write_register(axis_address(N) + 10, 0, device_id=1)
+        assert refused.isError()  # read-only
+        await set_point(client, N, CELL_UM, 1)  # row1[1..2]: only (1, 1) moves, (1, 0) stays
+        assert await inputs(client) == [False, False, False, True, False, True, False]
+
+    on_loom(Loom(segmented, [(1, 0), (1, 1)], Speeds()), test)
+
+
+def test_a_machine_beyond_the_map_is_refused_by_the_server():
+    segments = tuple(Segment("row", r, 2 * j, 2 * j + 1) for r in range(100) for j in range(39))
+    huge = Machine(rows=100, cols=100, pitch_x=1, pitch_y=1, d_mat=10, c_mat=0.5,
+                   segments=segments)  # fmt: skip
+    with pytest.raises(FieldbusError, match="at most 4089 axes, the machine has 4103"):
+        ModbusLoomServer(Loom(huge, [], Speeds()))
 
 
 def test_absolute_axes_read_back_signed_positions():
