@@ -27,7 +27,7 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.set_defaults(handler=run_slice)
 
-    p = sub.add_parser("metrics", help="section, yarn angles and contacts per cycle")
+    p = sub.add_parser("metrics", help="section, yarn angles, contacts per cycle, contact groups")
     _common(p)
     p.add_argument(
         "--cycle-length",
@@ -107,6 +107,7 @@ def print_metrics(result: dict[str, Any], console: Console) -> None:
     console.print(_section_table(result["section"]))
     console.print(_angle_table(result["angles"]))
     console.print(_cycle_table(result["cycles"]))
+    console.print(_groups_table(result["groups"], result["unconnected"]))
 
 
 def _section_table(section: dict[str, Any] | None) -> Table:
@@ -141,4 +142,19 @@ def _cycle_table(cycles: dict[str, Any]) -> Table:
     table.add_row("mean", _number(cycles["mean"]))
     table.add_row("min / max", f"{cycles['min']} / {cycles['max']}")
     table.add_row("counts", shown or "-")
+    return table
+
+
+def _listed(values: list[Any], most: int = 20) -> str:
+    shown = ", ".join(str(v) for v in values[:most])
+    return (shown + (f", ... ({len(values)} in all)" if len(values) > most else "")) or "-"
+
+
+def _groups_table(groups: dict[str, Any], unconnected: dict[str, Any]) -> Table:
+    table = Table(title="Contact graph (yarns joined by contacts)", show_header=False)
+    table.add_row("groups", str(groups["count"]))
+    table.add_row("sizes", _listed(groups["sizes"]))
+    table.add_row("yarns without contact", str(unconnected["count"]))
+    if unconnected["ids"]:
+        table.add_row("their ids", _listed(unconnected["ids"]))
     return table

@@ -1,4 +1,5 @@
-"""Preform metrics from a skeleton: section, yarn angles, contacts per cycle (docs/exports.md)."""
+"""Preform metrics from a skeleton: section, yarn angles, contacts per cycle and contact groups
+(docs/exports.md)."""
 
 from __future__ import annotations
 
@@ -77,6 +78,42 @@ def angles(sk: SkeletonData) -> dict[str, dict[str, Any]]:
     return out
 
 
+def contact_groups(sk: SkeletonData) -> list[list[int]]:
+    """Connected groups of the contact graph (yarns, one edge per contact), largest first.
+
+    A yarn without contacts is a group of its own. Groups of one size keep the order of
+    their smallest yarn ids; each group lists its yarn ids in increasing order.
+    """
+    parent = {y.id: y.id for y in sk.yarns}
+
+    def root(yarn: int) -> int:
+        while parent[yarn] != yarn:
+            parent[yarn] = parent[parent[yarn]]
+            yarn = parent[yarn]
+        return yarn
+
+    for c in sk.contacts:
+        a, b = root(c.moving_yarn), root(c.hit_yarn)
+        parent[max(a, b)] = min(a, b)
+    members: dict[int, list[int]] = {}
+    for yarn in sorted(parent):
+        members.setdefault(root(yarn), []).append(yarn)
+    return sorted(members.values(), key=lambda group: (-len(group), group[0]))
+
+
+def groups(sk: SkeletonData) -> dict[str, Any]:
+    """Number, sizes and members of the contact graph's connected groups."""
+    found = contact_groups(sk)
+    return {"count": len(found), "sizes": [len(g) for g in found], "members": found}
+
+
+def unconnected(sk: SkeletonData) -> dict[str, Any]:
+    """The yarns that take part in no contact, neither moving nor hit."""
+    touched = {y for c in sk.contacts for y in (c.moving_yarn, c.hit_yarn)}
+    ids = [y.id for y in sk.yarns if y.id not in touched]
+    return {"count": len(ids), "ids": ids}
+
+
 def contacts_per_cycle(sk: SkeletonData, cycle_length: int | None) -> dict[str, Any]:
     """Contacts per cycle of ``cycle_length`` instructions, counted from instruction 1.
 
@@ -118,4 +155,6 @@ def metrics(sk: SkeletonData, cycle_length: int | None) -> dict[str, Any]:
         "section": section(sk),
         "angles": angles(sk),
         "cycles": contacts_per_cycle(sk, cycle_length),
+        "groups": groups(sk),
+        "unconnected": unconnected(sk),
     }
