@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from bwsd.twin.instructions import Program
+from bwsd.twin.machine import Machine
 from bwsd.twin.skeleton import SkeletonData
+
+if TYPE_CHECKING:
+    from bwsd.export.mixing import NamedSection
 
 
 def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -27,7 +32,10 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.set_defaults(handler=run_slice)
 
-    p = sub.add_parser("metrics", help="section, yarn angles, contacts per cycle, contact groups")
+    p = sub.add_parser(
+        "metrics",
+        help="section, yarn angles, contacts per cycle, contact groups, carrier mixing",
+    )
     _common(p)
     p.add_argument(
         "--cycle-length",
@@ -35,6 +43,13 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=None,
         metavar="N",
         help="instructions per cycle (default: one pass of the outermost REPEAT)",
+    )
+    p.add_argument(
+        "--section",
+        default=None,
+        metavar="SPEC",
+        help="the braided section, e.g. rect:2x2 or L:2x6:4x2 (default: the program's "
+        "'# section:' line, if any): carrier mixing",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.set_defaults(handler=run_metrics)
@@ -45,16 +60,22 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="machine configuration (TOML)")
 
 
-def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
-    """Load the config and the program, run the twin, return the final skeleton."""
+def load_inputs(config: str, program: str) -> tuple[Machine, Program]:
+    """Load the config and the program, validated for the config's machine."""
     # Imported here so that building the parser stays cheap.
     from bwsd.config import load_config
     from bwsd.program.validate import load_program
-    from bwsd.twin import simulate
 
     loaded = load_config(config)
     machine = loaded.machine
-    parsed = load_program(program, machine, loaded.table("controller")["max_instructions"])
+    return machine, load_program(program, machine, loaded.table("controller")["max_instructions"])
+
+
+def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
+    """Load the config and the program, run the twin, return the final skeleton."""
+    from bwsd.twin import simulate
+
+    machine, parsed = load_inputs(config, program)
     return simulate(machine, parsed).skeleton(), parsed
 
 
@@ -75,15 +96,31 @@ def run_slice(args: argparse.Namespace) -> int:
 def run_metrics(args: argparse.Namespace) -> int:
     """`bwsd metrics`: print the metrics as tables or JSON."""
     from bwsd.export.metrics import metrics
+    from bwsd.export.mixing import check_fits, section_option, simulate_with_visits
+    from bwsd.twin import simulate
 
-    sk, program = simulate_program(args.config, args.program)
+    named = section_option(args.section) if args.section is not None else None
+    machine, program = load_inputs(args.config, args.program)
+    named = named or _header_section(args.program)
     cycle = args.cycle_length if args.cycle_length is not None else program.cycle_length
-    result = metrics(sk, cycle)
+    if named is None:
+        result = metrics(simulate(machine, program).skeleton(), cycle)
+    else:
+        check_fits(named.section, machine)
+        twin, visits = simulate_with_visits(machine, program, named.section)
+        result = metrics(twin.skeleton(), cycle, named=named, visits=visits)
     if args.json:
         print(json.dumps(result, indent=2, allow_nan=False))  # never NaN or Infinity
     else:
         print_metrics(result, Console())
     return 0
+
+
+def _header_section(program: str) -> NamedSection | None:
+    """The section named by the program's ``# section:`` line (the program reads as UTF-8)."""
+    from bwsd.export.mixing import section_header
+
+    return section_header(Path(program).read_text(encoding="utf-8"), program)
 
 
 def _number(value: float | None, unit: str = "") -> str:
@@ -108,6 +145,8 @@ def print_metrics(result: dict[str, Any], console: Console) -> None:
     console.print(_angle_table(result["angles"]))
     console.print(_cycle_table(result["cycles"]))
     console.print(_groups_table(result["groups"], result["unconnected"]))
+    if result["mixing"] is not None:
+        console.print(_mixing_table(result["mixing"], result["section_spec"]))
 
 
 def _section_table(section: dict[str, Any] | None) -> Table:
@@ -158,3 +197,35 @@ def _groups_table(groups: dict[str, Any], unconnected: dict[str, Any]) -> Table:
     if unconnected["ids"]:
         table.add_row("their ids", _listed(unconnected["ids"]))
     return table
+
+
+def _mixing_table(mixing: dict[str, Any], spec: dict[str, Any]) -> Table:
+    source = "--section" if spec["source"] == "option" else f"program line {spec['line']}"
+    table = Table(title=f"Carrier mixing, section {mixing['section']} (from {source})",
+                  show_header=False)  # fmt: skip
+    table.add_row("carriers", f"{mixing['carriers']} ({mixing['edge']} filled outside the section)")
+    if mixing["empty_body_cells"]:
+        table.add_row("body cells empty at the fill", str(mixing["empty_body_cells"]))
+    for zone in mixing["zones"]:
+        need = "required" if zone["required"] else "not required"
+        visited = f"{zone['carriers']} carriers visited ({zone['cells']} cells, {need})"
+        table.add_row(f"zone {zone['name']}", visited)
+    table.add_row("visited every required zone", str(mixing["complete"]))
+    table.add_row("did not", str(mixing["incomplete"]))
+    for miss in mixing["missing"]:
+        row, col = miss["cell"]
+        table.add_row(f"  yarn {miss['yarn']} (filled at {row}, {col})",
+                      "missed " + ", ".join(miss["zones"]))  # fmt: skip
+    if mixing["incomplete"] > len(mixing["missing"]):
+        table.add_row("  ...", f"{mixing['incomplete'] - len(mixing['missing'])} more")
+    table.add_row("K (cycles until all mixed)", _k(mixing))
+    return table
+
+
+def _k(mixing: dict[str, Any]) -> str:
+    if mixing["k"] is None:
+        return "never within the program"
+    if mixing["k"] == 0:
+        return "0 (all mixed at the fill)"
+    return (f"{mixing['k']} (after instruction {mixing['instruction']}, "
+            f"cycles of {mixing['cycle_length']})")  # fmt: skip

@@ -1,5 +1,5 @@
-"""Preform metrics from a skeleton: section, yarn angles, contacts per cycle and contact groups
-(docs/exports.md)."""
+"""Preform metrics from a skeleton: section, yarn angles, contacts per cycle, contact groups,
+carrier mixing (docs/exports.md)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 
 from bwsd.export.errors import ExportError
 from bwsd.export.families import family_codes
+from bwsd.export.mixing import NamedSection, ZoneVisits
 from bwsd.twin.skeleton import FloatArray, SkeletonData, YarnData
 
 
@@ -114,6 +115,14 @@ def unconnected(sk: SkeletonData) -> dict[str, Any]:
     return {"count": len(ids), "ids": ids}
 
 
+def cycle_length_or_whole(cycle_length: int | None, instructions: int) -> int:
+    """``cycle_length``, or the whole run (at least 1) when None; refused below 1."""
+    length = cycle_length if cycle_length is not None else max(instructions, 1)
+    if length < 1:
+        raise ExportError(f"cycle length must be at least 1, got {length}")
+    return length
+
+
 def contacts_per_cycle(sk: SkeletonData, cycle_length: int | None) -> dict[str, Any]:
     """Contacts per cycle of ``cycle_length`` instructions, counted from instruction 1.
 
@@ -123,9 +132,7 @@ def contacts_per_cycle(sk: SkeletonData, cycle_length: int | None) -> dict[str, 
     made = [c.instruction for c in sk.contacts]
     n = max([sk.instructions, *made])
     per_instruction = np.bincount(np.asarray(made, dtype=np.int64), minlength=n + 1)[1:]
-    length = cycle_length if cycle_length is not None else max(n, 1)
-    if length < 1:
-        raise ExportError(f"cycle length must be at least 1, got {length}")
+    length = cycle_length_or_whole(cycle_length, n)
     counts = [int(per_instruction[k : k + length].sum()) for k in range(0, n, length)]
     complete = counts[: n // length]
     return {
@@ -140,8 +147,27 @@ def contacts_per_cycle(sk: SkeletonData, cycle_length: int | None) -> dict[str, 
     }
 
 
-def metrics(sk: SkeletonData, cycle_length: int | None) -> dict[str, Any]:
-    """All metrics as JSON-ready builtins (definitions in docs/exports.md)."""
+def _named(named: NamedSection | None) -> dict[str, Any] | None:
+    if named is None:
+        return None
+    line = named.line if named.source == "header" else None
+    return {"spec": named.section.spec, "shape": named.section.shape, "source": named.source,
+            "line": line}  # fmt: skip
+
+
+def metrics(
+    sk: SkeletonData,
+    cycle_length: int | None,
+    *,
+    named: NamedSection | None = None,
+    visits: ZoneVisits | None = None,
+) -> dict[str, Any]:
+    """All metrics as JSON-ready builtins (definitions in docs/exports.md).
+
+    ``visits`` (the carriers' zones, recorded while the twin ran, for the section
+    ``named``) gives the mixing numbers.
+    """
+    length = cycle_length_or_whole(cycle_length, sk.instructions)
     return {
         "instructions": sk.instructions,
         "takeup": sk.takeup,
@@ -157,4 +183,6 @@ def metrics(sk: SkeletonData, cycle_length: int | None) -> dict[str, Any]:
         "cycles": contacts_per_cycle(sk, cycle_length),
         "groups": groups(sk),
         "unconnected": unconnected(sk),
+        "section_spec": _named(named),
+        "mixing": visits.summary(length) if visits is not None else None,
     }
