@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -34,7 +35,7 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
     p = sub.add_parser(
         "metrics",
-        help="section, yarn angles, contacts per cycle, contact groups, carrier mixing",
+        help="section, yarn angles, contacts per cycle, contact groups, carrier mixing, footprint",
     )
     _common(p)
     p.add_argument(
@@ -49,7 +50,14 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=None,
         metavar="SPEC",
         help="the braided section, e.g. rect:2x2 or L:2x6:4x2 (default: the program's "
-        "'# section:' line, if any): carrier mixing",
+        "'# section:' line, if any): carrier mixing and the nominal footprint",
+    )
+    p.add_argument(
+        "--z",
+        type=float,
+        default=None,
+        metavar="Z",
+        help="measure the footprint at this height in the preform frame (mm)",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.set_defaults(handler=run_metrics)
@@ -95,20 +103,23 @@ def run_slice(args: argparse.Namespace) -> int:
 
 def run_metrics(args: argparse.Namespace) -> int:
     """`bwsd metrics`: print the metrics as tables or JSON."""
+    from bwsd.export.errors import ExportError
     from bwsd.export.metrics import metrics
     from bwsd.export.mixing import check_fits, section_option, simulate_with_visits
     from bwsd.twin import simulate
 
+    if args.z is not None and not math.isfinite(args.z):
+        raise ExportError(f"--z must be a finite height in mm, got {args.z}")
     named = section_option(args.section) if args.section is not None else None
     machine, program = load_inputs(args.config, args.program)
     named = named or _header_section(args.program)
     cycle = args.cycle_length if args.cycle_length is not None else program.cycle_length
     if named is None:
-        result = metrics(simulate(machine, program).skeleton(), cycle)
+        result = metrics(simulate(machine, program).skeleton(), cycle, z=args.z)
     else:
         check_fits(named.section, machine)
         twin, visits = simulate_with_visits(machine, program, named.section)
-        result = metrics(twin.skeleton(), cycle, named=named, visits=visits)
+        result = metrics(twin.skeleton(), cycle, z=args.z, named=named, visits=visits)
     if args.json:
         print(json.dumps(result, indent=2, allow_nan=False))  # never NaN or Infinity
     else:
@@ -147,6 +158,8 @@ def print_metrics(result: dict[str, Any], console: Console) -> None:
     console.print(_groups_table(result["groups"], result["unconnected"]))
     if result["mixing"] is not None:
         console.print(_mixing_table(result["mixing"], result["section_spec"]))
+    if result["footprint"] is not None:
+        console.print(_footprint_table(result["footprint"]))
 
 
 def _section_table(section: dict[str, Any] | None) -> Table:
@@ -229,3 +242,26 @@ def _k(mixing: dict[str, Any]) -> str:
         return "0 (all mixed at the fill)"
     return (f"{mixing['k']} (after instruction {mixing['instruction']}, "
             f"cycles of {mixing['cycle_length']})")  # fmt: skip
+
+
+def _range(values: list[float] | None) -> str:
+    return "-" if values is None else f"{values[0]:.3f} .. {values[1]:.3f} mm"
+
+
+def _footprint_table(foot: dict[str, Any]) -> Table:
+    table = Table(title=f"Footprint at z = {foot['z']:g} mm (discs of the yarn diameter)",
+                  show_header=False)  # fmt: skip
+    free = f", {foot['free']} on free segments" if foot["free"] else ""
+    table.add_row("crossings", f"{foot['crossings']}{free}")
+    measured = foot["measured"]
+    table.add_row("measured area", _number(measured["area"], " mm^2"))
+    table.add_row("measured x / y", f"{_range(measured['x'])} / {_range(measured['y'])}")
+    nominal = foot["nominal"]
+    if nominal is None:
+        return table
+    table.add_row(f"nominal area ({nominal['section']})", _number(nominal["area"], " mm^2"))
+    table.add_row("nominal x / y", f"{_range(nominal['x'])} / {_range(nominal['y'])}")
+    table.add_row("measured / nominal", _number(foot["ratio"]))
+    table.add_row("nominal covered", _number(foot["coverage"]))
+    table.add_row("measured outside nominal", _number(foot["outside"], " mm^2"))
+    return table

@@ -1,5 +1,5 @@
 """Preform metrics from a skeleton: section, yarn angles, contacts per cycle, contact groups,
-carrier mixing (docs/exports.md)."""
+carrier mixing and footprint (docs/exports.md)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 
 from bwsd.export.errors import ExportError
 from bwsd.export.families import family_codes
+from bwsd.export.footprint import footprint
 from bwsd.export.mixing import NamedSection, ZoneVisits
 from bwsd.twin.skeleton import FloatArray, SkeletonData, YarnData
 
@@ -159,15 +160,17 @@ def metrics(
     sk: SkeletonData,
     cycle_length: int | None,
     *,
+    z: float | None = None,
     named: NamedSection | None = None,
     visits: ZoneVisits | None = None,
 ) -> dict[str, Any]:
     """All metrics as JSON-ready builtins (definitions in docs/exports.md).
 
-    ``visits`` (the carriers' zones, recorded while the twin ran, for the section
-    ``named``) gives the mixing numbers.
+    ``visits`` (the carriers' zones, recorded while the twin ran) gives the mixing numbers;
+    ``z`` the footprint at that height, against the nominal shape of ``named`` if given.
     """
     length = cycle_length_or_whole(cycle_length, sk.instructions)
+    section_ = named.section if named is not None else None
     return {
         "instructions": sk.instructions,
         "takeup": sk.takeup,
@@ -185,4 +188,5 @@ def metrics(
         "unconnected": unconnected(sk),
         "section_spec": _named(named),
         "mixing": visits.summary(length) if visits is not None else None,
+        "footprint": footprint(sk, z, section_) if z is not None else None,
     }

@@ -1,24 +1,28 @@
-"""`bwsd metrics` for shaped preforms: contact groups, carrier mixing."""
+"""`bwsd metrics` for shaped preforms: contact groups, carrier mixing, footprint at a height."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rich.console import Console
 
 from bwsd.cli import main
 from bwsd.errors import ProgramError
 from bwsd.export.cli import print_metrics, simulate_program
-from bwsd.export.metrics import groups, unconnected
+from bwsd.export.footprint import Grid, crossing_points, disc_samples, footprint
+from bwsd.export.metrics import groups, metrics, section, unconnected
 from bwsd.export.mixing import section_header
+from bwsd.program.sections import parse_section
 
-from .conftest import build, warp, weft
+from .conftest import MACHINE, build, warp, weft
 
 ROOT = Path(__file__).resolve().parents[2]
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
@@ -122,6 +126,10 @@ def run_error(capsys, *args: str) -> str:
     return captured.err
 
 
+def disc(d: float) -> float:
+    return math.pi * d * d / 4
+
+
 # ----- contact groups -----
 
 
@@ -203,8 +211,10 @@ def test_the_option_overrides_the_section_line_and_neither_is_fine(tmp_path, cap
     }
     assert result["mixing"]["zones"][0]["cells"] == 9
     plain, _ = l_program(tmp_path, header="")
-    result = run_json(capsys, plain, config)
+    result = run_json(capsys, plain, config, "--z", "10")
     assert (result["section_spec"], result["mixing"]) == (None, None)
+    assert result["footprint"]["nominal"] is None
+    assert result["footprint"]["crossings"] == 3
 
 
 def test_section_line_rules():
@@ -238,13 +248,95 @@ def test_other_section_faults_end_with_one_line(tmp_path, capsys, braid):
     err = run_error(capsys, braid[0], "--config", braid[1], "--section", "L:2x6:4x2")
     assert err == ("bwsd: error: section L:2x6:4x2 does not fit the 4 x 4 matrix of the config: "
                    "its cell (1, 4) lies outside\n")  # fmt: skip
+    err = run_error(capsys, braid[0], "--config", braid[1], "--z", "nan")
+    assert err == "bwsd: error: --z must be a finite height in mm, got nan\n"
+
+
+# ----- footprint -----
+
+
+def test_inscribed_discs_cover_pi_over_four_of_their_tiles():
+    # MACHINE: 2 x 2 cells, pitch 10, c_mat 0.5: tiles of 5 x 5 mm centred on the fell
+    # points (2.5 | 7.5, 2.5 | 7.5). A vertical yarn of diameter 5 on each fell point
+    # fills the disc inscribed in its tile; a fifth one lies one tile beyond the shape.
+    centres = [(2.5, 2.5), (7.5, 2.5), (2.5, 7.5), (7.5, 7.5), (12.5, 2.5)]
+    sk = build([warp([(x, y, 0.0), (x, y, 10.0), (x, y, 100.0)]) for x, y in centres], diameter=5.0)
+    result = footprint(sk, 5.0, parse_section("rect:2x2@0,0"))
+    assert result["nominal"] == {"section": "rect:2x2", "cells": 4, "area": 100.0,
+                                 "x": [0.0, 10.0], "y": [0.0, 10.0]}  # fmt: skip
+    assert result["grid"] == [5 / 64, 5 / 64]  # 64 steps of a tile of 5 mm: d / 64
+    assert (result["crossings"], result["free"]) == (5, 0)
+    assert result["coverage"] == pytest.approx(math.pi / 4, rel=0.01)
+    assert result["measured"]["area"] == pytest.approx(5 * disc(5.0), rel=0.01)
+    assert result["ratio"] == pytest.approx(5 * disc(5.0) / 100, rel=0.01)
+    assert result["outside"] == pytest.approx(disc(5.0), rel=0.01)
+    assert (result["measured"]["x"], result["measured"]["y"]) == ([0.0, 15.0], [0.0, 10.0])
+
+
+def test_a_rect_braid_at_its_start_edge(capsys, braid):
+    # At z = 0 every crossing is a fill node, at the centre of its cell's tile (4 x 4 mm
+    # here): the 4 body yarns' discs lie inside the nominal square of 8 x 8 mm, the 4 edge
+    # carriers' discs in the tiles around it.
+    result = run_json(capsys, *braid, "--section", "rect:2x2", "--z", "0")["footprint"]
+    d = 1.5
+    assert result["crossings"] == 8
+    assert result["nominal"]["area"] == 64.0
+    assert (result["nominal"]["x"], result["nominal"]["y"]) == ([11.0, 19.0], [11.0, 19.0])
+    assert result["coverage"] == pytest.approx(4 * disc(d) / 64, rel=0.01)
+    assert result["outside"] == pytest.approx(4 * disc(d), rel=0.01)
+    assert result["ratio"] == pytest.approx(8 * disc(d) / 64, rel=0.01)
+
+
+def test_a_rect_braid_fills_more_of_its_square_where_it_is_formed(braid):
+    """In a 4-step braid every carrier passes through the body, so in the formed preform
+    the edge carriers' yarns lie inside the nominal square too: at every height of the
+    measuring band of ``section`` (the middle half of the contact zone) the covered area
+    exceeds that of 5 of the 8 yarn discs (measured: 5.4 at least, 6.5 on average), where
+    the start edge has exactly the 4 body yarns inside."""
+    sk, _ = simulate_program(braid[1], braid[0])
+    shape = parse_section("rect:2x2")
+    low, high = section(sk)["z"]
+    for z in np.linspace(low, high, 33):
+        result = footprint(sk, float(z), shape)
+        covered = result["coverage"] * result["nominal"]["area"]
+        assert covered > 5 * disc(sk.diameter), z
+        assert result["coverage"] <= result["ratio"] + 1e-12  # covered area <= measured area
+        assert result["ratio"] <= 8 * disc(sk.diameter) / 64 * 1.01  # the union <= 8 discs
+
+
+def test_one_disc_is_sampled_within_one_percent():
+    rng = np.random.default_rng(7)
+    for d in (0.7, 1.0, 1.5, 3.0):
+        grid = Grid.of(MACHINE, d)
+        centres = [rng.uniform(-20, 20, size=2) for _ in range(100)] + [MACHINE.fell_xy(1, 0)]
+        for centre in centres:
+            ix, _ = disc_samples(np.array([centre]), d / 2, grid)
+            assert len(ix) * grid.cell_area == pytest.approx(disc(d), rel=0.01)
+
+
+def test_centrelines_have_no_footprint(centreline):
+    result = footprint(centreline, 15.0, parse_section("rect:2x2@0,0"))
+    assert result["crossings"] == 3
+    assert (result["grid"], result["measured"]["area"]) == (None, 0.0)
+    assert (result["coverage"], result["ratio"], result["outside"]) == (0.0, 0.0, 0.0)
+
+
+def test_crossings_are_those_of_slice(braid):
+    slice_ = pytest.importorskip("bwsd.export.slice")
+    sk, _ = simulate_program(braid[1], braid[0])
+    heights = [0.0, 50.0, 100.0, 179.0, float(sk.yarns[3].nodes[5][2])]  # the last: a node
+    for z in heights:
+        points, free = crossing_points(sk, z)
+        expected = slice_.crossings(sk, z)
+        assert points.tolist() == [[c.x, c.y] for c in expected]
+        assert free.tolist() == [c.free for c in expected]
 
 
 # ----- output -----
 
 
-def test_tables_show_groups_and_mixing(tmp_path, capsys):
-    result = run_json(capsys, *l_program(tmp_path))
+def test_tables_show_groups_mixing_and_footprint(tmp_path, capsys, braid):
+    result = run_json(capsys, *l_program(tmp_path), "--z", "10")
     console = Console(record=True, width=140)
     print_metrics(result, console)
     text = console.export_text()
@@ -255,11 +347,14 @@ def test_tables_show_groups_and_mixing(tmp_path, capsys):
         "yarn 2 (filled at 3, 1)",
         "missed flange",
         "never within the program",
+        "Footprint at z = 10 mm",
+        "nominal covered",
     ):
         assert expected in text, expected
+    assert metrics(simulate_program(braid[1], braid[0])[0], None)["footprint"] is None
 
 
-def test_metrics_with_a_section_needs_no_extra(tmp_path, braid):
+def test_metrics_with_section_and_height_needs_no_extra(tmp_path, braid):
     """The console script with VTK, pytexgen and matplotlib unimportable."""
     assert BWSD, "the bwsd console script is not installed beside this Python"
     (tmp_path / "sitecustomize.py").write_text(
@@ -269,7 +364,8 @@ def test_metrics_with_a_section_needs_no_extra(tmp_path, braid):
     )
     path = os.pathsep.join(p for p in (str(tmp_path), os.environ.get("PYTHONPATH", "")) if p)
     done = subprocess.run(
-        [BWSD, "metrics", braid[0], "--config", braid[1], "--section", "rect:2x2", "--json"],
+        [BWSD, "metrics", braid[0], "--config", braid[1], "--section", "rect:2x2", "--z", "100",
+         "--json"],
         capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
         env={**os.environ, "PYTHONPATH": path},
     )  # fmt: skip
@@ -277,3 +373,4 @@ def test_metrics_with_a_section_needs_no_extra(tmp_path, braid):
     result = json.loads(done.stdout)
     assert result["groups"]["count"] == 1
     assert result["mixing"]["k"] == 1
+    assert 0 < result["footprint"]["coverage"] < 1

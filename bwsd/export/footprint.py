@@ -1,0 +1,210 @@
+"""The preform's footprint at one height against the nominal shape of its section (numpy only).
+
+The measured footprint is the union of discs of the yarn diameter centred where yarn
+centrelines cross the plane z = Z (the crossings `bwsd slice` draws). The nominal shape is
+the section's body cells mapped to the fell as the twin maps a guide, one tile of
+``c_mat * pitch`` per cell. Areas are counted on a fine grid of sample points aligned with
+those tiles (docs/exports.md, "footprint").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from bwsd.program.sections import Section
+from bwsd.twin.machine import Machine
+from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData, YarnData
+
+BoolArray = npt.NDArray[np.bool_]
+SAMPLES_PER_DIAMETER = 64  # grid spacing at most d / 64: one disc's area within 1 %
+CHUNK_SAMPLES = 2_000_000  # window samples tested at once (bounds the memory)
+
+
+def _yarn_crossings(yarn: YarnData, z: float) -> tuple[FloatArray, BoolArray]:
+    """The xy and free flags of one yarn's crossings, along the yarn.
+
+    The rule of ``slice.crossings``, which imports matplotlib; a test holds both equal.
+    """
+    nodes = np.asarray(yarn.nodes, dtype=np.float64)
+    dz = nodes[:, 2] - z
+    free_from = len(nodes) - 2 if yarn.kind == "warp" else len(nodes)
+    off = dz != 0
+    neighbour_off = np.zeros_like(off)
+    neighbour_off[1:] |= off[:-1]
+    neighbour_off[:-1] |= off[1:]
+    at = np.flatnonzero(~off & neighbour_off)  # nodes on the plane, not lying in it
+    side = np.sign(dz)
+    cut = np.flatnonzero(side[:-1] * side[1:] < 0)  # segments with ends strictly apart
+    a, b = nodes[cut], nodes[cut + 1]
+    inner = a[:, :2] + ((z - a[:, 2]) / (b[:, 2] - a[:, 2]))[:, None] * (b[:, :2] - a[:, :2])
+    keys = [*at.astype(float).tolist(), *(cut + 0.5).tolist()]
+    xy = np.vstack([nodes[at, :2], inner]) if len(keys) else np.zeros((0, 2))
+    free = np.concatenate([at > free_from, cut >= free_from])
+    order = np.argsort(keys, kind="stable")
+    return xy[order], free[order]
+
+
+def crossing_points(sk: SkeletonData, z: float) -> tuple[FloatArray, BoolArray]:
+    """The (x, y) of every crossing of the plane z = Z, by yarn then along it, and whether
+    each lies on a warp's free segment."""
+    parts = [_yarn_crossings(yarn, z) for yarn in sk.yarns]
+    if not parts:
+        return np.zeros((0, 2)), np.zeros(0, dtype=bool)
+    return np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Sample points ``(x0 + (i + 0.5) hx, y0 + (j + 0.5) hy)``, aligned with the fell tiles.
+
+    Each fell tile of ``c_mat * pitch`` holds exactly ``per_tile`` samples along each axis,
+    and (x0, y0) is the corner of the tile of cell (0, 0): a tile boundary never passes
+    through a sample. The spacing is the largest that divides the tile and is at most d / 64.
+    """
+
+    x0: float
+    y0: float
+    hx: float
+    hy: float
+    per_tile: tuple[int, int]
+
+    @classmethod
+    def of(cls, machine: Machine, diameter: float) -> Grid:
+        """The grid for yarns of ``diameter`` (> 0) on ``machine``'s fell."""
+        finest = diameter / SAMPLES_PER_DIAMETER
+        tile = (machine.c_mat * machine.pitch_x, machine.c_mat * machine.pitch_y)
+        fx, fy = machine.fell_xy(0, 0)
+        if tile[0] == 0 or tile[1] == 0:  # c_mat 0: every tile is a point
+            return cls(fx, fy, finest, finest, (0, 0))
+        n = (math.ceil(tile[0] / finest), math.ceil(tile[1] / finest))
+        return cls(fx - tile[0] / 2, fy - tile[1] / 2, tile[0] / n[0], tile[1] / n[1], n)
+
+    @property
+    def cell_area(self) -> float:
+        """Area one sample stands for."""
+        return self.hx * self.hy
+
+
+def disc_samples(centres: FloatArray, radius: float, grid: Grid) -> tuple[IntArray, IntArray]:
+    """Indices (i, j) of the distinct samples within ``radius`` of a centre (closed discs)."""
+    h = np.array([grid.hx, grid.hy])
+    origin = np.array([grid.x0, grid.y0])
+    width = math.ceil(2 * radius / min(grid.hx, grid.hy)) + 2
+    steps = np.arange(width)
+    chunk = max(1, CHUNK_SAMPLES // (width * width))
+    found: list[IntArray] = []
+    for start in range(0, len(centres), chunk):
+        c = centres[start : start + chunk] - origin
+        first = np.floor((c - radius) / h - 0.5).astype(np.int64)
+        ix, iy = first[:, :1] + steps, first[:, 1:] + steps  # (n, width) each
+        dx2 = ((ix + 0.5) * grid.hx - c[:, :1]) ** 2
+        dy2 = ((iy + 0.5) * grid.hy - c[:, 1:]) ** 2
+        n, i, j = np.nonzero(dx2[:, :, None] + dy2[:, None, :] <= radius * radius)
+        found.append(np.stack([ix[n, i], iy[n, j]], axis=1))
+    if not found:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    both = np.vstack(found)
+    low = both.min(axis=0)
+    span = int(both[:, 1].max() - low[1]) + 1
+    keys = np.unique((both[:, 0] - low[0]) * span + (both[:, 1] - low[1]))
+    return keys // span + low[0], keys % span + low[1]
+
+
+class Nominal:
+    """A section's body cells at the fell: cell (r, c) is the tile of ``c_mat * pitch``
+    centred on ``Machine.fell_xy(r, c)`` (where the twin starts a warp filled there)."""
+
+    def __init__(self, section: Section, machine: Machine) -> None:
+        self.section = section
+        self.size = (machine.c_mat * machine.pitch_x, machine.c_mat * machine.pitch_y)
+        fx, fy = machine.fell_xy(0, 0)
+        self.origin = (fx - self.size[0] / 2, fy - self.size[1] / 2)
+        self.mask = np.zeros((machine.rows, machine.cols), dtype=bool)
+        for row, col in section.cells:
+            self.mask[row, col] = True
+        rows, cols = np.nonzero(self.mask)
+        self.lo = (int(cols.min()), int(rows.min()))  # tile column, tile row
+        self.hi = (int(cols.max()), int(rows.max()))
+
+    @property
+    def area(self) -> float:
+        """Exact area: one tile per cell."""
+        return len(self.section.cells) * self.size[0] * self.size[1]
+
+    def box(self, axis: int) -> tuple[float, float]:
+        """Extent along x (0) or y (1)."""
+        start, size = self.origin[axis], self.size[axis]
+        return start + self.lo[axis] * size, start + (self.hi[axis] + 1) * size
+
+    def inside(self, ix: IntArray, iy: IntArray, grid: Grid) -> BoolArray:
+        """Which samples (ix, iy) of ``grid`` lie in the shape."""
+        col, row = ix // grid.per_tile[0], iy // grid.per_tile[1]
+        rows, cols = self.mask.shape
+        ok = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
+        found = np.zeros(len(ix), dtype=bool)
+        found[ok] = self.mask[row[ok], col[ok]]
+        return found
+
+    def samples(self, grid: Grid) -> int:
+        """Samples of ``grid`` in the shape: the same number in every tile."""
+        return len(self.section.cells) * grid.per_tile[0] * grid.per_tile[1]
+
+
+def _box(values: FloatArray, pad: float) -> list[float] | None:
+    return [float(values.min()) - pad, float(values.max()) + pad] if len(values) else None
+
+
+def footprint(sk: SkeletonData, z: float, section: Section | None = None) -> dict[str, Any]:
+    """Measured footprint at z = Z, and against the section's nominal shape when given."""
+    points, free = crossing_points(sk, z)
+    radius = sk.diameter / 2
+    grid = Grid.of(sk.machine, sk.diameter) if radius > 0 else None
+    ix = iy = np.zeros(0, dtype=np.int64)
+    if grid is not None and len(points):
+        ix, iy = disc_samples(points, radius, grid)
+    area = len(ix) * grid.cell_area if grid is not None else 0.0
+    out: dict[str, Any] = {
+        "z": z,
+        "crossings": len(points),
+        "free": int(free.sum()),
+        "grid": None if grid is None else [grid.hx, grid.hy],
+        "measured": {
+            "area": area,
+            "x": _box(points[:, 0], radius),
+            "y": _box(points[:, 1], radius),
+        },
+        "nominal": None,
+        "ratio": None,
+        "coverage": None,
+        "outside": None,
+    }
+    if section is not None:
+        out.update(_against(Nominal(section, sk.machine), ix, iy, grid, area))
+    return out
+
+
+def _against(
+    nominal: Nominal, ix: IntArray, iy: IntArray, grid: Grid | None, area: float
+) -> dict[str, Any]:
+    """Nominal shape, measured over nominal area, covered fraction, area outside it."""
+    covered, coverage = 0, None
+    if nominal.area > 0:
+        covered = int(nominal.inside(ix, iy, grid).sum()) if grid is not None else 0
+        coverage = covered / nominal.samples(grid) if grid is not None else 0.0
+    return {
+        "nominal": {
+            "section": nominal.section.spec,
+            "cells": len(nominal.section.cells),
+            "area": nominal.area,
+            "x": list(nominal.box(0)),
+            "y": list(nominal.box(1)),
+        },
+        "ratio": area / nominal.area if nominal.area > 0 else None,
+        "coverage": coverage,
+        "outside": area - covered * grid.cell_area if grid is not None else 0.0,
+    }
