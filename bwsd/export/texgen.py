@@ -70,12 +70,25 @@ def _orthogonal(reference: FloatArray, tangent: FloatArray) -> FloatArray:
     return result
 
 
+def distinct_nodes(nodes: FloatArray) -> FloatArray:
+    """``nodes`` without a node at the same point as the one before it.
+
+    Two contacts at one point give a yarn two nodes there (the model allows it); TexGen
+    refuses a duplicate node, so the .tg3 holds it once.
+    """
+    if len(nodes) < 2:
+        return nodes
+    keep = np.concatenate([[True], np.any(nodes[1:] != nodes[:-1], axis=1)])
+    kept: FloatArray = nodes[keep]
+    return kept
+
+
 def _build_textile(tg: Any, sk: SkeletonData) -> Any:
     textile = tg.CTextile()
     diameter = sk.diameter if sk.diameter > 0 else ZERO_DIAMETER_SECTION
     zero = tg.XYZ(0.0, 0.0, 0.0)
     for yarn in sk.yarns:
-        nodes = np.asarray(yarn.nodes, dtype=np.float64)
+        nodes = distinct_nodes(np.asarray(yarn.nodes, dtype=np.float64))
         ty = tg.CYarn()
         for xyz, up in zip(nodes.tolist(), up_vectors(nodes).tolist(), strict=True):
             ty.AddNode(tg.CNode(tg.XYZ(*xyz), zero, tg.XYZ(*up)))
