@@ -42,6 +42,8 @@ def _common(parser: argparse.ArgumentParser, cycles: bool = True) -> None:
 def _kinds(sub: Any) -> None:
     p = sub.add_parser("twist", help="two yarns twisted in a 2 x 2 matrix")
     p.add_argument("--turns", type=int, default=4, help="full turns (4)")
+    p.add_argument("--takeup", type=float, default=0.0,
+                   help="take-up after each turn, mm (0: none, the worked example)")  # fmt: skip
     _common(p, cycles=False)
     p = sub.add_parser("braid4", help="4-step braid of a rectangular, L, T or I section")
     p.add_argument("--rows", type=int, default=2, help="body rows of a rect section (2)")
@@ -49,7 +51,10 @@ def _kinds(sub: Any) -> None:
     p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
     p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
     p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
-    p.add_argument("--takeup", type=float, default=3.0, help="take-up per cycle, mm (3)")
+    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
+                   help="L/T/I: the machine has the corner line segments (the default; "
+                   "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
+    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
     _common(p)
     p = sub.add_parser("weave-plain", help="plain weave of one warp layer")
     p.add_argument("--warps", type=int, default=10, help="warps in the layer (10)")
@@ -86,7 +91,7 @@ def generate(args: argparse.Namespace) -> Generated:
     """Call the generator the parsed arguments name."""
     machine = _machine_kwargs(args)
     if args.kind == "twist":
-        return twist(args.turns, **machine)
+        return twist(args.turns, takeup=args.takeup, **machine)
     if args.kind == "braid4":
         return braid4(
             args.rows,
@@ -95,6 +100,7 @@ def generate(args: argparse.Namespace) -> Generated:
             shape=args.shape,
             flange=args.flange,
             web=args.web,
+            segments=args.segments,
             takeup=args.takeup,
             **machine,
         )

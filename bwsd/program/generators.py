@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from bwsd.program.braid import BraidPlan, braid4, plan_braid, section_cells, twist
+from bwsd.program.braid import braid4, section, twist
 from bwsd.program.render import Generated, config_toml
 from bwsd.program.weave import shed_clearance, warp_cells, weave_3d, weave_plain
 
@@ -32,12 +32,10 @@ EXAMPLES: dict[str, Callable[[], Generated]] = {
 __all__ = [
     "EXAMPLES",
     "GENERATORS",
-    "BraidPlan",
     "Generated",
     "braid4",
     "config_toml",
-    "plan_braid",
-    "section_cells",
+    "section",
     "shed_clearance",
     "twist",
     "warp_cells",

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import itertools
+import re
 import tomllib
 
 import pytest
 
 from bwsd.config import parse_config
 from bwsd.program import parse_program, validate
+from bwsd.program.braid import section
+from bwsd.program.braidrules import PARTIAL, WHOLE, find_rule, multiplexed, whole_line
+from bwsd.program.carriers import check_rule
 from bwsd.program.generators import (
     Generated,
     braid4,
@@ -17,6 +21,7 @@ from bwsd.program.generators import (
     weave_3d,
     weave_plain,
 )
+from bwsd.twin import simulate
 from bwsd.twin.instructions import Program, Shift, Weft
 from tests.program.occupancy import cycle_states, positions
 
@@ -27,9 +32,13 @@ CASES = {
     "braid-1x4": lambda: braid4(1, 4, cycles=3),
     "braid-3x5": lambda: braid4(3, 5, cycles=3),
     "braid-L": lambda: braid4(shape="L", flange=(2, 6), web=(4, 2), cycles=3),
-    "braid-L-thin": lambda: braid4(shape="L", flange=(1, 3), web=(2, 1), cycles=3),
-    "braid-T": lambda: braid4(shape="T", flange=(2, 7), web=(3, 3), cycles=3),
-    "braid-I": lambda: braid4(shape="I", flange=(1, 6), web=(3, 2), cycles=3),
+    "braid-L-whole": lambda: braid4(shape="L", flange=(2, 6), web=(4, 2), cycles=3, segments=False),
+    "braid-T": lambda: braid4(shape="T", flange=(2, 8), web=(4, 2), cycles=3),
+    "braid-T-whole": lambda: braid4(
+        shape="T", flange=(3, 11), web=(6, 3), cycles=3, segments=False
+    ),
+    "braid-I": lambda: braid4(shape="I", flange=(2, 8), web=(4, 2), cycles=3),
+    "twist-takeup": lambda: twist(2, takeup=2.5),
     "weave-plain-2": lambda: weave_plain(2, cycles=2),
     "weave-plain-11": lambda: weave_plain(11, cycles=2),
     "weave-3d": lambda: weave_3d(3, 4, cycles=2),
@@ -61,8 +70,8 @@ def test_config_text_loads_back_to_the_machine(name: str):
     text = gen.config_toml()
     assert parse_config(tomllib.loads(text)).machine == gen.machine
     keys = [line for line in text.splitlines() if "=" in line and not line.startswith("#")]
-    assert len(keys) == 7
-    assert all("# " in line for line in keys)
+    assert len(keys) == 7 + bool(gen.machine.segments)
+    assert all("# " in line for line in keys if not line.startswith("segments"))
 
 
 def test_twist_is_the_worked_example():
@@ -105,41 +114,145 @@ def test_braid_moves_yarns_to_new_cells_each_cycle():
     assert sum(after[y] != start[y] for y in start) >= len(start) // 2
 
 
-# Carrier counts derived by hand: one edge carrier per run of every shifted line.
+# Carriers, period P and cycles K to mix every carrier through every zone, for the sizes
+# of the cell-grid study of shaped sections (an independent checker gave the same numbers).
 SECTIONS = [
-    ("L", (2, 6), (4, 2), 4 * 2 + 2 * 6 + (4 + 2 - 1) + (6 - 1)),
-    ("L", (1, 4), (3, 1), 3 * 1 + 1 * 4 + (3 + 1 - 1) + (4 - 1)),
-    ("T", (2, 6), (4, 2), 2 * 6 + 4 * 2 + (2 + 4 - 1) + (6 - 2)),
-    ("T", (1, 7), (2, 3), 1 * 7 + 2 * 3 + (1 + 2 - 1) + (7 - 2)),
-    ("I", (2, 6), (4, 2), 2 * 2 * 6 + 4 * 2 + (2 * 2 + 4 - 2) + 2 + 2 * (6 - 2 - 2)),
-    ("I", (1, 8), (3, 3), 2 * 1 * 8 + 3 * 3 + (2 * 1 + 3 - 2) + 3 + 2 * (8 - 3 - 2)),
+    ("L", (2, 6), (4, 2), True, 32, 20, 11),
+    ("L", (3, 10), (7, 3), True, 71, 71, 13),
+    ("T", (2, 8), (4, 2), True, 38, 297, 7),
+    ("I", (2, 8), (4, 2), True, 62, 31, 20),
+    ("L", (2, 6), (4, 2), False, 32, 175, 7),
+    ("L", (3, 10), (7, 3), False, 71, 575, 11),
+    ("T", (2, 8), (4, 2), False, 38, 36, 17),
+    ("T", (3, 11), (6, 3), False, 71, 6138, 16),
 ]
 
 
-@pytest.mark.parametrize(("shape", "flange", "web", "carriers"), SECTIONS)
-def test_section_carriers_and_restoration(shape, flange, web, carriers):
-    gen = braid4(shape=shape, flange=flange, web=web, cycles=2)
+@pytest.mark.parametrize(("shape", "flange", "web", "segments", "carriers", "period", "k"),
+                         SECTIONS)  # fmt: skip
+def test_shaped_rules_mix_every_carrier_through_every_zone(shape, flange, web, segments,
+                                                           carriers, period, k):  # fmt: skip
+    sec = section(shape, flange=flange, web=web)
+    rule, check = find_rule(sec, segments)
+    assert (len(rule.carriers), check.legal, check.periodic) == (carriers, True, True)
+    assert check.mixed and (check.period, check.k) == (period, k)
+    assert rule.partial == segments
+    gen = braid4(shape=shape, flange=flange, web=web, segments=segments, cycles=k)
     program = _parsed(gen)
     assert len(program.fill) == carriers
+    assert f"every carrier in every zone by cycle {k} (period {period})" in gen.program
     states = cycle_states(program, gen.machine)
-    assert states[0] == states[1] == states[2]
+    assert all(state == states[0] for state in states)
+    # Independently of the rule checker: replay the program and see each yarn's zones.
+    visited: list[set[str]] = [set() for _ in program.fill]
+    for upto in range(len(program.instructions) + 1):
+        for yarn, cell in positions(program, gen.machine, upto).items():
+            zone = sec.zone_of(cell)
+            if zone is not None:
+                visited[yarn].add(zone)
+    assert all(set(sec.required) <= zones for zones in visited)
+
+
+STUDY = [  # (shape, flange, web, schedule, axis or None for whole lines, P, K)
+    ("L", (2, 6), (4, 2), 0, (1, 1), 20, 11),
+    ("L", (3, 10), (7, 3), 1, (-1, -1), 525, 13),
+    ("T", (2, 8), (4, 2), 0, (1, -1), 297, 7),
+    ("T", (3, 11), (6, 3), 1, (-1, -1), 71, 19),
+    ("I", (2, 8), (4, 2), 0, (-1, -1), 31, 20),
+    ("I", (3, 9), (5, 3), 1, (1, -1), 95, 23),
+    ("L", (2, 6), (4, 2), 0, None, 175, 7),
+    ("L", (3, 10), (7, 3), 1, None, 575, 11),
+    ("T", (2, 8), (4, 2), 0, None, 36, 17),
+    ("T", (3, 11), (6, 3), 1, None, 6138, 16),
+]
+
+
+@pytest.mark.parametrize(("shape", "flange", "web", "which", "axis", "period", "k"), STUDY)
+def test_the_known_schedules_give_the_numbers_of_the_cell_grid_study(shape, flange, web, which,
+                                                                     axis, period, k):  # fmt: skip
+    """Each schedule on the size it was found for, as an independent checker counted it."""
+    sec = section(shape, flange=flange, web=web)
+    if axis is None:
+        rule = whole_line(sec, 2, WHOLE[shape][which])
+    else:
+        n, rows, cols, _ = PARTIAL[shape][which]
+        rule = multiplexed(sec, n, rows, cols, axis)
+    assert rule is not None
+    check = check_rule(sec, rule)
+    assert check.mixed and (check.period, check.k) == (period, k)
+
+
+def test_holding_the_corner_lines_walls_the_section_and_the_checker_says_so():
+    """The plain 4-step with the corner row and column held (what a whole-line machine
+    falls back to): legal and periodic, but some carriers never leave their zone."""
+    sec = section("L", flange=(2, 6), web=(4, 2))
+    held = {(kind, "corner", 0): ((0, 0), 1) for kind in ("ROW", "COL")}
+    arms = {(kind, "arm", i): ((1, 1), 1) for kind in ("ROW", "COL") for i in (0, 1)}
+    rule = whole_line(sec, 1, {**held, **arms})
+    assert rule is not None and len(rule.carriers) == 30
+    check = check_rule(sec, rule)
+    assert check.legal and check.periodic, check.reason
+    assert (check.period, check.orbits, check.mixed_orbits) == (44, 4, 2)
+    assert not check.mixed and check.k is None
+
+
+@pytest.mark.parametrize("segments", [True, False])
+@pytest.mark.parametrize(
+    ("shape", "flange", "web"),
+    [("L", (2, 6), (4, 2)), ("T", (2, 8), (4, 2)), ("I", (2, 8), (4, 2))],
+)
+def test_every_shaped_braid_is_one_preform_by_its_k_cycles(shape, flange, web, segments):
+    if shape == "I" and not segments:
+        with pytest.raises(ValueError, match="an I section needs a machine with corner segments"):
+            braid4(shape=shape, flange=flange, web=web, segments=False)
+        return
+    k = find_rule(section(shape, flange=flange, web=web), segments)[1].k
+    gen = braid4(shape=shape, flange=flange, web=web, segments=segments, cycles=k)
+    sk = simulate(gen.machine, _parsed(gen)).skeleton()
+    assert contact_groups(sk) == [list(range(len(sk.yarns)))]
+
+
+def contact_groups(sk) -> list[list[int]]:
+    """Yarns joined by contacts, as sorted groups (union-find, apart from bwsd.export)."""
+    parent = list(range(len(sk.yarns)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for c in sk.contacts:
+        parent[root(c.moving_yarn)] = root(c.hit_yarn)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(sk.yarns)):
+        groups.setdefault(root(i), []).append(i)
+    return sorted(groups.values())
 
 
 @pytest.mark.parametrize(
-    ("shape", "flange", "web"),
+    ("shape", "flange", "web", "segments", "message"),
     [
-        ("L", (2, 3), (3, 2)),
-        ("L", (2, 6), (1, 2)),
-        ("T", (2, 5), (3, 2)),
-        ("T", (2, 8), (1, 2)),
-        ("I", (2, 8), (2, 2)),
-        ("X", (2, 8), (3, 2)),
-        ("L", (0, 6), (3, 2)),
+        ("L", (1, 4), (3, 2), True, "nearby sizes that mix"),
+        ("L", (2, 4), (2, 1), True, "nearby sizes that mix"),
+        ("I", (1, 6), (3, 2), True, "nearby sizes that mix: flange 2x6 web 3x2"),
+        ("I", (2, 8), (4, 2), False, "an I section needs a machine with corner segments"),
+        ("X", (2, 8), (3, 2), True, "unknown shape"),
+        ("L", (0, 6), (3, 2), True, "at least 1 x 1"),
+        ("L", (2, 2), (3, 2), True, "flange wider than its web"),
+        ("T", (2, 7), (3, 2), True, "even number"),
     ],
 )
-def test_sections_too_thin_or_unknown_are_refused(shape, flange, web):
-    with pytest.raises(ValueError):
-        braid4(shape=shape, flange=flange, web=web)
+def test_sizes_no_rule_mixes_are_refused_naming_sizes_that_do(shape, flange, web, segments,
+                                                              message):  # fmt: skip
+    with pytest.raises(ValueError) as refused:
+        braid4(shape=shape, flange=flange, web=web, segments=segments)
+    text = str(refused.value)
+    if message:
+        assert message in text
+    for found in re.findall(r"flange (\d+)x(\d+) web (\d+)x(\d+)", text):
+        f, w = (int(found[0]), int(found[1])), (int(found[2]), int(found[3]))
+        assert _parsed(braid4(shape=shape, flange=f, web=w, segments=segments, cycles=1))
 
 
 @pytest.mark.parametrize(

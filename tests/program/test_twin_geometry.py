@@ -54,7 +54,7 @@ GENERATED = {
     "braid-3x4": lambda: braid4(3, 4, cycles=6),
     "braid-L-thin": lambda: braid4(shape="L", flange=(1, 3), web=(2, 1), cycles=6),
     "braid-T": lambda: braid4(shape="T", flange=(2, 6), web=(2, 2), cycles=6),
-    "braid-I": lambda: braid4(shape="I", flange=(1, 6), web=(3, 2), cycles=6),
+    "braid-I": lambda: braid4(shape="I", flange=(2, 8), web=(4, 2), cycles=6),
     "weave-plain-2": lambda: weave_plain(2, cycles=3),
     "weave-3d": lambda: weave_3d(3, 4, cycles=3),
     "weave-3d-wide": lambda: weave_3d(2, 7, cycles=3),
