@@ -24,7 +24,7 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the `slice` and `metrics` subcommands."""
     p = sub.add_parser("slice", help="draw the preform's cross-section at one height")
     _common(p)
-    p.add_argument("--z", type=float, required=True, help="height in the preform frame (mm)")
+    p.add_argument("--z", type=height, required=True, help="height in the preform frame (mm)")
     p.add_argument(
         "-o",
         "--output",
@@ -54,13 +54,24 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument(
         "--z",
-        type=float,
+        type=height,
         default=None,
         metavar="Z",
         help="measure the footprint at this height in the preform frame (mm)",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.set_defaults(handler=run_metrics)
+
+
+def height(text: str) -> float:
+    """A height on the command line: a finite number of mm (``nan`` and ``inf`` refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text[:20]!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite height in mm, got {text[:20]!r}")
+    return value
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -103,13 +114,10 @@ def run_slice(args: argparse.Namespace) -> int:
 
 def run_metrics(args: argparse.Namespace) -> int:
     """`bwsd metrics`: print the metrics as tables or JSON."""
-    from bwsd.export.errors import ExportError
     from bwsd.export.metrics import metrics
     from bwsd.export.mixing import check_fits, section_option, simulate_with_visits
     from bwsd.twin import simulate
 
-    if args.z is not None and not math.isfinite(args.z):
-        raise ExportError(f"--z must be a finite height in mm, got {args.z}")
     named = section_option(args.section) if args.section is not None else None
     machine, program = load_inputs(args.config, args.program)
     named = named or _header_section(args.program)

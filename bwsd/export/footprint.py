@@ -16,46 +16,24 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from bwsd.export.crossings import crossings
 from bwsd.program.sections import Section
 from bwsd.twin.machine import Machine
-from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData, YarnData
+from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
 
 BoolArray = npt.NDArray[np.bool_]
 SAMPLES_PER_DIAMETER = 64  # grid spacing at most d / 64: one disc's area within 1 %
 CHUNK_SAMPLES = 2_000_000  # window samples tested at once (bounds the memory)
 
 
-def _yarn_crossings(yarn: YarnData, z: float) -> tuple[FloatArray, BoolArray]:
-    """The xy and free flags of one yarn's crossings, along the yarn.
-
-    The rule of ``slice.crossings``, which imports matplotlib; a test holds both equal.
-    """
-    nodes = np.asarray(yarn.nodes, dtype=np.float64)
-    dz = nodes[:, 2] - z
-    free_from = len(nodes) - 2 if yarn.kind == "warp" else len(nodes)
-    off = dz != 0
-    neighbour_off = np.zeros_like(off)
-    neighbour_off[1:] |= off[:-1]
-    neighbour_off[:-1] |= off[1:]
-    at = np.flatnonzero(~off & neighbour_off)  # nodes on the plane, not lying in it
-    side = np.sign(dz)
-    cut = np.flatnonzero(side[:-1] * side[1:] < 0)  # segments with ends strictly apart
-    a, b = nodes[cut], nodes[cut + 1]
-    inner = a[:, :2] + ((z - a[:, 2]) / (b[:, 2] - a[:, 2]))[:, None] * (b[:, :2] - a[:, :2])
-    keys = [*at.astype(float).tolist(), *(cut + 0.5).tolist()]
-    xy = np.vstack([nodes[at, :2], inner]) if len(keys) else np.zeros((0, 2))
-    free = np.concatenate([at > free_from, cut >= free_from])
-    order = np.argsort(keys, kind="stable")
-    return xy[order], free[order]
-
-
 def crossing_points(sk: SkeletonData, z: float) -> tuple[FloatArray, BoolArray]:
-    """The (x, y) of every crossing of the plane z = Z, by yarn then along it, and whether
-    each lies on a warp's free segment."""
-    parts = [_yarn_crossings(yarn, z) for yarn in sk.yarns]
-    if not parts:
+    """The (x, y) of every crossing of the plane z = Z (``crossings``), by yarn then along
+    it, and whether each lies on a warp's free segment."""
+    found = crossings(sk, z)
+    if not found:
         return np.zeros((0, 2)), np.zeros(0, dtype=bool)
-    return np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+    xy: FloatArray = np.array([(c.x, c.y) for c in found], dtype=np.float64)
+    return xy, np.array([c.free for c in found], dtype=bool)
 
 
 @dataclass(frozen=True)

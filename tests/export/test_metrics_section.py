@@ -17,7 +17,7 @@ from rich.console import Console
 from bwsd.cli import main
 from bwsd.errors import ProgramError
 from bwsd.export.cli import print_metrics, simulate_program
-from bwsd.export.footprint import Grid, crossing_points, disc_samples, footprint
+from bwsd.export.footprint import Grid, disc_samples, footprint
 from bwsd.export.metrics import groups, metrics, section, unconnected
 from bwsd.export.mixing import section_header
 from bwsd.program.sections import parse_section
@@ -248,8 +248,14 @@ def test_other_section_faults_end_with_one_line(tmp_path, capsys, braid):
     err = run_error(capsys, braid[0], "--config", braid[1], "--section", "L:2x6:4x2")
     assert err == ("bwsd: error: section L:2x6:4x2 does not fit the 4 x 4 matrix of the config: "
                    "its cell (1, 4) lies outside\n")  # fmt: skip
-    err = run_error(capsys, braid[0], "--config", braid[1], "--z", "nan")
-    assert err == "bwsd: error: --z must be a finite height in mm, got nan\n"
+    for command in ("metrics", "slice"):  # argparse's usage, then one line naming --z
+        with pytest.raises(SystemExit) as stop:
+            main([command, braid[0], "--config", braid[1], "--z", "nan", "-o", "x.png"][
+                 : 6 if command == "metrics" else 8])  # fmt: skip
+        assert stop.value.code == 2
+        err = capsys.readouterr().err
+        assert err.endswith(f"bwsd {command}: error: argument --z: must be a finite height in "
+                            "mm, got 'nan'\n")  # fmt: skip
 
 
 # ----- footprint -----
@@ -319,17 +325,6 @@ def test_centrelines_have_no_footprint(centreline):
     assert result["crossings"] == 3
     assert (result["grid"], result["measured"]["area"]) == (None, 0.0)
     assert (result["coverage"], result["ratio"], result["outside"]) == (0.0, 0.0, 0.0)
-
-
-def test_crossings_are_those_of_slice(braid):
-    slice_ = pytest.importorskip("bwsd.export.slice")
-    sk, _ = simulate_program(braid[1], braid[0])
-    heights = [0.0, 50.0, 100.0, 179.0, float(sk.yarns[3].nodes[5][2])]  # the last: a node
-    for z in heights:
-        points, free = crossing_points(sk, z)
-        expected = slice_.crossings(sk, z)
-        assert points.tolist() == [[c.x, c.y] for c in expected]
-        assert free.tolist() == [c.free for c in expected]
 
 
 # ----- output -----
