@@ -9,7 +9,7 @@ from bwsd.program.render import Generated
 from bwsd.program.sections import SHAPES, Block, Section, rect, shaped
 from bwsd.twin.machine import Machine
 
-__all__ = ["SHAPES", "braid4", "describe", "layout", "section", "twist"]
+__all__ = ["SHAPES", "Block", "braid4", "braid_rule", "describe", "layout", "section", "twist"]
 
 
 def twist(
@@ -51,7 +51,8 @@ def section(shape: str = "rect", rows: int = 2, cols: int = 2, flange: Block = (
     return shaped(shape, flange, web)
 
 
-def _rule(sec: Section, segments: bool) -> tuple[Rule, RuleCheck]:
+def braid_rule(sec: Section, segments: bool) -> tuple[Rule, RuleCheck]:
+    """The rule ``find_rule`` gives, or ValueError naming nearby sizes that mix."""
     found = find_rule(sec, segments)
     if found is not None:
         return found
@@ -94,7 +95,7 @@ def braid4(
     if takeup <= 0:
         raise ValueError("take-up must be positive")
     sec = section(shape, rows, cols, flange, web)
-    rule, check = _rule(sec, segments)
+    rule, check = braid_rule(sec, segments)
     size = sec.size
     machine = Machine(*size, pitch, pitch, d_mat, c_mat, diameter, segments=rule.segments)
     if shape == "rect":

@@ -10,6 +10,7 @@ from typing import Any
 from bwsd.errors import BwsdError
 from bwsd.program.braid import SHAPES as BRAID_SHAPES
 from bwsd.program.braid import braid4, twist
+from bwsd.program.braidweave import ANGLES, braid_weave
 from bwsd.program.render import Generated
 from bwsd.program.weave import SHAPES as WEAVE_SHAPES
 from bwsd.program.weave import weave_3d, weave_plain
@@ -25,6 +26,19 @@ def _block(text: str) -> tuple[int, int]:
     if not sep or not rows.isdigit() or not cols.isdigit():
         raise argparse.ArgumentTypeError(f"expected ROWSxCOLS, got {text!r}")
     return int(rows), int(cols)
+
+
+def _angles(text: str) -> tuple[int, ...]:
+    """Weft angles written 0,90,45,-45."""
+    try:
+        angles = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected angles like 0,90,45,-45, got {text!r}"
+        ) from None
+    if not angles or any(a not in ANGLES for a in angles):
+        raise argparse.ArgumentTypeError(f"weft angles are among {', '.join(map(str, ANGLES))}")
+    return angles
 
 
 def _common(parser: argparse.ArgumentParser, cycles: bool = True) -> None:
@@ -56,6 +70,20 @@ def _kinds(sub: Any) -> None:
                    "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
     p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
     _common(p)
+    p = sub.add_parser("braid-weave", help="4-step braid with a layer of wefts every N cycles")
+    p.add_argument("--rows", type=int, default=3, help="body rows of a rect section (3)")
+    p.add_argument("--cols", type=int, default=3, help="body columns of a rect section (3)")
+    p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
+    p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
+    p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
+    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
+                   help="L/T/I: the machine has the corner segments (the default)")  # fmt: skip
+    p.add_argument("--weft-every", type=int, default=2, help="cycles between weft layers (2)")
+    p.add_argument("--angles", type=_angles, default=ANGLES,
+                   help="weft angles, taken in turn, layer by layer (0,90,45,-45)")  # fmt: skip
+    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
+    _common(p)
+    p.set_defaults(cycles=8)
     p = sub.add_parser("weave-plain", help="plain weave of one warp layer")
     p.add_argument("--warps", type=int, default=10, help="warps in the layer (10)")
     p.add_argument("--takeup", type=float, default=4.0, help="take-up per pick, mm (4)")
@@ -101,6 +129,20 @@ def generate(args: argparse.Namespace) -> Generated:
             flange=args.flange,
             web=args.web,
             segments=args.segments,
+            takeup=args.takeup,
+            **machine,
+        )
+    if args.kind == "braid-weave":
+        return braid_weave(
+            args.rows,
+            args.cols,
+            args.cycles,
+            shape=args.shape,
+            flange=args.flange,
+            web=args.web,
+            segments=args.segments,
+            weft_every=args.weft_every,
+            angles=args.angles,
             takeup=args.takeup,
             **machine,
         )

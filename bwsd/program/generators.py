@@ -9,12 +9,14 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from bwsd.program.braid import braid4, section, twist
+from bwsd.program.braidweave import braid_weave
 from bwsd.program.render import Generated, config_toml
-from bwsd.program.weave import shed_clearance, warp_cells, weave_3d, weave_plain
+from bwsd.program.weave import warp_cells, weave_3d, weave_plain
 
 GENERATORS: dict[str, Callable[..., Generated]] = {
     "twist": twist,
     "braid4": braid4,
+    "braid-weave": braid_weave,
     "weave-plain": weave_plain,
     "weave-3d": weave_3d,
 }
@@ -34,9 +36,9 @@ __all__ = [
     "GENERATORS",
     "Generated",
     "braid4",
+    "braid_weave",
     "config_toml",
     "section",
-    "shed_clearance",
     "twist",
     "warp_cells",
     "weave_3d",

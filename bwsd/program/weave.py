@@ -2,62 +2,22 @@
 
 from __future__ import annotations
 
-import math
-
 from bwsd.program import render
 from bwsd.program.render import Cell, Generated
+from bwsd.program.wefts import Item, Shed, woven
+from bwsd.twin.instructions import Axis, Shift, TakeUp, as_moves
 from bwsd.twin.machine import Machine
 
-# Wefts go in at this fraction of d_mat above the fell: near the guides, where the warps
-# opened by a shed have drifted furthest from the previous weft.
-WEFT_LEVEL = 0.9
-# The predicted clearance must exceed the yarn diameter by this factor.
-CLEARANCE_MARGIN = 1.25
 SHAPES = ("rect", "U")
+CYCLE_3D = "column shed + wefts along x, row shed + wefts along y, twice"
 
 
-def shed_clearance(machine: Machine, takeup: float, z: float, span: float) -> float:
-    """Predicted smallest distance (centre lines, mm) between a new weft and an opened warp.
-
-    A warp rests on the previous weft, ``takeup`` below the new one, at most one diameter
-    on the wrong side; opening the shed moves its guide one pitch, and the weft sees the
-    warp where the line from that rest to the guide crosses its height. On the first
-    picks the warps also still lean towards the convergence point by up to
-    (1 - fan) * ``span``, span the largest guide offset from it along the shed.
-    """
-    d = machine.yarn_diameter
-    p = min(machine.pitch_x, machine.pitch_y)
-    length = machine.d_mat - z + takeup
-    reach = p + d
-    tilt = length / math.hypot(length, reach)
-    steady = (reach * takeup / length - d) * tilt
-    fan = machine.c_mat + (1 - machine.c_mat) * z / machine.d_mat
-    drift = (1 - fan) * (1 - takeup / length) * span
-    early = (p * takeup / length - drift) * tilt
-    return min(steady, early)
-
-
-def _check_shed(machine: Machine, takeup: float, z: float, span: float) -> None:
-    if takeup <= 0:
-        raise ValueError("take-up must be positive")
-    clearance = shed_clearance(machine, takeup, z, span)
-    need = CLEARANCE_MARGIN * machine.yarn_diameter
-    if clearance <= need:
-        raise ValueError(
-            f"the shed would not clear the weft (predicted {clearance:.2f} mm, need more"
-            f" than {need:.2f} mm): raise the take-up or the pitch"
-        )
-
-
-def _pick(axis: str, moves: list[tuple[int, int]], wefts: list[str], takeup: float) -> list[str]:
-    """Open a shed, insert its wefts, close the shed, take up."""
+def _pick(axis: Axis, moves: list[tuple[int, int]], wefts: list[Shed],
+          takeup: float) -> list[Item]:  # fmt: skip
+    """Open a shed, insert its wefts (each placed near the fell), close the shed, take up."""
     closing = [(i, -k) for i, k in moves]
-    return [
-        render.shift(axis, moves),
-        *wefts,
-        render.shift(axis, closing),
-        f"TAKEUP {render.num(takeup)}",
-    ]
+    return [Shift(axis, as_moves(moves)), *wefts, Shift(axis, as_moves(closing)),
+            TakeUp(takeup)]  # fmt: skip
 
 
 def weave_plain(
@@ -73,14 +33,17 @@ def weave_plain(
     """Plain weave: one layer of warps in row 1 of a 3-row matrix, two picks per cycle."""
     if warps < 2 or cycles < 1:
         raise ValueError("a plain weave needs at least 2 warps and 1 cycle")
+    if takeup <= 0:
+        raise ValueError("take-up must be positive")
     machine = Machine(3, warps, pitch, pitch, d_mat, c_mat, diameter)
-    z = WEFT_LEVEL * d_mat
-    _check_shed(machine, takeup, z, 0.0)
-    line = render.weft((warps - 1) / 2 * pitch, pitch, z, 0, (warps + 1) * pitch)
-    body: list[str] = []
-    for sign in (1, -1):
+    cycle: list[Item] = []
+    for sign, name in ((1, "first pick"), (-1, "second pick")):
         moves = [(c, sign if c % 2 == 0 else -sign) for c in range(warps)]
-        body += _pick("col", moves, [line], takeup)
+        sides = [tuple((1 + k, c) for c, k in moves if k == way) for way in (1, -1)]
+        cycle += _pick(
+            "col", moves, [Shed(0, sides[0], sides[1], f"the weft of the {name}")], takeup
+        )
+    fill = tuple((1, c) for c in range(warps))
     command = " ".join(
         [
             "bwsd program weave-plain",
@@ -93,8 +56,8 @@ def weave_plain(
     title = f"Plain weave, {warps} warps, {cycles} cycles of two picks"
     lines = [
         *render.header(title, command, machine),
-        *render.fill_block(3, warps, [(1, c) for c in range(warps)]),
-        *render.repeat(cycles, body, "even columns up, weft, close; then down"),
+        *render.fill_block(3, warps, fill),
+        *woven(machine, fill, [cycle] * cycles, "even columns up, weft, close; then down"),
     ]
     return Generated("weave-plain", title, command, machine, "\n".join(lines) + "\n")
 
@@ -125,32 +88,37 @@ def warp_cells(
     return frozenset((i, j) for i, j in full if j < leg or j >= warps - leg or i >= layers - base)
 
 
-def _wefts(grid: frozenset[Cell], axis: int, z: float, pitch: float) -> list[str]:
-    """One weft per run of warps of each grid row (axis 0, along x) or column (axis 1)."""
+def _wefts(grid: frozenset[Cell], axis: int, signs: dict[int, int]) -> list[Shed]:
+    """One weft per run of warps of each grid row (axis 0, along x) or column (axis 1),
+    between the warps the shed moved one way and those it moved the other (``signs``: the
+    shift of each warp column for axis 0, of each warp row for axis 1)."""
     members: dict[int, list[int]] = {}
     for cell in grid:
         members.setdefault(cell[axis], []).append(cell[1 - axis])
     out = []
     for line in sorted(members):
         for lo, hi in render.runs(members[line]):
-            across = (lo + hi + 1) * pitch
-            level = (2 * line + 1) * pitch
-            length = (2 * (hi - lo) + 2) * pitch
-            x, y = (across, level) if axis == 0 else (level, across)
-            out.append(render.weft(x, y, z, 90 * axis, length))
+            sides: list[list[Cell]] = [[], []]
+            for j in range(lo, hi + 1):
+                k = signs[j]
+                warp = (2 * line + 1 + k, 2 * j + 1) if axis == 0 else (2 * j + 1, 2 * line + 1 + k)
+                sides[k > 0].append(warp)
+            name = f"{'layer' if axis == 0 else 'column'} {line} weft (warps {lo}..{hi})"
+            out.append(Shed(90 * axis, tuple(sides[0]), tuple(sides[1]), name))
     return out
 
 
-def _cycle_3d(grid: frozenset[Cell], z: float, pitch: float, takeup: float) -> list[str]:
+def _cycle_3d(grid: frozenset[Cell], takeup: float) -> list[Item]:
     rows = sorted({i for i, _ in grid})
     cols = sorted({j for _, j in grid})
-    x_wefts, y_wefts = _wefts(grid, 0, z, pitch), _wefts(grid, 1, z, pitch)
-    body: list[str] = []
+    body: list[Item] = []
     for sign in (1, -1):
-        col_moves = [(2 * j + 1, sign if j % 2 == 0 else -sign) for j in cols]
-        row_moves = [(2 * i + 1, sign if i % 2 == 0 else -sign) for i in rows]
-        body += _pick("col", col_moves, x_wefts, takeup)
-        body += _pick("row", row_moves, y_wefts, takeup)
+        col_signs = {j: sign if j % 2 == 0 else -sign for j in cols}
+        row_signs = {i: sign if i % 2 == 0 else -sign for i in rows}
+        col_moves = [(2 * j + 1, k) for j, k in col_signs.items()]
+        row_moves = [(2 * i + 1, k) for i, k in row_signs.items()]
+        body += _pick("col", col_moves, _wefts(grid, 0, col_signs), takeup)
+        body += _pick("row", row_moves, _wefts(grid, 1, row_signs), takeup)
     return body
 
 
@@ -176,10 +144,10 @@ def weave_3d(
     """
     if cycles < 1:
         raise ValueError("cycles must be at least 1")
+    if takeup <= 0:
+        raise ValueError("take-up must be positive")
     grid = warp_cells(shape, layers, warps, leg, base)
     machine = Machine(2 * layers + 1, 2 * warps + 1, pitch, pitch, d_mat, c_mat, diameter)
-    z = WEFT_LEVEL * d_mat
-    _check_shed(machine, takeup, z, (max(layers, warps) - 1) * pitch)
     what = [render.option("layers", layers), render.option("warps", warps)]
     if shape == "U":
         what += [
@@ -200,14 +168,10 @@ def weave_3d(
         f"Dual-direction 3D weave, {'U section of ' if shape == 'U' else ''}"
         f"{layers} layers x {warps} warps ({len(grid)} warps), {cycles} cycles"
     )
-    cells = [(2 * i + 1, 2 * j + 1) for i, j in grid]
+    fill = tuple(sorted((2 * i + 1, 2 * j + 1) for i, j in grid))
     lines = [
         *render.header(title, command, machine),
-        *render.fill_block(machine.rows, machine.cols, cells),
-        *render.repeat(
-            cycles,
-            _cycle_3d(grid, z, pitch, takeup),
-            "column shed + wefts along x, row shed + wefts along y, twice",
-        ),
+        *render.fill_block(machine.rows, machine.cols, fill),
+        *woven(machine, fill, [_cycle_3d(grid, takeup)] * cycles, CYCLE_3D),
     ]
     return Generated("weave-3d", title, command, machine, "\n".join(lines) + "\n")

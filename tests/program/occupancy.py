@@ -48,3 +48,21 @@ def positions(program: Program, machine: Machine, upto: int) -> dict[int, Cell]:
         if isinstance(instruction, Shift):
             cases = apply(cases, instruction, machine)
     return cases
+
+
+def contact_groups(sk) -> list[list[int]]:
+    """Yarns joined by contacts, as sorted groups (union-find, apart from bwsd.export)."""
+    parent = list(range(len(sk.yarns)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for c in sk.contacts:
+        parent[root(c.moving_yarn)] = root(c.hit_yarn)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(sk.yarns)):
+        groups.setdefault(root(i), []).append(i)
+    return sorted(groups.values())

@@ -8,7 +8,7 @@ import pytest
 
 from bwsd.config import load_config
 from bwsd.program import load_program, parse_program
-from bwsd.program.generators import Generated, braid4, shed_clearance, weave_3d, weave_plain
+from bwsd.program.generators import Generated, braid4, weave_3d, weave_plain
 from bwsd.twin.instructions import Program
 from bwsd.twin.machine import Machine
 
@@ -68,16 +68,3 @@ GENERATED = {
 def test_generated_every_yarn_interlaces(name: str):
     gen: Generated = GENERATED[name]()
     assert _untouched(gen.machine, parse_program(gen.program)) == []
-
-
-@pytest.mark.parametrize("takeup", [2.0, 2.5])
-def test_predicted_closed_shed_is_closed_on_the_twin(takeup, monkeypatch):
-    """Below the predicted clearance the twin refuses the weft: the prediction is not loose."""
-    from bwsd.errors import ShedClosedError
-    from bwsd.program import weave
-
-    monkeypatch.setattr(weave, "_check_shed", lambda *args: None)
-    gen = weave_plain(cycles=2, takeup=takeup)
-    assert shed_clearance(gen.machine, takeup, 90.0, 0.0) < gen.machine.yarn_diameter
-    with pytest.raises(ShedClosedError):
-        _untouched(gen.machine, parse_program(gen.program))
