@@ -299,3 +299,14 @@ def test_a_shed_too_narrow_for_the_yarn_is_refused_naming_the_weft():
     with pytest.raises(ValueError, match=r"cycle 1, the weft of the first pick: no height "
                        "between the fell and the guides where the shed is open"):  # fmt: skip
         weave_plain(4, cycles=1, diameter=10.0)
+
+
+def test_twist_takes_up_after_every_turn():
+    gen = twist(3, takeup=2.5)
+    program = _parsed(gen)
+    takeups = [i for i in program.instructions if not isinstance(i, Shift)]
+    assert [t.length for t in takeups] == [2.5] * 3  # type: ignore[union-attr]
+    assert program.cycle_length == 5
+    assert "--takeup 2.5" in gen.command
+    assert simulate(gen.machine, program).skeleton().takeup == 7.5
+    assert twist(4).program == twist(4, takeup=0).program  # the worked example unchanged
