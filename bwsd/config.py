@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from bwsd.errors import ConfigError, TwinError
+from bwsd.limits import MODBUS_MAX_AXES, MODBUS_MAX_CELLS
 from bwsd.twin.exact import MIN_LENGTH, decimal_float
 from bwsd.twin.machine import Machine, Segment
 
@@ -133,7 +134,6 @@ SCHEMA: dict[str, dict[str, Spec]] = {
     },
 }
 REQUIRED = ("machine",)
-MODBUS_MAX_CELLS = 65535  # occupancy sensors are discrete inputs 0 .. R*C-1, e-stop R*C
 
 
 @dataclass(frozen=True)
@@ -250,10 +250,8 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
     _check_geometry(machine, path)
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)
-    elif machine.rows * machine.cols > MODBUS_MAX_CELLS:
-        raise ConfigError(f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
-                          f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
-                          key="backend")  # fmt: skip
+    else:
+        _check_modbus_map(machine, path)
     return Config(machine=machine, path=path, tables=tables)
 
 
@@ -268,6 +266,21 @@ def _check_geometry(machine: Machine, path: str) -> None:
     if 0 < machine.yarn_diameter < float(MIN_LENGTH):
         raise ConfigError(f"must be 0 or at least {float(MIN_LENGTH):g} mm", path=path,
                           table="yarn", key="diameter")  # fmt: skip
+
+
+def _check_modbus_map(machine: Machine, path: str) -> None:
+    """Occupancy sensors are discrete inputs 0 .. R*C-1 (e-stop R*C); an axis block per row,
+    column, weft and take-up axis and segment, ending at holding register 65535."""
+    if machine.rows * machine.cols > MODBUS_MAX_CELLS:
+        raise ConfigError(f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
+                          f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
+                          key="backend")  # fmt: skip
+    axes = machine.rows + machine.cols + 3 + len(machine.segments)
+    if axes > MODBUS_MAX_AXES:  # only segments get there while rows and cols are <= 1000
+        raise ConfigError(f"the Modbus map addresses at most {MODBUS_MAX_AXES} axes, the machine "
+                          f"has {axes} ({machine.rows} rows, {machine.cols} cols, 3 weft and "
+                          f"take-up axes, {len(machine.segments)} segments)", path=path,
+                          table="machine", key="segments" if machine.segments else "")  # fmt: skip
 
 
 def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:

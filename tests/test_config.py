@@ -104,6 +104,24 @@ def test_modbus_map_limits_the_matrix():
         parse_config(huge)
 
 
+def _row_segments(rows: int, per_row: int) -> list[str]:
+    return [f"ROW {r}[{2 * j}..{2 * j + 1}]" for r in range(rows) for j in range(per_row)]
+
+
+def test_modbus_map_limits_the_axes_segments_included():
+    """An axis block per row, column, weft and take-up axis and segment: at most 4089."""
+    square = {**GOOD["machine"], "rows": 100, "cols": 100}
+    fits = parse_config({"machine": {**square, "segments": _row_segments(100, 39)[:3886]}})
+    assert len(fits.machine.segments) == 3886  # 100 + 100 + 3 + 3886 = 4089 axes
+    over = {"machine": {**square, "segments": _row_segments(100, 39)[:3887]}}
+    with pytest.raises(ConfigError, match=r"\[machine\.segments\]: the Modbus map addresses at "
+                       r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 3 weft and "
+                       r"take-up axes, 3887 segments\)"):  # fmt: skip
+        parse_config(over)
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 4090 axes \(3887 of"):
+        parse_config({**over, "fieldbus": {"backend": "canopen"}})  # the bus's own limit
+
+
 def test_daemon_tables_defaults_and_flags():
     cfg = parse_config(GOOD)
     assert cfg.table("api")["open_reads"] is False and cfg.table("plc")["enabled"] is True

@@ -28,6 +28,12 @@ from bwsd.fieldbus.base import (
     FieldbusTimeout,
     MachineState,
 )
+from bwsd.limits import (
+    MODBUS_AXIS_BASE,
+    MODBUS_AXIS_STRIDE,
+    MODBUS_MAX_AXES,
+    MODBUS_MAX_CELLS,
+)
 from bwsd.twin.machine import Machine
 
 if TYPE_CHECKING:
@@ -38,7 +44,7 @@ MAP_VERSION = 2  # 2: registers +10 .. +13 of a shift axis's block say which cel
 REG_VERSION, REG_AXES, REG_ROWS, REG_COLS, REG_STATUS, REG_COMMAND = range(6)
 MACHINE_ESTOP, MACHINE_FAULTED, MACHINE_BUSY = 1, 2, 4  # bits of REG_STATUS
 CMD_NONE, CMD_RESET, CMD_QUICK_STOP, CMD_HOME = 0, 1, 2, 3
-AXIS_BASE, AXIS_STRIDE = 100, 16
+AXIS_BASE, AXIS_STRIDE = MODBUS_AXIS_BASE, MODBUS_AXIS_STRIDE
 OFF_TARGET, OFF_SEQ, OFF_STATUS, OFF_POSITION, OFF_DONE, OFF_FAULT, OFF_LAST = 0, 2, 3, 4, 6, 7, 8
 OFF_SHAPE = 10  # +10 kind, +11 line, +12 first cell, +13 last cell (shift axes)
 SHAPE_WORDS = 4
@@ -47,8 +53,7 @@ AXIS_BUSY, AXIS_FAULTED, AXIS_HOMED = 1, 2, 4  # bits of OFF_STATUS
 SEQ_MAX = 0x7FFF
 MAX_READ_REGISTERS = 125  # per request, by the Modbus specification
 MAX_READ_BITS = 2000
-MAX_CELLS = 0xFFFF  # discrete inputs 0 .. 65535 hold the cells and the e-stop
-MAX_AXES = (0x10000 - AXIS_BASE) // AXIS_STRIDE  # holding registers end at 65535
+MAX_CELLS, MAX_AXES = MODBUS_MAX_CELLS, MODBUS_MAX_AXES  # bwsd.limits: checked at config load
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
 
