@@ -41,6 +41,26 @@ def _angles(text: str) -> tuple[int, ...]:
     return angles
 
 
+def _section(p: argparse.ArgumentParser, side: int) -> None:
+    """The braided section's options (a rect of ``side`` x ``side`` by default)."""
+    p.add_argument("--rows", type=int, default=side, help=f"body rows of a rect section ({side})")
+    p.add_argument("--cols", type=int, default=side,
+                   help=f"body columns of a rect section ({side})")  # fmt: skip
+    p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
+    p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
+    p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
+    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
+                   help="L/T/I: the machine has the corner line segments (the default; "
+                   "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
+    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
+
+
+def _braided(args: argparse.Namespace) -> dict[str, Any]:
+    """The section and take-up arguments of braid4 and braid-weave."""
+    names = ("shape", "flange", "web", "segments", "takeup")
+    return {n: getattr(args, n) for n in names}
+
+
 def _common(parser: argparse.ArgumentParser, cycles: bool = True) -> None:
     if cycles:
         parser.add_argument("--cycles", type=int, default=10, help="machine cycles (10)")
@@ -60,28 +80,13 @@ def _kinds(sub: Any) -> None:
                    help="take-up after each turn, mm (0: none, the worked example)")  # fmt: skip
     _common(p, cycles=False)
     p = sub.add_parser("braid4", help="4-step braid of a rectangular, L, T or I section")
-    p.add_argument("--rows", type=int, default=2, help="body rows of a rect section (2)")
-    p.add_argument("--cols", type=int, default=2, help="body columns of a rect section (2)")
-    p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
-    p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
-    p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
-    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
-                   help="L/T/I: the machine has the corner line segments (the default; "
-                   "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
-    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
+    _section(p, 2)
     _common(p)
     p = sub.add_parser("braid-weave", help="4-step braid with a layer of wefts every N cycles")
-    p.add_argument("--rows", type=int, default=3, help="body rows of a rect section (3)")
-    p.add_argument("--cols", type=int, default=3, help="body columns of a rect section (3)")
-    p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
-    p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
-    p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
-    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
-                   help="L/T/I: the machine has the corner segments (the default)")  # fmt: skip
+    _section(p, 3)
     p.add_argument("--weft-every", type=int, default=2, help="cycles between weft layers (2)")
     p.add_argument("--angles", type=_angles, default=ANGLES,
                    help="weft angles, taken in turn, layer by layer (0,90,45,-45)")  # fmt: skip
-    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
     _common(p)
     p.set_defaults(cycles=8)
     p = sub.add_parser("weave-plain", help="plain weave of one warp layer")
@@ -121,31 +126,10 @@ def generate(args: argparse.Namespace) -> Generated:
     if args.kind == "twist":
         return twist(args.turns, takeup=args.takeup, **machine)
     if args.kind == "braid4":
-        return braid4(
-            args.rows,
-            args.cols,
-            args.cycles,
-            shape=args.shape,
-            flange=args.flange,
-            web=args.web,
-            segments=args.segments,
-            takeup=args.takeup,
-            **machine,
-        )
+        return braid4(args.rows, args.cols, args.cycles, **_braided(args), **machine)
     if args.kind == "braid-weave":
-        return braid_weave(
-            args.rows,
-            args.cols,
-            args.cycles,
-            shape=args.shape,
-            flange=args.flange,
-            web=args.web,
-            segments=args.segments,
-            weft_every=args.weft_every,
-            angles=args.angles,
-            takeup=args.takeup,
-            **machine,
-        )
+        return braid_weave(args.rows, args.cols, args.cycles, weft_every=args.weft_every,
+                           angles=args.angles, **_braided(args), **machine)  # fmt: skip
     if args.kind == "weave-plain":
         return weave_plain(args.warps, args.cycles, takeup=args.takeup, **machine)
     return weave_3d(
