@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from itertools import pairwise
 from typing import Any, Literal
 
 
@@ -57,19 +58,19 @@ class Machine:
         if self.yarn_diameter < 0:
             raise ValueError("yarn diameter must not be negative")
         object.__setattr__(self, "segments", tuple(self.segments))
-        for i, seg in enumerate(self.segments):
-            self._check_segment(seg, self.segments[:i])
+        for seg in self.segments:
+            self._check_segment(seg)
+        overlap = first_overlap(self.segments)
+        if overlap is not None:
+            raise ValueError(f"segment {overlap[0].text()} overlaps {overlap[1].text()}")
 
-    def _check_segment(self, seg: Segment, before: tuple[Segment, ...]) -> None:
+    def _check_segment(self, seg: Segment) -> None:
         lines, along = (self.rows, self.cols) if seg.axis == "row" else (self.cols, self.rows)
         if not 0 <= seg.line < lines:
             raise ValueError(f"segment {seg.text()}: {seg.axis} {seg.line} is outside the "
                              f"matrix (0 to {lines - 1})")  # fmt: skip
         if not 0 <= seg.lo < seg.hi < along:
             raise ValueError(f"segment {seg.text()}: needs 0 <= first < last <= {along - 1}")
-        for other in before:
-            if seg.overlaps(other):
-                raise ValueError(f"segment {seg.text()} overlaps {other.text()}")
 
     def as_dict(self) -> dict[str, Any]:
         """The machine as plain data (snapshots, skeleton JSON); ``segments`` only when it
@@ -111,6 +112,22 @@ class Machine:
         ox, oy = self.convergence_xy()
         gx, gy = self.guide_xy(row, col)
         return ox + self.c_mat * (gx - ox), oy + self.c_mat * (gy - oy)
+
+
+def first_overlap(segments: Sequence[Segment]) -> tuple[Segment, Segment] | None:
+    """Two segments that share a cell, the later declared first (of the pairs found, the one
+    declared earliest); None when no two do.
+
+    Sorted by line and first cell, a segment that overlaps any other overlaps its neighbour
+    in that order, so comparing neighbours finds every line with an overlap: O(n log n).
+    """
+    order = sorted(range(len(segments)), key=segments.__getitem__)  # axis, line, first, last
+    found = [(max(i, j), min(i, j)) for i, j in pairwise(order)
+             if segments[i].overlaps(segments[j])]  # fmt: skip
+    if not found:
+        return None
+    later, earlier = min(found)
+    return segments[later], segments[earlier]
 
 
 def unknown_segment(machine: Machine, axis: str, line: int, span: tuple[int, int]) -> str:
