@@ -1,6 +1,7 @@
 // The machine matrix: rows × cols cells, row 0 at the top as in the program's FILL block,
 // each cell showing the id of the warp whose case is in it, in that yarn's colour. The
-// line(s) the next ROW/COL instruction moves are highlighted with an arrow and their step.
+// cells the next ROW/COL instruction moves (whole lines, or a segment's span of one) are
+// highlighted, with an arrow and the step of each line.
 
 import { css, textOn } from './colours.js';
 
@@ -139,8 +140,9 @@ export class MatrixGrid {
   }
 
   /**
-   * Highlight the lines the next instruction moves: `instruction` is the next one
-   * ({kind: "shift", axis, moves: [[line, k], ...]}) or anything else for none.
+   * Highlight the cells the next instruction moves: `instruction` is the next one
+   * ({kind: "shift", axis, moves: [[line, k], ...]}, a move on a segment being
+   * [line, k, first, last]) or anything else for none.
    */
   setNext(instruction) {
     this.shift = instruction && instruction.kind === 'shift' ? instruction : null;
@@ -152,28 +154,71 @@ export class MatrixGrid {
     this.highlights.replaceChildren();
     this.arrows.replaceChildren();
     if (!this.shift || !this.rows) return;
-    const { axis, moves } = this.shift;
-    const gridRight = MARGIN + this.cols * CELL;
-    const gridBottom = MARGIN + this.rows * CELL;
-    for (const [line, k] of moves) {
-      if (axis === 'row') {
-        // Row `line` moves along its columns: → for +k, ← for -k, in the right margin.
-        if (line < 0 || line >= this.rows) continue;
-        const y = MARGIN + line * CELL;
-        this.highlights.append(svg('rect', { x: MARGIN - 2, y: y - 1, width: this.cols * CELL + 4, height: CELL + 2, class: 'moving' }));
-        const arrow = svg('text', { x: gridRight + 3, y: y + CELL / 2, class: 'arrow row-arrow' }, `${k > 0 ? '→' : '←'}\u2009${signed(k)}`);
-        arrow.append(svg('title', {}, `row ${line} moves ${signed(k)} along its columns`));
-        this.arrows.append(arrow);
-      } else {
-        // Column `line` moves along its rows: ↓ for +k (towards higher rows), ↑ for -k.
-        if (line < 0 || line >= this.cols) continue;
-        const x = MARGIN + line * CELL;
-        this.highlights.append(svg('rect', { x: x - 1, y: MARGIN - 2, width: CELL + 2, height: this.rows * CELL + 4, class: 'moving' }));
-        const arrow = svg('text', { x: x + CELL / 2, y: gridBottom + 11, class: 'arrow col-arrow' }, k > 0 ? '↓' : '↑');
-        const step = svg('text', { x: x + CELL / 2, y: gridBottom + 23, class: 'arrow col-arrow' }, signed(k));
-        step.append(svg('title', {}, `column ${line} moves ${signed(k)} along its rows`));
-        this.arrows.append(arrow, step);
-      }
+    const row = this.shift.axis === 'row';
+    const [lines, along] = row ? [this.rows, this.cols] : [this.cols, this.rows];
+    for (const [line, spans] of movesByLine(this.shift.moves, along)) {
+      if (line < 0 || line >= lines) continue;
+      for (const { first, last } of spans) this.highlights.append(this.band(row, line, first, last));
+      this.arrows.append(...this.arrow(row, line, spans, along));
     }
   }
+
+  /**
+   * The highlight over cells first..last of a row or column. At an end inside the line it
+   * stops at the last cell's edge, so two segments of one line show as two bands.
+   */
+  band(row, line, first, last) {
+    const along = row ? this.cols : this.rows;
+    const across = MARGIN + line * CELL - 1;
+    const from = first === 0 ? MARGIN - 2 : MARGIN + first * CELL + 1;
+    const to = last === along - 1 ? MARGIN + along * CELL + 2 : MARGIN + (last + 1) * CELL - 1;
+    const length = to - from;
+    const place = row
+      ? { x: from, y: across, width: length, height: CELL + 2 }
+      : { x: across, y: from, width: CELL + 2, height: length };
+    return svg('rect', { ...place, class: 'moving', 'data-line': line, 'data-first': first, 'data-last': last });
+  }
+
+  /**
+   * The arrow and step of one line, in the right margin (rows: → for +k, ← for -k) or
+   * under the matrix (columns: ↓ for +k, towards higher rows, ↑ for -k). Segments of one
+   * line moving opposite ways share a ⇄ or ⇅; the highlights show which cells go.
+   */
+  arrow(row, line, spans, along) {
+    const steps = [...new Set(spans.map((span) => span.k))];
+    const k = steps.length === 1 ? steps[0] : null;
+    const step = k === null ? '±' : signed(k);
+    const what = spans.map(({ first, last, k: each }) =>
+      first === 0 && last === along - 1 ? `moves ${signed(each)}` : `cells ${first}..${last} move ${signed(each)}`);
+    const title = svg('title', {}, `${row ? 'row' : 'column'} ${line}: ${what.join(', ')} along its ${row ? 'columns' : 'rows'}`);
+    if (row) {
+      const glyph = k === null ? '⇄' : k > 0 ? '→' : '←';
+      const y = MARGIN + line * CELL + CELL / 2;
+      const arrow = svg('text', { x: MARGIN + this.cols * CELL + 3, y, class: 'arrow row-arrow' }, `${glyph}\u2009${step}`);
+      arrow.append(title);
+      return [arrow];
+    }
+    const x = MARGIN + line * CELL + CELL / 2;
+    const bottom = MARGIN + this.rows * CELL;
+    const glyph = k === null ? '⇅' : k > 0 ? '↓' : '↑';
+    const arrow = svg('text', { x, y: bottom + 11, class: 'arrow col-arrow' }, glyph);
+    const label = svg('text', { x, y: bottom + 23, class: 'arrow col-arrow' }, step);
+    label.append(title);
+    return [arrow, label];
+  }
+}
+
+/**
+ * A shift's moves by line, in the order given: line -> [{k, first, last}], the cells each
+ * move carries (a whole line is cells 0..along-1; a segment's span is clipped to the matrix).
+ */
+function movesByLine(moves, along) {
+  const lines = new Map();
+  for (const [line, k, first = 0, last = along - 1] of moves) {
+    const span = { k, first: Math.max(0, first), last: Math.min(along - 1, last) };
+    if (span.first > span.last) continue;
+    if (!lines.has(line)) lines.set(line, []);
+    lines.get(line).push(span);
+  }
+  return lines;
 }
