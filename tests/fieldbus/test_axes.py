@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from bwsd.config import parse_config
@@ -63,7 +65,9 @@ def test_a_machine_with_more_axes_than_modbus_blocks_is_refused_when_the_bus_is_
     fits = parse_config({"machine": {**machine, "segments": many_segments(100, 100, 39)[:3886]}})
     assert len(machine_axes(fits.machine)) == MAX_AXES == 4089 and map_problem(fits.machine) == ""
     ModbusBus.from_config(fits)  # the last block ends at register 65535
-    over = parse_config({"machine": {**machine, "segments": many_segments(100, 100, 39)[:3887]}})
+    extra = Segment("row", 99, 50, 51)  # a config with it is refused at load (test_config)
+    over = dataclasses.replace(fits, machine=dataclasses.replace(
+        fits.machine, segments=(*fits.machine.segments, extra)))  # fmt: skip
     assert "at most 4089 axes, the machine has 4090" in map_problem(over.machine)
     with pytest.raises(ConfigError, match=r"\[machine\.segments\]: the Modbus map addresses at "
                        r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 3 weft and "
