@@ -25,7 +25,7 @@ GENERATORS: dict[str, Callable[..., Generated]] = {
 EXAMPLES: dict[str, Callable[[], Generated]] = {
     "twist": lambda: twist(turns=4),
     "braid-2x2": lambda: braid4(2, 2, cycles=10),
-    "braid-L": lambda: braid4(cycles=10, shape="L", flange=(2, 6), web=(4, 2)),
+    "braid-L": lambda: braid4(cycles=11, shape="L", flange=(2, 6), web=(4, 2)),
     "braid-24x24": lambda: braid4(24, 24, cycles=10, d_mat=300.0, c_mat=0.3),
     "weave-plain": lambda: weave_plain(warps=10, cycles=10),
     "weave-U": lambda: weave_3d(5, 6, cycles=10, shape="U", leg=2, base=2),

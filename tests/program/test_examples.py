@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import re
 import shlex
 from pathlib import Path
 
 import pytest
 
 from bwsd.config import load_config
+from bwsd.export.mixing import section_header, simulate_with_visits
 from bwsd.program import cli as program_cli
 from bwsd.program import load_program
 from bwsd.program.generators import EXAMPLES
@@ -47,12 +49,51 @@ def test_example_is_exactly_what_its_command_prints(stem, tmp_path, capsys):
     assert config.read_text() == (ROOT / "config" / f"{stem}.toml").read_text()
 
 
-@pytest.mark.parametrize("stem", STEMS)
-def test_example_loads_against_its_config(stem):
+# Cycles each example runs: 10 by default; the twist its 4 turns (the worked example); the
+# L braid until its rule has taken every carrier through every zone (K, its header says).
+CYCLES = {"twist": 4, "braid-L": 11}
+
+
+def _cycles(stem: str) -> int:
     machine = load_config(ROOT / "config" / f"{stem}.toml").machine
     program = load_program(ROOT / "examples" / f"{stem}.bws", machine)
     assert program.cycle_length
-    assert len(program.instructions) == 10 * program.cycle_length or stem == "twist"
+    count, rest = divmod(len(program.instructions), program.cycle_length)
+    assert rest == 0, f"{stem}: a partial cycle at the end"
+    return count
+
+
+@pytest.mark.parametrize("stem", STEMS)
+def test_example_loads_against_its_config_and_runs_its_cycles(stem):
+    assert _cycles(stem) == CYCLES.get(stem, 10)
+
+
+def _rule_k(stem: str) -> int | None:
+    """K from the example's header: the cycles its braid rule needs to mix every carrier."""
+    found = re.search(r"every zone by cycle (\d+)", (ROOT / "examples" / f"{stem}.bws").read_text())
+    return int(found[1]) if found else None
+
+
+SHAPED = [stem for stem in STEMS if _rule_k(stem) is not None]
+
+
+def test_the_shaped_braid_examples_are_known():
+    assert set(SHAPED) == {"braid-L"}
+
+
+@pytest.mark.parametrize("stem", SHAPED)
+def test_a_shaped_braid_example_runs_until_every_carrier_visited_every_zone(stem):
+    """On the twin, not only on the rule's cell grid: K of ``bwsd metrics`` is the header's."""
+    machine = load_config(ROOT / "config" / f"{stem}.toml").machine
+    path = ROOT / "examples" / f"{stem}.bws"
+    program = load_program(path, machine)
+    named = section_header(path.read_text())
+    assert named is not None
+    _, visits = simulate_with_visits(machine, program, named.section)
+    mixing = visits.summary(program.cycle_length or 1)
+    assert _cycles(stem) >= _rule_k(stem)
+    assert mixing["k"] == _rule_k(stem)
+    assert mixing["incomplete"] == 0
 
 
 @pytest.mark.parametrize(
