@@ -29,6 +29,21 @@ EXAMPLES: dict[str, Callable[[], Generated]] = {
     "braid-24x24": lambda: braid4(24, 24, cycles=10, d_mat=300.0, c_mat=0.3),
     "weave-plain": lambda: weave_plain(warps=10, cycles=10),
     "weave-U": lambda: weave_3d(5, 6, cycles=10, shape="U", leg=2, base=2),
+    # The seed paper's case studies on one machine (docs/paper.md): 5 cycles of the 8-step L
+    # rule are the paper's 10 cycles of 4 steps; take-up 3 mm per four steps, or per pick.
+    "paper-L": lambda: braid4(
+        cycles=5,
+        shape="L",
+        flange=(3, 7),
+        web=(7, 3),
+        takeup=3.0,
+        d_mat=100.0,
+        c_mat=0.4,
+        diameter=1.0,
+    ),
+    "paper-U": lambda: weave_3d(
+        3, 6, cycles=10, shape="U", leg=2, base=2, takeup=3.0, d_mat=100.0, c_mat=0.4, diameter=1.0
+    ),
 }
 
 __all__ = [
