@@ -1,0 +1,234 @@
+"""The seed paper's two case studies on the twin: prints the tables of docs/paper.md.
+
+    python bench/paper.py                      # both paper examples, 20 runs each, one core
+    python bench/paper.py --repeat 50 --skip reference
+    python bench/paper.py --neighbours         # also the sizes and settings around them
+
+The paper ("A novel braiding-weaving system ... collision detection", Journal of Industrial
+Textiles, 2013) reports 504 interferences in 138.15 s for 10 cycles of an L-section 4-step
+braid, and 610 in 376 s for 10 cycles of a U-section dual-direction 3D weave. Those four
+numbers are the only constants here. Everything else is measured in this run, pinned to one
+core: ``simulate`` of examples/paper-L.bws and paper-U.bws (median and 99th percentile over
+the repetitions), and as a baseline the test suite's exact reference (tests/twin/reference.py,
+brute force in Python integers and fractions), run once each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+# numpy's OpenBLAS threads would spin on another core; the twin uses no BLAS
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bwsd.config import load_config  # noqa: E402
+from bwsd.export.metrics import metrics  # noqa: E402
+from bwsd.export.mixing import section_header, simulate_with_visits  # noqa: E402
+from bwsd.program import load_program, parse_program  # noqa: E402
+from bwsd.program.generators import Generated, braid4, weave_3d  # noqa: E402
+from bwsd.twin import Machine, Program, Twin, simulate  # noqa: E402
+from tests.twin.reference import RefTwin  # noqa: E402
+
+
+@dataclass(frozen=True)
+class Case:
+    """One of the paper's case studies and the example that stands for it."""
+
+    stem: str
+    what: str
+    interferences: int
+    seconds: float
+
+
+CASES = (
+    Case("paper-L", "L-section 4-step braid", 504, 138.15),
+    Case("paper-U", "U-section dual-direction 3D weave", 610, 376.0),
+)
+
+
+def one_core() -> str:
+    """Pin this process to one CPU; say which."""
+    if not hasattr(os, "sched_setaffinity"):
+        return "not pinned (no sched_setaffinity here)"
+    cpu = min(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {cpu})
+    return f"pinned to CPU {cpu}"
+
+
+def load(stem: str) -> tuple[Machine, Program]:
+    machine = load_config(ROOT / "config" / f"{stem}.toml").machine
+    return machine, load_program(ROOT / "examples" / f"{stem}.bws", machine)
+
+
+def timed(fn: Callable[[], object], repeat: int) -> list[float]:
+    out = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - start)
+    return out
+
+
+def p99(values: Sequence[float]) -> float:
+    return float(np.percentile(values, 99))
+
+
+def reference_seconds(machine: Machine, program: Program) -> float:
+    """Seconds the exact reference takes for the whole program (its contacts must agree)."""
+    diameter = machine.yarn_diameter if program.diameter is None else program.diameter
+    start = time.perf_counter()
+    ref = RefTwin(machine, list(program.fill), diameter)
+    for ins in program.instructions:
+        ref.run(ins)
+    seconds = time.perf_counter() - start
+    assert len(ref.contacts) == simulate(machine, program).contact_count
+    return seconds
+
+
+def paper_table(repeat: int, reference: bool) -> list[str]:
+    rows = ["| case | example | yarns | instructions | interferences (paper) | contacts (bwsd) "
+            "| nodes (bwsd) | paper s | bwsd median s | p99 s | paper / bwsd | reference s |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for case in CASES:
+        machine, program = load(case.stem)
+        twin = simulate(machine, program)
+        times = timed(lambda m=machine, p=program: simulate(m, p), repeat)  # type: ignore[misc]
+        median = statistics.median(times)
+        ref = f"{reference_seconds(machine, program):.1f}" if reference else ""
+        rows.append(
+            f"| {case.what} | {case.stem} | {twin.yarn_count} | {twin.done} "
+            f"| {case.interferences} | {twin.contact_count} | {twin.node_count} "
+            f"| {case.seconds:g} | {median:.4f} | {p99(times):.4f} "
+            f"| {case.seconds / median:,.0f}x | {ref} |"
+        )
+        print(rows[-1], file=sys.stderr)
+    return rows
+
+
+def rule_k(stem: str) -> str:
+    """K as the braid rule's check states it in the program's header, if it does."""
+    found = re.search(r"every zone by cycle (\d+)", (ROOT / "examples" / f"{stem}.bws").read_text())
+    return f"cycle {found[1]}" if found else ""
+
+
+def preform(stem: str) -> dict[str, Any]:
+    """``bwsd metrics`` of an example, with its section's mixing when it names one."""
+    machine, program = load(stem)
+    named = section_header((ROOT / "examples" / f"{stem}.bws").read_text(encoding="utf-8"))
+    if named is None:
+        return metrics(simulate(machine, program).skeleton(), program.cycle_length)
+    twin, visits = simulate_with_visits(machine, program, named.section)
+    return metrics(twin.skeleton(), program.cycle_length, named=named, visits=visits)
+
+
+def preform_table() -> list[str]:
+    rows = ["| example | contact groups | yarns without contact | carriers mixed | K reached "
+            "| K of the rule | measuring band z mm | width mm | thickness mm |",
+            "|---|---:|---:|---:|---|---|---|---:|---:|"]  # fmt: skip
+    for case in CASES:
+        m = preform(case.stem)
+        mix, sec = m["mixing"], m["section"]
+        mixed = f"{mix['complete']} of {mix['carriers']}" if mix else "(no section)"
+        k = ("no" if mix["k"] is None else f"cycle {mix['k']}") if mix else ""
+        band = f"{sec['z'][0]:.1f} to {sec['z'][1]:.1f}"
+        rows.append(f"| {case.stem} | {m['groups']['count']} | {m['unconnected']['count']} "
+                    f"| {mixed} | {k} | {rule_k(case.stem)} | {band} "
+                    f"| {sec['width']:.1f} | {sec['thickness']:.1f} |")  # fmt: skip
+    return rows
+
+
+# The sizes and settings considered around the chosen ones (docs/paper.md): the chosen
+# machine is pitch 10, d_mat 100, c_mat 0.4, yarn 1 mm, 3 mm of take-up.
+MACHINE = {"pitch": 10.0, "d_mat": 100.0, "c_mat": 0.4, "diameter": 1.0, "takeup": 3.0}
+L_CHOSEN = {"flange": (3, 7), "web": (7, 3)}
+U_CHOSEN = {"layers": 3, "warps": 6, "leg": 2, "base": 2}
+L_AROUND: list[dict[str, Any]] = [
+    {}, {"flange": (5, 8), "web": (2, 6)}, {"flange": (3, 10), "web": (6, 2)},
+    {"flange": (2, 11), "web": (7, 3)}, {"flange": (6, 7), "web": (2, 5)},
+    {"flange": (4, 9), "web": (3, 3)}, {"flange": (3, 8), "web": (7, 3)},
+    {"flange": (3, 6), "web": (7, 3)}, {"flange": (3, 7), "web": (6, 3)},
+    {"takeup": 2.5}, {"takeup": 3.5}, {"diameter": 0.9}, {"diameter": 1.2},
+    {"c_mat": 0.35}, {"c_mat": 0.45}, {"d_mat": 110.0},
+    {"d_mat": 150.0, "diameter": 1.5}, {"segments": False}, {"cycles": 10},
+]  # fmt: skip
+U_AROUND: list[dict[str, Any]] = [
+    {}, {"warps": 5}, {"warps": 7}, {"layers": 4, "warps": 5}, {"takeup": 2.5},
+    {"takeup": 3.5}, {"takeup": 4.0}, {"diameter": 0.9}, {"diameter": 1.2},
+    {"c_mat": 0.45}, {"c_mat": 0.5},
+    {"takeup": 5.0, "c_mat": 0.6},  # the weave-3d defaults
+]  # fmt: skip
+
+
+def _braid(change: dict[str, Any]) -> Generated:
+    kw = {**MACHINE, **L_CHOSEN, "cycles": 5, "shape": "L", **change}
+    return braid4(**kw)
+
+
+def _weave(change: dict[str, Any]) -> Generated:
+    kw = {**MACHINE, **U_CHOSEN, "cycles": 10, "shape": "U", **change}
+    return weave_3d(**kw)
+
+
+def _changed(change: dict[str, Any]) -> str:
+    if not change:
+        return "**chosen**"
+    return ", ".join(f"{k} {'x'.join(map(str, v)) if isinstance(v, tuple) else v}"
+                     for k, v in change.items())  # fmt: skip
+
+
+def neighbours_table() -> list[str]:
+    rows = ["| case | change from the chosen | warps | instructions | contacts "
+            "| against the paper |", "|---|---|---:|---:|---:|---:|"]  # fmt: skip
+    for case, make, around in ((CASES[0], _braid, L_AROUND), (CASES[1], _weave, U_AROUND)):
+        for change in around:
+            try:
+                generated = make(change)
+            except ValueError as exc:
+                rows.append(f"| {case.stem} | {_changed(change)} | refused: {exc} | | | |")
+                continue
+            program = parse_program(generated.program)
+            twin: Twin = simulate(generated.machine, program)
+            delta = twin.contact_count - case.interferences
+            rows.append(f"| {case.stem} | {_changed(change)} | {len(program.fill)} "
+                        f"| {twin.done} | {twin.contact_count} | {delta:+d} |")  # fmt: skip
+            print(rows[-1], file=sys.stderr)
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeat", type=int, default=20)
+    parser.add_argument("--skip", default="", help="comma list: reference,preform")
+    parser.add_argument("--neighbours", action="store_true",
+                        help="also the sizes and settings around the chosen ones")  # fmt: skip
+    args = parser.parse_args()
+    skip = set(filter(None, args.skip.split(",")))
+    pinned = one_core()
+    print(f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
+          f"{pinned}, {args.repeat} runs each\n")  # fmt: skip
+    print("### The paper's case studies against bwsd\n")
+    print("\n".join(paper_table(args.repeat, "reference" not in skip)) + "\n")
+    if "preform" not in skip:
+        print("### The preforms (bwsd metrics)\n")
+        print("\n".join(preform_table()) + "\n")
+    if args.neighbours:
+        print("### Around the chosen sizes and settings\n")
+        print("\n".join(neighbours_table()) + "\n")
+
+
+if __name__ == "__main__":
+    main()
