@@ -31,7 +31,9 @@ def example(stem: str) -> tuple[str, str]:
     return str(ROOT / "examples" / f"{stem}.bws"), str(ROOT / "config" / f"{stem}.toml")
 
 
-@pytest.mark.parametrize("stem", ["twist", "braid-2x2", "weave-plain", "braid-L", "weave-U"])
+@pytest.mark.parametrize(
+    "stem", ["twist", "braid-2x2", "weave-plain", "braid-L", "weave-U", "paper-L", "paper-U"]
+)
 def test_simulate_json_matches_the_twin(stem):
     program, config = example(stem)
     done = bwsd("simulate", program, "--config", config, "--json")

@@ -157,6 +157,22 @@ def test_a_shipped_preform_is_one_group(stem):
     assert unconnected(sk) == {"count": 0, "ids": []}
 
 
+@pytest.mark.parametrize("stem", ["braid-L", "paper-L"])
+def test_metrics_say_a_shipped_shaped_braid_is_one_preform_of_mixed_carriers(capsys, stem):
+    """From the program's own '# section:' line: one group, and (braid-L runs its K cycles)
+    every carrier through flange and web; paper-L runs the paper's 10 cycles, fewer than K."""
+    result = run_json(capsys, str(ROOT / "examples" / f"{stem}.bws"),
+                      str(ROOT / "config" / f"{stem}.toml"))  # fmt: skip
+    assert result["groups"]["count"] == 1 and result["unconnected"]["count"] == 0
+    mixing = result["mixing"]
+    assert (result["section_spec"]["shape"], result["section_spec"]["source"]) == ("L", "header")
+    if stem == "braid-L":
+        assert mixing["incomplete"] == 0 and mixing["complete"] == mixing["carriers"] == 32
+        assert mixing["k"] == 11
+    else:
+        assert 0 < mixing["complete"] < mixing["carriers"] and mixing["k"] is None
+
+
 # ----- carrier mixing -----
 
 
