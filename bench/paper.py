@@ -22,7 +22,6 @@ import re
 import statistics
 import sys
 import time
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,10 +34,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bwsd.config import load_config  # noqa: E402
+from bench.twin import load, p99, timed  # noqa: E402
 from bwsd.export.metrics import metrics  # noqa: E402
 from bwsd.export.mixing import section_header, simulate_with_visits  # noqa: E402
-from bwsd.program import load_program, parse_program  # noqa: E402
+from bwsd.program import parse_program  # noqa: E402
 from bwsd.program.generators import Generated, braid4, weave_3d  # noqa: E402
 from bwsd.twin import Machine, Program, Twin, simulate  # noqa: E402
 from tests.twin.reference import RefTwin  # noqa: E402
@@ -67,24 +66,6 @@ def one_core() -> str:
     cpu = min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})
     return f"pinned to CPU {cpu}"
-
-
-def load(stem: str) -> tuple[Machine, Program]:
-    machine = load_config(ROOT / "config" / f"{stem}.toml").machine
-    return machine, load_program(ROOT / "examples" / f"{stem}.bws", machine)
-
-
-def timed(fn: Callable[[], object], repeat: int) -> list[float]:
-    out = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - start)
-    return out
-
-
-def p99(values: Sequence[float]) -> float:
-    return float(np.percentile(values, 99))
 
 
 def reference_seconds(machine: Machine, program: Program) -> float:
