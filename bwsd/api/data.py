@@ -21,8 +21,8 @@ from bwsd.controller.errors import Busy, ControllerError
 from bwsd.errors import ProgramError, TwinError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict
-from bwsd.program import parse_program_with_positions, validate
-from bwsd.twin import Machine, SkeletonData
+from bwsd.program import parse_program_with_positions
+from bwsd.twin import SkeletonData
 
 from .auth import Principal, require
 from .context import Ctx
@@ -82,7 +82,7 @@ async def post_program(
             assert ctl.dry_run is not None
             totals = ctl.dry_run
     except ProgramError as exc:
-        raise _program_error(await _located(exc, body, ctl.machine)) from None
+        raise _program_error(exc) from None
     except Busy as exc:
         raise ApiError(429, str(exc), headers={"Retry-After": "1"}) from None
     except ControllerError as exc:
@@ -105,22 +105,6 @@ async def _until_gone(request: Request, cancel: threading.Event, work: Awaitable
 
 def _program_error(exc: ProgramError) -> ApiError:
     return ApiError(422, exc.reason, line=exc.line, column=exc.column)
-
-
-async def _located(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramError:
-    """The same error with its column, when only the line was known (found off the loop)."""
-    if exc.column or not exc.line:
-        return exc
-    return await asyncio.to_thread(_locate, exc, body, machine)
-
-
-def _locate(exc: ProgramError, body: ProgramIn, machine: Machine) -> ProgramError:
-    try:
-        program, positions = parse_program_with_positions(body.text, body.name)
-        validate(program, machine, body.name, positions)
-    except ProgramError as located:
-        return located
-    return exc
 
 
 async def _refused_at(exc: TwinError, body: ProgramIn) -> ProgramError:

@@ -16,7 +16,7 @@ from typing import Any
 from bwsd.controller.errors import Cancelled, ControllerError
 from bwsd.controller.plan import Limits, RefusedMove, check_limits
 from bwsd.errors import BwsdError, TwinError
-from bwsd.program import parse_program, validate
+from bwsd.program import parse_program_with_positions, validate
 from bwsd.twin import Machine, Program, Snapshot, Twin
 from bwsd.twin.instructions import Instruction, Shift
 
@@ -68,8 +68,8 @@ def rebuild(machine: Machine, program: Program, done: int,
 def check_program(machine: Machine, limits: Limits, most: int, name: str, text: str,
            cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
     """Parse, validate, bound and dry-run a program (in a worker thread)."""
-    program = parse_program(text, name, most)
-    validate(program, machine, name)
+    program, positions = parse_program_with_positions(text, name, most)
+    validate(program, machine, name, positions)  # a refusal names its line and column
     twin = Twin.from_program(machine, program)
     predict = bool(limits.max_contacts or limits.tensioner_stroke)
     try:

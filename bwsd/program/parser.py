@@ -254,20 +254,41 @@ _HANDLERS = {
 }
 
 
-def _size(node: _Statement | _Repeat, source: str, most: int = MAX_INSTRUCTIONS) -> int:
-    """Expanded instruction count of a node; refuses programs beyond ``most``, at the
-    REPEAT that passes it (before anything is expanded)."""
+def _count(node: _Statement | _Repeat) -> int:
+    """Expanded instruction count of a node, by arithmetic alone (nothing is expanded)."""
     if isinstance(node, _Statement):
         return 1
-    total = node.count * sum(_size(child, source, most) for child in node.body)
-    if total > most:
-        raise ProgramError(
-            f"the program expands to more than {most} instructions ([controller] max_instructions)",
-            line=node.line,
-            column=node.column,
-            source=source,
-        )
-    return total
+    return node.count * sum(_count(child) for child in node.body)
+
+
+def _passing(node: _Repeat, most: int) -> _Statement | _Repeat:
+    """Where a program of more than ``most`` instructions passes it: the innermost REPEAT
+    that expands past it alone, else the top-level statement or REPEAT the count passes at."""
+    running = 0
+    for child in node.body:
+        size = _count(child)
+        if isinstance(child, _Repeat) and size > most:
+            return _passing(child, most)
+        running += size
+        if node.line == 0 and running > most:  # the top level, which has no line of its own
+            return child
+    return node
+
+
+def _check_size(root: _Repeat, source: str, most: int) -> None:
+    """Refuse a program beyond ``most`` instructions, before anything is expanded."""
+    total = _count(root)
+    if total <= most:
+        return
+    place = _passing(root, most)
+    shown = str(total) if total < 10**12 else "more than 10^12"  # nested counts multiply
+    raise ProgramError(
+        f"the program expands to more than {most} instructions ([controller] "
+        f"max_instructions): {shown} in all",
+        line=place.line,
+        column=place.column,
+        source=source,
+    )
 
 
 def _expand(body: list[_Statement | _Repeat], out: list[_Statement]) -> None:
@@ -296,12 +317,12 @@ def parse_program_with_positions(
     for lineno, line in enumerate(lines, start=1):
         parser.feed(lineno, line.removesuffix("\r"))
     root = parser.finish()
-    _size(root, source, most)
+    _check_size(root, source, most)
     flat: list[_Statement] = []
     _expand(root.body, flat)
     cells = sorted(parser.fills)
     repeats = [node for node in root.body if isinstance(node, _Repeat)]
-    cycle = sum(_size(n, source) for n in repeats[-1].body) if repeats else None
+    cycle = sum(_count(n) for n in repeats[-1].body) if repeats else None
     program = Program(
         diameter=parser.diameter,
         fill=tuple(cells),

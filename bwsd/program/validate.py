@@ -94,12 +94,23 @@ def _fail(
     )
 
 
+def _too_small(fill: tuple[Cell, ...], cell: Cell, grid: Occupancy) -> str:
+    """Why a fill does not fit: the first cell outside, and the matrix the fill needs."""
+    rows = max(r for r, _ in fill) + 1
+    cols = max(c for _, c in fill) + 1
+    return (f"fill cell {cell} is outside the {grid.rows} x {grid.cols} matrix: the program "
+            f"fills cells up to row {rows - 1}, column {cols - 1}, so it needs a matrix of "
+            f"at least {rows} x {cols}; this loom has {grid.rows} x {grid.cols}")  # fmt: skip
+
+
 def _check_fill(
     program: Program, grid: Occupancy, positions: SourceMap | None, source: str
 ) -> None:
     for i, cell in enumerate(program.fill):
         reason = grid.fill(cell)
         if reason is not None:
+            if not grid.inside(cell):
+                reason = _too_small(program.fill, cell, grid)
             line, column = positions.fill[i] if positions is not None else (0, 0)
             raise ProgramError(reason, line=line, column=column, source=source)
 
@@ -109,7 +120,10 @@ def _check_shift(shift: Shift, grid: Occupancy, machine: Machine) -> tuple[int, 
     size = grid.line_size(shift.axis)
     for entry, (index, k, span) in enumerate(shift.moves):
         if not 0 <= index < size:
-            return entry, f"{shift.axis} {index} is outside the matrix (0 to {size - 1})"
+            lines = "rows" if shift.axis == "row" else "columns"
+            return entry, (f"{shift.axis} {index} is outside the matrix (0 to {size - 1}): the "
+                           f"program needs at least {index + 1} {lines}; this loom has "
+                           f"{size}")  # fmt: skip
         if span is not None and machine.segment(shift.axis, index, span) is None:
             return entry, unknown_segment(machine, shift.axis, index, span)
         reason = grid.shift(shift.axis, index, k, span)
