@@ -38,6 +38,7 @@ from .models import (
     NodeOut,
     PreviewOut,
     StateOut,
+    WhoOut,
 )
 from .problems import ApiError, describe
 from .routing import RouteTable
@@ -46,6 +47,7 @@ router = RouteTable()
 READ = [Depends(require("viewer"))]
 WRITE = [Depends(require("operator"))]
 Operator = Annotated[Principal, Depends(require("operator"))]
+Viewer = Annotated[Principal, Depends(require("viewer"))]
 
 
 def _next_out(step: dict[str, Any] | None) -> NextOut | None:
@@ -85,6 +87,12 @@ async def get_state(ctx: Ctx) -> StateOut:
         last_fault=ctx.last_fault,
         next=_next_out(step_dict(st.next)),
     )
+
+
+@router.get("/whoami", response_model=WhoOut, responses=AUTH_ERRORS)
+async def get_whoami(who: Viewer) -> WhoOut:
+    """Whose token this is and its role: a client learns what it may do before it tries."""
+    return WhoOut(name=who.name, role=who.role)
 
 
 @router.get("/machine", response_model=MachineOut, dependencies=READ,

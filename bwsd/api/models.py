@@ -147,6 +147,13 @@ class ModeIn(BaseModel):
     mode: ModeName
 
 
+class WhoOut(BaseModel):
+    """The holder of the request's token, and its role."""
+
+    name: str = Field(description="the token's name (`anonymous`: an open read without one)")
+    role: Literal["viewer", "operator", "admin"]
+
+
 class ModeOut(BaseModel):
     mode: int
     mode_name: str

@@ -193,7 +193,7 @@ class Controller:
             program_name=self.program_name, index=self.index,
             count=len(program.instructions) if program is not None else 0,
             allowed=tuple(self.allowed()), bus=self.seen.status, recovering=self._recovering,
-            next=self.next_step(),
+            next=None if self._p.finished else self.next_step(),  # an ended run runs nothing
         )  # fmt: skip
 
     def next_step(self) -> dict[str, Any] | None:

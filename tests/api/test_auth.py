@@ -153,6 +153,18 @@ def test_open_reads_serve_anyone_but_writes_still_need_an_operator(open_live):
         assert client.post("/commands/reset", headers=viewer).status_code == 403
 
 
+def test_whoami_names_the_token_and_its_role_before_anything_is_refused(live, open_live):
+    with httpx.Client(base_url=live.api, timeout=WAIT) as client:
+        for role in ("viewer", "operator", "admin"):
+            answer = client.get("/whoami", headers=live.headers(role))
+            assert answer.json() == {"name": f"{role}-token", "role": role}
+        assert client.get("/whoami").status_code == 401
+        assert client.get("/whoami", headers={"Authorization": "Bearer nope"}).status_code == 401
+    with httpx.Client(base_url=open_live.api, timeout=WAIT) as client:
+        assert client.get("/whoami").json() == {"name": "anonymous", "role": "viewer"}
+        assert client.get("/whoami", headers={"Authorization": "Bearer nope"}).status_code == 401
+
+
 def test_the_event_socket_checks_the_token_like_a_read(live, open_live):
     for server, token, status in ((live, None, 401), (live, "nope", 401), (open_live, "nope", 401)):
         url = server.ws + (f"?token={token}" if token else "")

@@ -315,6 +315,29 @@ def test_the_mode_route_changes_the_unit_mode_where_packml_allows_it(live: Live)
     assert refused.status_code == 409 and "not accepted in state Held" in refused.json()["error"]
 
 
+def test_a_run_ended_by_stop_or_abort_has_no_next_instruction(live: Live):
+    """Its progress stays (instructions done), but nothing will run next: Start is refused."""
+    operator, viewer = live.client("operator"), live.client("viewer")
+    long = BRAID.replace("REPEAT 3", "REPEAT 500")
+    for ending, rest in (("stop", "Stopped"), ("abort", "Aborted")):
+        operator.post("/programs", json={"name": "l.bws", "text": long}).raise_for_status()
+        if viewer.get("/state").json()["name"] == "Aborted":
+            operator.post("/commands/clear").raise_for_status()
+        operator.post("/commands/reset").raise_for_status()
+        operator.post("/commands/start").raise_for_status()
+        assert operator.post("/commands/hold").json()["name"] == "Held"
+        held = viewer.get("/state").json()
+        assert held["next"]["index"] == held["index"] + 1
+        assert operator.post(f"/commands/{ending}").json()["name"] == rest
+        state = viewer.get("/state").json()
+        assert (state["index"], state["count"], state["next"]) == (held["index"], 2500, None)
+        if ending == "stop":
+            assert operator.post("/commands/reset").json()["name"] == "Idle"
+            state = viewer.get("/state").json()
+            assert state["next"] is None and state["allowed"] == ["stop", "abort"]
+            operator.post("/commands/abort").raise_for_status()
+
+
 def test_a_pressed_estop_shows_in_state_and_refuses_reset(live: Live, mock):
     operator, viewer = live.client("operator"), live.client("viewer")
     control = ("127.0.0.1", mock.ports["control"])
