@@ -1,30 +1,22 @@
 // The machine matrix: rows × cols cells, row 0 at the top as in the program's FILL block,
-// each cell showing the id of the warp whose case is in it, in that yarn's colour. The
-// cells the next ROW/COL instruction moves (whole lines, or a segment's span of one) are
-// highlighted, with an arrow and the step of each line.
+// each cell showing the id of the warp whose case is in it, in that yarn's colour. Over the
+// twin's picture: the lines the next shift moves (with an arrow and step each), the cells
+// where the machine's occupancy sensors differ from the twin, the e-stop, the axes that
+// report a fault, and the path of the next weft. Zoom (wheel, pinch, +/−), pan (drag,
+// arrow keys) and fit; a click picks the yarn in a cell.
 
 import { css, textOn } from './colours.js';
+import { CELL, arrow, band, differMark, faultMark, patterns, rulers, svg, weftPath } from './matrix-draw.js';
+import { axisCells, differingCells, movesByLine, weftInCells } from './matrix-geometry.js';
+import { ZoomPan } from './matrix-zoom.js';
 
-// The SVG namespace, as the HTML parser gives it (so no address appears in the page's files).
-const SVG = (() => {
-  const holder = document.createElement('div');
-  holder.innerHTML = '<svg></svg>';
-  return holder.firstChild.namespaceURI;
-})();
-const CELL = 24; // user units per cell (the SVG scales to the panel)
-const MARGIN = 30; // around the cells: line numbers on the top/left, move arrows on the right/bottom
+export { signed } from './matrix-draw.js';
 
-function svg(tag, attributes = {}, text) {
-  const element = document.createElementNS(SVG, tag);
-  for (const [name, value] of Object.entries(attributes)) element.setAttribute(name, value);
-  if (text !== undefined) element.textContent = text;
-  return element;
-}
-
-/** A step with its sign, as the program writes it: +1, -2. */
-export function signed(k) {
-  return k > 0 ? `+${k}` : String(k);
-}
+const FIT_CELL_PX = 44; // a small matrix stops growing at this cell size
+const TOP = 14; // px: the column numbers
+const BOTTOM = 28; // px: room under the matrix for the columns' arrows
+const ID_PX = 8.5; // the smallest id worth printing in a cell
+let grids = 0; // numbers each grid's hatch patterns
 
 export class MatrixGrid {
   /**
@@ -36,102 +28,160 @@ export class MatrixGrid {
     this.palette = palette;
     this.rows = 0;
     this.cols = 0;
-    this.cells = []; // [row][col] -> {rect, text, yarn}
+    this.cells = []; // [row][col] -> {group, rect, text, title, yarn}
     this.shift = null; // the next shift instruction, or null
+    this.weft = null; // the next weft instruction, or null
+    this.geometry = null; // the skeleton JSON's `machine`: pitches and convergence
+    this.machine = null; // {differs, estop, faulted} as last read, or null
+    this.picked = null; // the highlighted yarn id, or null
+    this.onPick = null; // set by the page: (yarnId | null) => void
+    this.hover = null; // the pointer over the frame, px
+    this.frameRequested = false;
+    this.moving = { rows: new Map(), cols: new Map() }; // line -> spans, of the next shift
+    this.faultedLines = { rows: new Map(), cols: new Map() }; // line -> axis name
+    this.differKeys = new Set(); // "r,c" of the cells whose sensor differs
+    this.prefix = `matrix${(grids += 1)}`;
+    this.construct();
     this.showEmpty('no program loaded');
+  }
+
+  construct() {
+    const tools = document.createElement('div');
+    tools.className = 'matrix-tools';
+    const button = (label, title, action) => {
+      const element = document.createElement('button');
+      element.type = 'button';
+      element.textContent = label;
+      element.title = title;
+      element.addEventListener('click', action);
+      tools.append(element);
+      return element;
+    };
+    this.buttons = [button('−', 'zoom out (−)', () => this.view.zoomBy(1 / 1.5)), button('+', 'zoom in (+)', () => this.view.zoomBy(1.5)),
+      button('fit', 'show the whole matrix (0)', () => this.view.fit())];
+    this.buttons[2].className = 'matrix-fit';
+    const hint = document.createElement('span');
+    hint.className = 'matrix-hint';
+    hint.textContent = 'wheel zooms · drag pans · click picks a yarn';
+    tools.append(hint);
+    this.frame = document.createElement('div');
+    this.frame.className = 'matrix-frame';
+    this.frame.tabIndex = 0;
+    this.root = svg('svg', { class: 'matrix-svg', role: 'img' });
+    this.world = svg('g', { class: 'world' });
+    this.layers = {};
+    for (const name of ['cells', 'faults', 'differs', 'highlights', 'marks', 'weft']) {
+      this.layers[name] = svg('g', { class: name });
+      this.world.append(this.layers[name]);
+    }
+    this.highlights = this.layers.highlights;
+    this.screen = svg('g', { class: 'screen' });
+    this.root.append(patterns(this.prefix), this.world, this.screen);
+    this.note = element('p', 'grid-empty');
+    this.estop = element('div', 'matrix-estop');
+    this.estop.title = 'the emergency stop is pressed: no axis moves until it is released';
+    this.label = element('div', 'matrix-hover');
+    this.estop.replaceChildren(element('span', 'matrix-estop-sign', 'E-STOP'));
+    this.frame.append(this.root, this.note, this.estop, this.label);
+    this.status = element('p', 'matrix-machine');
+    this.status.setAttribute('aria-live', 'polite');
+    this.host.replaceChildren(tools, this.frame, this.status, legend());
+    this.view = new ZoomPan(this.frame, {
+      cell: CELL, maxCellPx: FIT_CELL_PX, onChange: () => this.schedule(),
+      onTap: (x, y) => this.tap(x, y), onHover: (x, y) => this.pointAt(x, y),
+    });
+    this.frame.addEventListener('keydown', (event) => {
+      if (event.key === 'Escape' && this.onPick) this.onPick(null);
+    });
+    new ResizeObserver(() => this.layout()).observe(this.frame);
+    window.addEventListener('resize', () => this.layout()); // the tallest frame follows the window
   }
 
   /** No matrix to show: a line of text instead. */
   showEmpty(text) {
     this.rows = this.cols = 0;
     this.cells = [];
-    const note = document.createElement('p');
-    note.className = 'grid-empty';
-    note.textContent = text;
-    this.host.replaceChildren(note);
+    for (const layer of Object.values(this.layers)) layer.replaceChildren();
+    this.screen.replaceChildren();
+    this.note.textContent = text;
+    this.frame.classList.add('empty');
+    this.root.setAttribute('aria-label', text);
+    for (const each of this.buttons) each.disabled = true;
+    this.frame.style.height = '';
+    this.drawStatus();
   }
 
   /** Build the cells for a rows × cols matrix (only when the size changes). */
   build(rows, cols) {
     this.rows = rows;
     this.cols = cols;
-    const width = cols * CELL + 2 * MARGIN;
-    const height = rows * CELL + 2 * MARGIN;
-    const root = svg('svg', {
-      viewBox: `0 0 ${width} ${height}`,
-      role: 'img',
-      'aria-label': `machine matrix, ${rows} rows × ${cols} columns, row 0 at the top`,
-    });
-    // Line numbers: columns along the top, rows down the left.
-    const every = Math.max(1, Math.ceil(Math.max(rows, cols) / 13)); // keep the numbers legible
-    for (let c = 0; c < cols; c += every) {
-      root.append(svg('text', { x: MARGIN + (c + 0.5) * CELL, y: MARGIN - 8, class: 'axis' }, String(c)));
-    }
-    for (let r = 0; r < rows; r += every) {
-      root.append(svg('text', { x: MARGIN - 6, y: MARGIN + (r + 0.5) * CELL, class: 'axis row-number' }, String(r)));
-    }
-    this.highlights = svg('g', { class: 'highlights' });
-    root.append(this.highlights);
-    const cellGroup = svg('g', { class: 'cells' });
+    this.differKeys = differingCells(this.machine?.differs, rows, cols);
+    this.frame.classList.remove('empty');
+    for (const each of this.buttons) each.disabled = false;
+    this.root.setAttribute('aria-label', `machine matrix, ${rows} rows × ${cols} columns, row 0 at the top`);
     this.cells = [];
+    const group = this.layers.cells;
+    group.replaceChildren();
     for (let r = 0; r < rows; r += 1) {
       const row = [];
       for (let c = 0; c < cols; c += 1) {
         const cell = svg('g', { class: 'cell empty', 'data-row': r, 'data-col': c });
-        const x = MARGIN + c * CELL;
-        const y = MARGIN + r * CELL;
-        const rect = svg('rect', { x: x + 1, y: y + 1, width: CELL - 2, height: CELL - 2, rx: 3 });
-        const text = svg('text', { x: x + CELL / 2, y: y + CELL / 2 });
+        const rect = svg('rect', { x: c * CELL, y: r * CELL, width: CELL, height: CELL });
+        const text = svg('text', { x: (c + 0.5) * CELL, y: (r + 0.5) * CELL });
         const title = svg('title', {}, `row ${r}, col ${c}: empty`);
         cell.append(rect, text, title);
-        cellGroup.append(cell);
+        group.append(cell);
         row.push({ group: cell, rect, text, title, yarn: null });
       }
       this.cells.push(row);
     }
-    root.append(cellGroup);
-    this.arrows = svg('g', { class: 'arrows' });
-    root.append(this.arrows);
-    root.style.maxWidth = `${width * 1.6}px`; // a small matrix stays a sensible size
-    this.host.replaceChildren(root);
+    this.view.fitted = true;
+    this.layout();
   }
 
   /** Show `occupancy` (rows arrays of cols yarn ids, -1 empty); only changed cells are touched. */
   setOccupancy(occupancy) {
     const rows = occupancy.length;
     const cols = rows ? occupancy[0].length : 0;
-    if (rows !== this.rows || cols !== this.cols) {
-      this.build(rows, cols);
-      this.drawShift();
-    }
+    const built = rows !== this.rows || cols !== this.cols;
+    if (built) this.build(rows, cols);
+    let changed = built;
     for (let r = 0; r < rows; r += 1) {
       for (let c = 0; c < cols; c += 1) {
         const yarn = occupancy[r][c];
         const cell = this.cells[r][c];
         if (cell.yarn === yarn) continue;
         cell.yarn = yarn;
+        changed = true;
         this.paint(cell, r, c);
       }
     }
+    if (!changed) return;
+    const most = Math.max(0, ...occupancy.map((line) => Math.max(...line)));
+    this.layers.cells.style.fontSize = `${Math.min(13, 21 / (0.62 * String(most).length))}px`; // the widest id fits
+    this.drawShift();
+    this.drawMachine(); // the sensors' side of a cell depends on the twin's
+    this.drawPicked();
   }
 
   paint(cell, r, c) {
     const yarn = cell.yarn;
+    const sensor = this.sensorNote(r, c);
     if (yarn === null || yarn < 0) {
       cell.group.setAttribute('class', 'cell empty');
       cell.group.removeAttribute('data-yarn');
       cell.rect.removeAttribute('style');
       cell.text.textContent = '';
-      cell.title.textContent = `row ${r}, col ${c}: empty`;
+      cell.title.textContent = `row ${r}, col ${c}: empty${sensor}`;
       return;
     }
     const colour = this.palette.colour(yarn);
-    cell.group.setAttribute('class', 'cell');
+    cell.group.setAttribute('class', yarn === this.picked ? 'cell picked' : 'cell');
     cell.group.setAttribute('data-yarn', yarn);
     cell.rect.style.fill = css(colour);
     cell.text.style.fill = textOn(colour);
     cell.text.textContent = String(yarn);
-    cell.title.textContent = `row ${r}, col ${c}: yarn ${yarn}`;
+    cell.title.textContent = `row ${r}, col ${c}: yarn ${yarn}${sensor}`;
   }
 
   /** The colours changed (colour mode): repaint every cell. */
@@ -139,86 +189,286 @@ export class MatrixGrid {
     this.cells.forEach((row, r) => row.forEach((cell, c) => this.paint(cell, r, c)));
   }
 
+  // ----- the next instruction -----
+
   /**
-   * Highlight the cells the next instruction moves: `instruction` is the next one
-   * ({kind: "shift", axis, moves: [[line, k], ...]}, a move on a segment being
-   * [line, k, first, last]) or anything else for none.
+   * Show the next instruction: a shift ({kind: "shift", axis, moves: [[line, k], ...], a
+   * move on a segment being [line, k, first, last]) highlights the cells it moves; a weft
+   * shows its path as setNextWeft does; anything else, neither.
    */
   setNext(instruction) {
     this.shift = instruction && instruction.kind === 'shift' ? instruction : null;
     this.drawShift();
+    this.setNextWeft(instruction && instruction.kind === 'weft' ? instruction : null);
   }
 
   drawShift() {
-    if (!this.highlights) return;
     this.highlights.replaceChildren();
-    this.arrows.replaceChildren();
-    if (!this.shift || !this.rows) return;
-    const row = this.shift.axis === 'row';
-    const [lines, along] = row ? [this.rows, this.cols] : [this.cols, this.rows];
-    for (const [line, spans] of movesByLine(this.shift.moves, along)) {
-      if (line < 0 || line >= lines) continue;
-      for (const { first, last } of spans) this.highlights.append(this.band(row, line, first, last));
-      this.arrows.append(...this.arrow(row, line, spans, along));
+    this.moving = { rows: new Map(), cols: new Map() };
+    if (this.shift && this.rows) {
+      const row = this.shift.axis === 'row';
+      const [lines, along] = row ? [this.rows, this.cols] : [this.cols, this.rows];
+      for (const [line, spans] of movesByLine(this.shift.moves, along)) {
+        if (line < 0 || line >= lines) continue;
+        for (const { first, last } of spans) this.highlights.append(band(row, line, first, last));
+        (row ? this.moving.rows : this.moving.cols).set(line, spans);
+      }
     }
+    this.schedule();
   }
 
-  /**
-   * The highlight over cells first..last of a row or column. At an end inside the line it
-   * stops at the last cell's edge, so two segments of one line show as two bands.
-   */
-  band(row, line, first, last) {
-    const along = row ? this.cols : this.rows;
-    const across = MARGIN + line * CELL - 1;
-    const from = first === 0 ? MARGIN - 2 : MARGIN + first * CELL + 1;
-    const to = last === along - 1 ? MARGIN + along * CELL + 2 : MARGIN + (last + 1) * CELL - 1;
-    const length = to - from;
-    const place = row
-      ? { x: from, y: across, width: length, height: CELL + 2 }
-      : { x: across, y: from, width: CELL + 2, height: length };
-    return svg('rect', { ...place, class: 'moving', 'data-line': line, 'data-first': first, 'data-last': last });
+  /** The next weft ({kind: "weft", x, y, z, angle, length}) drawn over the matrix, or null. */
+  setNextWeft(instruction) {
+    this.weft = instruction && instruction.kind === 'weft' ? instruction : null;
+    this.drawWeft();
   }
 
+  /** The machine's geometry (the skeleton JSON's `machine`): the weft needs its pitches. */
+  setGeometry(machine) {
+    if (machine === this.geometry) return;
+    this.geometry = machine ?? null;
+    this.drawWeft();
+  }
+
+  drawWeft() {
+    const layer = this.layers.weft;
+    layer.replaceChildren();
+    this.weftCells = this.rows ? weftInCells(this.weft, this.geometry) : null;
+    if (this.weftCells) layer.append(weftPath(this.weftCells, describeWeft(this.weft, this.weftCells)));
+    this.drawStatus();
+  }
+
+  // ----- the machine as read -----
+
   /**
-   * The arrow and step of one line, in the right margin (rows: → for +k, ← for -k) or
-   * under the matrix (columns: ↓ for +k, towards higher rows, ↑ for -k). Segments of one
-   * line moving opposite ways share a ⇄ or ⇅; the highlights show which cells go.
+   * The machine as the controller last read it (`/state`'s `bus`): `differs` the cells
+   * [row, col] where the occupancy sensors differ from the twin, `estop` pressed,
+   * `faulted` the names of the axes reporting a fault; null when not known.
    */
-  arrow(row, line, spans, along) {
-    const steps = [...new Set(spans.map((span) => span.k))];
-    const k = steps.length === 1 ? steps[0] : null;
-    const step = k === null ? '±' : signed(k);
-    const what = spans.map(({ first, last, k: each }) =>
-      first === 0 && last === along - 1 ? `moves ${signed(each)}` : `cells ${first}..${last} move ${signed(each)}`);
-    const title = svg('title', {}, `${row ? 'row' : 'column'} ${line}: ${what.join(', ')} along its ${row ? 'columns' : 'rows'}`);
-    if (row) {
-      const glyph = k === null ? '⇄' : k > 0 ? '→' : '←';
-      const y = MARGIN + line * CELL + CELL / 2;
-      const arrow = svg('text', { x: MARGIN + this.cols * CELL + 3, y, class: 'arrow row-arrow' }, `${glyph}\u2009${step}`);
-      arrow.append(title);
-      return [arrow];
+  setMachine(machine) {
+    const next = machine ? { differs: machine.differs ?? [], estop: Boolean(machine.estop), faulted: machine.faulted ?? [] } : null;
+    if (JSON.stringify(next) === JSON.stringify(this.machine)) return;
+    this.machine = next;
+    this.differKeys = differingCells(next?.differs, this.rows, this.cols);
+    this.drawMachine();
+    this.repaint(); // the sensors' reading in each cell's tooltip
+  }
+
+  drawMachine() {
+    const { differs, faults } = this.layers;
+    differs.replaceChildren();
+    faults.replaceChildren();
+    this.faultedLines = { rows: new Map(), cols: new Map() };
+    const machine = this.machine;
+    this.frame.classList.toggle('estop', Boolean(machine?.estop));
+    if (machine && this.rows) {
+      for (const key of this.differKeys) {
+        const [r, c] = key.split(',').map(Number);
+        const twin = this.cells[r][c].yarn;
+        const sees = !(twin >= 0);
+        differs.append(differMark(this.prefix, r, c, sees, `row ${r}, col ${c}: twin ${twin >= 0 ? `yarn ${twin}` : 'empty'}${this.sensorNote(r, c)}`));
+      }
+      for (const name of machine.faulted) {
+        const cells = axisCells(name, this.rows, this.cols);
+        if (!cells) continue;
+        faults.append(faultMark(this.prefix, name, cells));
+        (cells.axis === 'row' ? this.faultedLines.rows : this.faultedLines.cols).set(cells.line, name);
+      }
     }
-    const x = MARGIN + line * CELL + CELL / 2;
-    const bottom = MARGIN + this.rows * CELL;
-    const glyph = k === null ? '⇅' : k > 0 ? '↓' : '↑';
-    const arrow = svg('text', { x, y: bottom + 11, class: 'arrow col-arrow' }, glyph);
-    const label = svg('text', { x, y: bottom + 23, class: 'arrow col-arrow' }, step);
-    label.append(title);
-    return [arrow, label];
+    this.drawStatus();
+    this.schedule();
+  }
+
+  /** ", sensor: empty (the twin differs)" for a cell whose sensor disagrees; "" otherwise. */
+  sensorNote(r, c) {
+    if (!this.differKeys.has(`${r},${c}`)) return '';
+    const twin = this.cells[r]?.[c]?.yarn;
+    return ` — sensor: ${twin >= 0 ? 'empty' : 'case'} (differs from the twin)`;
+  }
+
+  // ----- picking -----
+
+  /** Outline the cell of yarn `yarnId` and dim the rest; null: no highlight. */
+  highlight(yarnId) {
+    this.picked = yarnId ?? null;
+    this.repaint();
+    const cell = this.drawPicked();
+    if (cell) this.bringIntoView(cell.r, cell.c);
+  }
+
+  drawPicked() {
+    const marks = this.layers.marks;
+    marks.querySelector('.picked-edge')?.remove();
+    this.frame.classList.toggle('picking', this.picked !== null && this.rows > 0);
+    const cell = this.picked === null ? null : this.cellOf(this.picked);
+    if (cell) marks.append(svg('rect', { x: cell.c * CELL, y: cell.r * CELL, width: CELL, height: CELL, class: 'picked-edge', 'data-row': cell.r, 'data-col': cell.c }));
+    this.drawStatus();
+    return cell;
+  }
+
+  cellOf(yarn) {
+    for (let r = 0; r < this.rows; r += 1) {
+      for (let c = 0; c < this.cols; c += 1) if (this.cells[r][c].yarn === yarn) return { r, c };
+    }
+    return null;
+  }
+
+  bringIntoView(r, c) {
+    const [x, y] = this.view.toPixels((c + 0.5) * CELL, (r + 0.5) * CELL);
+    const { left, top, bottom } = this.view.insets;
+    if (x >= left && x <= this.view.width && y >= top && y <= this.view.height - bottom) return;
+    this.view.panBy((left + this.view.width) / 2 - x, (top + this.view.height - bottom) / 2 - y);
+  }
+
+  /** The cell under element pixels (x, y): {r, c}, or null outside the matrix. */
+  cellAt(x, y) {
+    const { left, top } = this.view.insets;
+    if (!this.rows || x < left || y < top) return null;
+    const [u, v] = this.view.toUnits(x, y);
+    const c = Math.floor(u / CELL);
+    const r = Math.floor(v / CELL);
+    return r >= 0 && c >= 0 && r < this.rows && c < this.cols ? { r, c } : null;
+  }
+
+  tap(x, y) {
+    const cell = this.cellAt(x, y);
+    if (!cell || !this.onPick) return;
+    const yarn = this.cells[cell.r][cell.c].yarn;
+    this.onPick(yarn >= 0 ? yarn : null);
+  }
+
+  pointAt(x, y) {
+    this.hover = x === null || x === undefined ? null : { x, y };
+    this.schedule();
+  }
+
+  // ----- layout and drawing in pixels -----
+
+  /** Size the frame to the matrix at fit (the panel's width decides), and fit it again. */
+  layout() {
+    const width = this.frame.clientWidth;
+    if (!this.rows || !width) return;
+    const left = this.rows > 100 ? 22 : 16;
+    const tallest = Math.max(220, Math.min(560, 0.7 * window.innerHeight));
+    const px = Math.min(FIT_CELL_PX, (width - left) / this.cols, (tallest - TOP - BOTTOM) / this.rows);
+    const height = Math.ceil(TOP + this.rows * px + BOTTOM);
+    if (this.frame.style.height !== `${height}px`) this.frame.style.height = `${height}px`;
+    this.view.setContent(this.cols * CELL, this.rows * CELL, { left, top: TOP, right: 0, bottom: BOTTOM });
+    this.view.resize(width, height);
+  }
+
+  schedule() {
+    if (this.frameRequested) return;
+    this.frameRequested = true;
+    requestAnimationFrame(() => {
+      this.frameRequested = false;
+      this.render();
+    });
+  }
+
+  /** What depends on the zoom: the transform, the ids, the rulers, the arrows, the hover. */
+  render() {
+    this.screen.replaceChildren();
+    if (!this.rows) return;
+    const view = this.view;
+    this.world.setAttribute('transform', `translate(${view.tx} ${view.ty}) scale(${view.scale})`);
+    const fontPx = parseFloat(this.layers.cells.style.fontSize || '13') * view.scale;
+    this.frame.classList.toggle('ids-hidden', fontPx < ID_PX);
+    this.frame.dataset.cellPx = view.cellPx.toFixed(2);
+    const cell = this.hover ? this.cellAt(this.hover.x, this.hover.y) : null;
+    const marks = { rows: new Map(), cols: new Map() };
+    for (const [line] of this.moving.rows) marks.rows.set(line, 'line-moving');
+    for (const [line] of this.moving.cols) marks.cols.set(line, 'line-moving');
+    for (const [line] of this.faultedLines.rows) marks.rows.set(line, 'line-faulted');
+    for (const [line] of this.faultedLines.cols) marks.cols.set(line, 'line-faulted');
+    if (cell) {
+      marks.rows.set(cell.r, 'line-hover');
+      marks.cols.set(cell.c, 'line-hover');
+    }
+    const sizes = view.insets;
+    const arrows = svg('g', { class: 'arrows' });
+    for (const [line, spans] of this.moving.rows) arrows.append(...[arrow(view, true, line, spans, this.cols, sizes)].filter(Boolean));
+    for (const [line, spans] of this.moving.cols) arrows.append(...[arrow(view, false, line, spans, this.rows, sizes)].filter(Boolean));
+    this.screen.append(arrows, rulers(view, this.rows, this.cols, sizes, marks));
+    this.drawHover(cell);
+  }
+
+  drawHover(cell) {
+    const marks = this.layers.marks;
+    marks.querySelector('.hover-edge')?.remove();
+    if (!cell || !this.hover) {
+      this.label.hidden = true;
+      return;
+    }
+    marks.append(svg('rect', { x: cell.c * CELL, y: cell.r * CELL, width: CELL, height: CELL, class: 'hover-edge' }));
+    const yarn = this.cells[cell.r][cell.c].yarn;
+    this.label.textContent = `row ${cell.r}, col ${cell.c}: ${yarn >= 0 ? `yarn ${yarn}` : 'empty'}${this.sensorNote(cell.r, cell.c)}`;
+    this.label.hidden = false;
+    const room = this.view.width - this.label.offsetWidth - 4;
+    this.label.style.left = `${Math.max(2, Math.min(room, this.hover.x + 14))}px`;
+    this.label.style.top = `${this.hover.y > this.view.height - 40 ? this.hover.y - 34 : this.hover.y + 16}px`;
+  }
+
+  /** The line under the matrix: e-stop, faulted axes, differing sensors, the weft, the pick. */
+  drawStatus() {
+    const parts = [];
+    const machine = this.machine;
+    let alarm = false;
+    if (machine) {
+      if (machine.estop) parts.push('E-STOP pressed');
+      if (machine.faulted.length) parts.push(`faulted: ${machine.faulted.join(', ')}`);
+      alarm = machine.estop || machine.faulted.length > 0 || machine.differs.length > 0;
+      parts.push(describeDiffers(machine.differs, this));
+    }
+    if (this.weft) parts.push(this.weftCells ? describeWeft(this.weft, this.weftCells) : 'next weft: waiting for the matrix geometry');
+    if (this.picked !== null) {
+      const cell = this.rows ? this.cellOf(this.picked) : null;
+      parts.push(cell ? `yarn ${this.picked}: row ${cell.r}, col ${cell.c}` : `yarn ${this.picked} has no case on the matrix`);
+    }
+    this.status.textContent = parts.filter(Boolean).join(' · ');
+    this.status.dataset.alarm = String(alarm);
   }
 }
 
-/**
- * A shift's moves by line, in the order given: line -> [{k, first, last}], the cells each
- * move carries (a whole line is cells 0..along-1; a segment's span is clipped to the matrix).
- */
-function movesByLine(moves, along) {
-  const lines = new Map();
-  for (const [line, k, first = 0, last = along - 1] of moves) {
-    const span = { k, first: Math.max(0, first), last: Math.min(along - 1, last) };
-    if (span.first > span.last) continue;
-    if (!lines.has(line)) lines.set(line, []);
-    lines.get(line).push(span);
+function element(tag, className, text) {
+  const made = document.createElement(tag);
+  made.className = className;
+  if (text !== undefined) made.textContent = text;
+  return made;
+}
+
+/** "sensors differ from the twin at (1, 2) case, (0, 0) empty". */
+function describeDiffers(differs, grid) {
+  if (!differs.length) return grid.rows ? 'sensors agree with the twin' : '';
+  if (differs.some(([r, c]) => r < 0 || c < 0)) return "the sensors' matrix is not the twin's size";
+  const shown = differs.slice(0, 6).map(([r, c]) => {
+    const twin = grid.cells[r]?.[c]?.yarn;
+    return `(${r}, ${c}) ${twin >= 0 ? 'empty' : 'case'}`;
+  });
+  const more = differs.length > 6 ? ` and ${differs.length - 6} more` : '';
+  return `sensors differ from the twin at ${shown.join(', ')}${more}`;
+}
+
+/** "next weft: 0°, 60.8 mm, 10.5 mm above the fell (drawn ×1.81, at the guides' scale)". */
+function describeWeft(weft, cells) {
+  const number = (value) => String(Number(Number(value).toFixed(2)));
+  return `next weft: ${number(weft.angle)}°, ${number(weft.length)} mm, ${number(weft.z)} mm above the fell (drawn ×${number(1 / cells.fan)}, at the guides' scale)`;
+}
+
+/** What the marks mean. */
+function legend() {
+  const box = element('div', 'matrix-legend');
+  const entries = [
+    ['moving', 'moves next'],
+    ['differs', 'sensor ≠ twin (● sees a case, ○ sees none)'],
+    ['faulted', 'axis fault'],
+    ['weft', "next weft, at the guides' scale"],
+    ['picked', 'picked yarn'],
+  ];
+  for (const [kind, text] of entries) {
+    const item = element('span', `matrix-key key-${kind}`, text);
+    item.dataset.key = kind;
+    box.append(item);
   }
-  return lines;
+  return box;
 }
