@@ -6,29 +6,54 @@
 const TOKEN_KEY = 'bwsd.token';
 
 // ----- the operator's token -----
+//
+// Kept in the tab's session storage, so it ends with the browser session; "remember me"
+// keeps it in local storage instead, for the next sessions too. Only one of the two
+// holds it at a time.
 
-/** The token kept in this browser, or null. */
-export function getToken() {
+function store(kind) {
   try {
-    return localStorage.getItem(TOKEN_KEY) || null;
+    return kind === 'local' ? window.localStorage : window.sessionStorage;
   } catch {
     return null; // storage disabled: the page still works for open reads
   }
 }
 
-/** Keep `token` (or forget it, for null / ''). */
-export function setToken(token) {
+/** The token kept in this tab or browser, or null. */
+export function getToken() {
   try {
-    if (token) localStorage.setItem(TOKEN_KEY, token);
-    else localStorage.removeItem(TOKEN_KEY);
+    return store('session')?.getItem(TOKEN_KEY) || store('local')?.getItem(TOKEN_KEY) || null;
   } catch {
-    // storage disabled: nothing to keep
+    return null;
+  }
+}
+
+/** True when the token is remembered beyond this browser session (local storage). */
+export function tokenRemembered() {
+  try {
+    return Boolean(store('local')?.getItem(TOKEN_KEY));
+  } catch {
+    return false;
+  }
+}
+
+/** Keep `token` for this session, or beyond it with `remember` (null or '' forgets it). */
+export function setToken(token, remember = false) {
+  for (const kind of ['session', 'local']) {
+    try {
+      const place = store(kind);
+      if (!place) continue;
+      if (token && (kind === 'local') === remember) place.setItem(TOKEN_KEY, token);
+      else place.removeItem(TOKEN_KEY);
+    } catch {
+      // storage disabled or full: nothing to keep
+    }
   }
 }
 
 /**
- * A link such as `…/#token=XYZ` hands the page a token: keep it, then take it out of
- * the address bar (and so out of the history) at once.
+ * A link such as `…/#token=XYZ` hands the page a token: keep it for this session, then
+ * take it out of the address bar (and so out of the history) at once.
  */
 export function takeTokenFromFragment() {
   const fragment = new URLSearchParams(location.hash.replace(/^#/, ''));
@@ -37,22 +62,25 @@ export function takeTokenFromFragment() {
   fragment.delete('token');
   const rest = fragment.toString();
   history.replaceState(history.state, '', location.pathname + location.search + (rest ? `#${rest}` : ''));
-  if (token) setToken(token);
+  if (token) setToken(token, false);
   return token || null;
 }
 
 // ----- REST -----
 
+const REQUEST_MS = 10000; // a request not answered by then counts as the daemon not answering
+
 /**
  * One request to the API: `{status, body}`, body the parsed JSON answer (or null).
  * HTTP errors are answers, not exceptions: the caller shows a 409's `error` to the
- * operator. Only a network failure throws.
+ * operator. Only a network failure, or no answer within `timeoutMs`, throws.
  */
-export async function request(path, { method = 'GET', body, signal } = {}) {
+export async function request(path, { method = 'GET', body, timeoutMs = REQUEST_MS } = {}) {
   const headers = { Accept: 'application/json' };
   const token = getToken();
   if (token) headers.Authorization = `Bearer ${token}`;
-  const init = { method, headers, signal, cache: 'no-store' };
+  const init = { method, headers, cache: 'no-store' };
+  if (timeoutMs) init.signal = AbortSignal.timeout(timeoutMs);
   if (body !== undefined) {
     headers['Content-Type'] = 'application/json';
     init.body = JSON.stringify(body);
@@ -68,6 +96,36 @@ export async function request(path, { method = 'GET', body, signal } = {}) {
     }
   }
   return { status: response.status, ok: response.ok, body: parsed };
+}
+
+/**
+ * GET `path` with the token and save the answer as the file `name` (the browser's download).
+ * `{ok, status, error}`; the file is saved only for a 200.
+ */
+export async function download(path, name) {
+  const headers = {};
+  const token = getToken();
+  if (token) headers.Authorization = `Bearer ${token}`;
+  const response = await fetch(path, { headers, cache: 'no-store' });
+  if (!response.ok) {
+    const answer = { status: response.status, body: null };
+    try {
+      answer.body = await response.json();
+    } catch {
+      // not JSON: the status says it
+    }
+    return { ok: false, status: response.status, error: errorText(answer) };
+  }
+  const url = URL.createObjectURL(await response.blob());
+  const link = document.createElement('a');
+  link.href = url;
+  link.download = name;
+  link.hidden = true;
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 60000); // the download has its copy by then
+  return { ok: true, status: response.status, error: '' };
 }
 
 /** The `error` of a refused request, with a fallback naming the status. */

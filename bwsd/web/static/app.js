@@ -1,6 +1,11 @@
 // The operator's panel: the predicted preform, which line moves next, why the machine
 // stopped, and the PackML commands to start, hold and stop it.
 //
+// The page shows what the daemon says and offers only what it would accept: a command's
+// button is enabled only when `/state`'s `allowed` has it, the token's role may command
+// (`/whoami`, asked at log in) and the daemon answers. While the daemon does not answer,
+// the last picture stays, greyed, with the time it was last heard from.
+//
 // Data flow. The page fetches the state and the whole skeleton once, then follows the
 // daemon's event stream. Each instruction event carries a skeleton delta; deltas are
 // queued and applied in batches, once per animation frame, to the yarns they touch only.
@@ -9,18 +14,30 @@
 // means events were missed, and the whole skeleton is fetched again. Events that arrive
 // while a fetch is under way wait, then go through the same rule.
 
-import { EventLink, errorText, getToken, request, setToken, takeTokenFromFragment } from './api.js';
-import { Palette, css } from './colours.js';
+import { EventLink, errorText, getToken, request, setToken, takeTokenFromFragment, tokenRemembered } from './api.js';
+import * as colours from './colours.js';
+import { confirmCommand, dismissConfirm } from './confirm.js';
 import { MatrixGrid, signed } from './grid.js';
+import { HistoryPanel } from './history.js';
+import { JobPanel } from './job.js';
 import { ProgramPanel } from './program.js';
 import { PreformView } from './skeleton.js';
+import { StatusPanel } from './status.js';
 
 const $ = (id) => document.getElementById(id);
+const { Palette, css } = colours;
 const COLOUR_KEY = 'bwsd.colourBy';
+const COLOUR_MODES = colours.COLOUR_MODES ?? ['family', 'yarn'];
 const WITH_REASON = new Set(['stop', 'hold', 'abort']); // commands that send the reason field
+const CONFIRMED = new Set(['stop', 'abort']); // commands asked about first
 const KEEP = 1000; // samples kept in window.bwsd.latencies, .frames and .work
 const FLOW_MS = 1000; // updates "flow" while the last instruction event is younger than this
 const STATE_EVERY_MS = 2000; // while a program runs, the state (bus health…) is read this often
+const WATCH_EVERY_MS = 5000; // at rest, the state is read this often: a silent daemon is seen
+const COMMANDING_ROLES = new Set(['operator', 'admin']);
+// Where the daemon takes a program and a unit mode change (docs/api.md, docs/packml.md).
+const LOADABLE = new Set(['Stopped', 'Idle', 'Complete', 'Aborted']);
+const MODE_STATES = new Set(['Stopped', 'Idle', 'Aborted']);
 
 // ----- test and diagnostics hooks -----
 const hooks = {
@@ -30,6 +47,10 @@ const hooks = {
   yarns: 0,
   contacts: 0,
   state: null, // PackML state name
+  allowed: [], // the commands whose buttons are enabled
+  online: false, // the daemon answers and the event link is up
+  role: null, // the token's role, from /whoami
+  selected: null, // the yarn picked in the view or the matrix
   latencies: [], // ms from an instruction's time to the frame that drew it
   frames: [], // ms between consecutive frames while updates flow
   work: [], // per frame that applied instructions: {ms: applying and drawing, nodes: shown}
@@ -43,16 +64,28 @@ function keep(samples, value) {
 }
 
 // ----- what the page knows -----
-const live = {
-  state: null, // the last GET state answer
-  programId: null, // the program whose skeleton is shown
-  loaded: false, // a skeleton is shown
-  noProgram: false, // the daemon has no program loaded
-  done: 0, // instructions in the skeleton shown
-  eventIndex: 0, // the newest instruction index seen in an event (for this program)
-  eventNext: null, // and the "next" it announced
-  fetchedOnce: false,
-};
+let live = fresh();
+
+function fresh() {
+  return {
+    state: null, // the last GET state answer
+    programId: null, // the program whose skeleton is shown
+    loaded: false, // a skeleton is shown
+    noProgram: false, // the daemon has no program loaded
+    done: 0, // instructions in the skeleton shown
+    eventIndex: 0, // the newest instruction index seen in an event since the last state
+    eventNext: null, // and the "next" it announced
+    fetchedOnce: false,
+  };
+}
+
+// The link to the daemon: up while the event stream is open and the last request was
+// answered; `lastSeen` is when it last answered or sent an event.
+const connection = { linkUp: false, answering: true, lastSeen: null };
+// Who is logged in: the token's name and role (null until /whoami answers).
+const session = { name: null, role: null };
+let selected = null; // the yarn picked, or null
+let generation = 0; // counts logins and logouts: an answer asked for before one is dropped
 
 let inbox = []; // instruction events to apply at the next frame
 let waiting = []; // instruction events that arrived while the skeleton was being fetched
@@ -66,13 +99,17 @@ let statusDirty = false;
 // ----- the parts of the page -----
 let colourMode = 'family';
 try {
-  colourMode = localStorage.getItem(COLOUR_KEY) === 'yarn' ? 'yarn' : 'family';
+  const kept = localStorage.getItem(COLOUR_KEY);
+  if (COLOUR_MODES.includes(kept)) colourMode = kept;
 } catch {
   // storage disabled
 }
 const palette = new Palette(colourMode);
 const view = new PreformView($('view'), palette, scheduleFrame);
 const grid = new MatrixGrid($('grid'), palette);
+const status = new StatusPanel();
+const job = new JobPanel({ onAnswer: answered, onUnreachable: unreachable });
+const record = new HistoryPanel({ onAnswer: answered, onUnreachable: unreachable, onOpen: openProgram });
 const programs = new ProgramPanel({
   onLoaded: () => refetch(),
   onUnauthorized: () => loggedOut(true),
@@ -161,9 +198,10 @@ function judge(event) {
 /** The progress and next line an instruction event announces (shown at this frame). */
 function noteProgress(event) {
   const state = live.state;
-  if (!state || event.program_id !== state.program_id || event.index < live.eventIndex) return;
+  if (!state || event.program_id !== state.program_id || event.index <= Math.max(live.eventIndex, state.index)) return;
   live.eventIndex = event.index;
   live.eventNext = event.next ?? null;
+  job.noteInstruction(event);
   statusDirty = true;
   gridDirty = true;
 }
@@ -191,7 +229,7 @@ class Coalesced {
           await this.work();
         } while (this.again);
       } catch (error) {
-        say(`the daemon cannot be reached (${error.message})`, 'error');
+        unreachable(error);
       } finally {
         this.running = null;
         this.after();
@@ -215,15 +253,17 @@ function refetch() {
 }
 
 async function fetchAll() {
+  const asked = generation;
   const stateAnswer = await request('api/v1/state');
-  if (!accept(stateAnswer)) return;
+  if (asked !== generation || !accept(stateAnswer)) return;
   showState(stateAnswer.body);
   const programId = stateAnswer.body.program_id;
   if (programId === null || programId === undefined) {
     showNoProgram();
     return;
   }
-  const skeletonAnswer = await request('api/v1/skeleton');
+  const skeletonAnswer = await request('api/v1/skeleton', { timeoutMs: 0 }); // a large one takes its time
+  if (asked !== generation) return;
   if (skeletonAnswer.status === 409) {
     showNoProgram();
     return;
@@ -235,11 +275,13 @@ async function fetchAll() {
 
 /** GET the state alone (after a state, mode or fault event, or a command). */
 const stateFetch = new Coalesced(async () => {
+  const asked = generation;
   const answer = await request('api/v1/state');
-  if (accept(answer)) showState(answer.body);
+  if (asked === generation && accept(answer)) showState(answer.body);
 });
 
 function refreshState() {
+  if (!getToken() && session.role === null) return Promise.resolve(); // logged out
   return stateFetch.run();
 }
 
@@ -254,24 +296,90 @@ function refreshStateNowAndThen() {
 
 /** True for an answer to show; a 401 logs out, other refusals are said. */
 function accept(answer) {
+  heard();
   if (answer.ok) return true;
   if (answer.status === 401) loggedOut(true);
   else say(errorText(answer), 'error');
   return false;
 }
 
+/** A refused answer from a panel: a 401 logs out (the panel shows the rest). */
+function answered(answer) {
+  heard();
+  if (answer.status === 401) loggedOut(true);
+}
+
+// ----- the link to the daemon -----
+
+/** The daemon answered or sent an event. */
+function heard() {
+  connection.lastSeen = new Date();
+  if (!connection.answering) {
+    connection.answering = true;
+    if ($('message').dataset.kind === 'error' && $('message').textContent.includes('cannot be reached')) say('', '');
+    statusDirty = true;
+    scheduleFrame();
+  }
+}
+
+/** A request found no daemon (a network error or no answer in time). */
+function unreachable(error) {
+  if (connection.answering) {
+    connection.answering = false;
+    say(`the daemon cannot be reached (${error?.message ?? error})`, 'error');
+  }
+  statusDirty = true;
+  scheduleFrame();
+}
+
+/** The daemon answers and the event link is up; null while the page does not ask. */
+function online() {
+  if (!link.wanted) return null;
+  return connection.linkUp && connection.answering;
+}
+
+// At rest nothing arrives on the event link: read the state now and then, so a daemon that
+// stopped answering (its socket still open) is seen within WATCH_EVERY_MS.
+setInterval(() => {
+  if (link.wanted && connection.linkUp) refreshState();
+}, WATCH_EVERY_MS);
+
 // ----- showing what was fetched -----
 
 function showState(state) {
   const sameProgram = live.state && live.state.program_id === state.program_id;
-  if (!sameProgram) {
-    live.eventIndex = 0;
-    live.eventNext = null;
+  if (!sameProgram || state.index >= live.eventIndex || !RUNNING_STATES.has(state.name)) {
+    // The state is the truth as of its answer; events only run ahead of it while running.
+    live.eventIndex = state.index;
+    live.eventNext = state.next ?? null;
   }
+  if (!sameProgram) refreshHistory();
   live.state = state;
+  if ((state.bus?.faulted ?? []).length > 0) readFaultNames(state.bus.faulted);
   statusDirty = true;
   gridDirty = true;
   scheduleFrame();
+}
+
+const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspending']);
+
+/** The fault names of the faulted axes (stall, jam...), read from /machine once per change. */
+let faultedAsked = '';
+async function readFaultNames(faulted) {
+  const key = faulted.join(',');
+  if (key === faultedAsked) return;
+  faultedAsked = key;
+  try {
+    const asked = generation;
+    const answer = await request('api/v1/machine');
+    if (answer.ok && asked === generation) {
+      status.setFaultNames(answer.body.axes);
+      statusDirty = true;
+      scheduleFrame();
+    }
+  } catch {
+    faultedAsked = ''; // asked again with the next state
+  }
 }
 
 function showNoProgram() {
@@ -280,6 +388,7 @@ function showNoProgram() {
   live.programId = null;
   live.noProgram = true;
   live.done = 0;
+  select(null);
   gridDirty = true;
   statusDirty = true;
   $('view-note').hidden = false;
@@ -289,12 +398,16 @@ function showNoProgram() {
 function showSkeleton(skeleton, programId) {
   const newProgram = !live.loaded || programId !== live.programId;
   view.load(skeleton);
+  if (typeof grid.setGeometry === 'function') grid.setGeometry(skeleton.machine ?? null);
   live.loaded = true;
   live.noProgram = false;
   live.programId = programId;
   live.done = skeleton.instructions;
   $('view-note').hidden = true;
-  if (newProgram) view.fit(); // keep the operator's camera on a refetch of the same program
+  if (newProgram) {
+    view.fit(); // keep the operator's camera on a refetch of the same program
+    select(null);
+  }
   drawLegend();
   gridDirty = true;
   statusDirty = true;
@@ -304,14 +417,22 @@ function showSkeleton(skeleton, programId) {
 /** The matrix grid and the next-instruction line. */
 function drawGrid() {
   gridDirty = false;
+  const next = currentNext();
   if (!live.loaded || !view.occupancy) {
-    grid.showEmpty(live.noProgram ? 'no program loaded' : 'waiting for the skeleton…');
+    grid.showEmpty(live.noProgram ? 'no program loaded' : live.state ? 'waiting for the skeleton…' : 'not logged in');
     grid.setNext(null);
   } else {
     grid.setOccupancy(view.occupancy);
-    grid.setNext(currentNext()?.instruction ?? null);
+    grid.setNext(next?.instruction ?? null);
   }
-  $('next').textContent = describeNext(currentNext());
+  const instruction = next?.instruction;
+  if (typeof grid.setNextWeft === 'function') grid.setNextWeft(instruction?.kind === 'weft' && live.loaded ? instruction : null);
+  if (typeof grid.setMachine === 'function') {
+    const bus = live.state?.bus;
+    const known = bus && online() !== false && bus.connected === true;
+    grid.setMachine(known ? { differs: bus.differs ?? [], estop: Boolean(bus.estop), faulted: bus.faulted ?? [] } : null);
+  }
+  if ($('next')) $('next').textContent = describeNext(next);
 }
 
 /** The next instruction: from the newest of the state and the instruction events. */
@@ -330,8 +451,9 @@ function currentIndex() {
 /** "next: line 12 — ROW 1:+1 2:-1", "next: line 14 — TAKEUP 3 mm". */
 function describeNext(next) {
   const state = live.state;
-  if (!state || state.program_id === null || state.program_id === undefined) return 'next: — (no program loaded)';
-  if (!next) return currentIndex() >= state.count ? 'next: — (program done)' : 'next: —';
+  if (!state) return 'next: —';
+  if (state.program_id === null || state.program_id === undefined) return 'next: — (no program loaded)';
+  if (!next) return currentIndex() >= state.count ? 'next: — (program done)' : 'next: — (the run has ended)';
   const where = next.line ? `line ${next.line}` : `instruction ${next.index}`;
   const i = next.instruction ?? {};
   const number = (value) => String(Number(Number(value).toFixed(3)));
@@ -351,41 +473,61 @@ function describeNext(next) {
   return `next: ${where} — ${what}`;
 }
 
-/** State, mode, program, progress, reason, fault, bus; and which commands are open. */
+/** State, program, status, job; and which commands are open. */
 function drawStatus() {
   statusDirty = false;
   const state = live.state;
-  if (!state) return;
-  const stateBox = $('state');
-  stateBox.textContent = state.name;
-  stateBox.dataset.state = state.name;
-  hooks.state = state.name;
-  $('mode').textContent = state.mode_name ?? '—';
-  const hasProgram = state.program_id !== null && state.program_id !== undefined;
-  $('program-label').textContent = hasProgram ? `${state.program_name ?? 'unnamed'} (#${state.program_id})` : 'none loaded';
-  const index = currentIndex();
-  const progress = $('progress');
-  progress.max = Math.max(state.count, 1);
-  progress.value = Math.min(index, state.count);
-  $('progress-text').textContent = `${index} / ${state.count}`;
-  $('reason').textContent = state.reason || '—';
-  $('last-fault').textContent = state.last_fault || '—';
-  const bus = state.bus ?? {};
-  const busBox = $('bus');
-  const [busText, busKey] = bus.connected === true ? ['connected', 'up'] : bus.connected === false ? ['lost', 'down'] : ['not seen yet', 'unknown'];
-  busBox.textContent = busText;
-  busBox.dataset.bus = busKey;
-  $('bus-error').textContent = bus.last_error ? `(${bus.last_error})` : '';
+  const up = online();
+  hooks.online = up === true;
+  status.draw(state, up, connection.lastSeen);
+  hooks.state = state?.name ?? null;
+  if (state) {
+    const hasProgram = state.program_id !== null && state.program_id !== undefined;
+    $('program-label').textContent = hasProgram ? `${state.program_name ?? 'unnamed'} (#${state.program_id})` : 'none loaded';
+    $('program-label').title = $('program-label').textContent;
+    job.draw(state, currentIndex(), currentNext(), up !== false);
+  } else {
+    $('program-label').textContent = '—';
+  }
+  drawMode();
   drawButtons();
 }
 
+/** The token may command, the daemon answers, and the state is fresh. */
+function mayCommand() {
+  return Boolean(getToken()) && COMMANDING_ROLES.has(session.role) && online() === true;
+}
+
 function drawButtons() {
-  const allowed = new Set(live.state?.allowed ?? []);
   const may = mayCommand();
+  const allowed = new Set(may ? live.state?.allowed ?? [] : []);
+  const enabled = [];
   for (const button of document.querySelectorAll('button[data-command]')) {
-    button.disabled = !(may && allowed.has(button.dataset.command));
+    const open = allowed.has(button.dataset.command);
+    button.disabled = !open;
+    if (open) enabled.push(button.dataset.command);
   }
-  programs.setAllowed(may);
+  hooks.allowed = enabled;
+  const state = live.state;
+  const loadable = Boolean(state) && LOADABLE.has(state.name) && !state.recovering;
+  programs.setAllowed({
+    check: may,
+    load: may && loadable,
+    loadWhy: may ? 'a program is loaded only in Stopped, Idle, Complete or Aborted' : 'needs an operator token and a daemon that answers',
+  });
+  const readOnly = $('read-only');
+  readOnly.hidden = !session.role || COMMANDING_ROLES.has(session.role);
+  readOnly.textContent = getToken()
+    ? `read only: a ${session.role}'s token may not command the machine or load programs`
+    : 'read only: log in with an operator token to command the machine';
+}
+
+/** The unit mode: shown always; changeable by an operator where PackML allows it. */
+function drawMode() {
+  const select = $('mode-select');
+  const state = live.state;
+  if (!modeBusy) select.value = String(state?.mode_name ?? 'production').toLowerCase();
+  select.disabled = modeBusy || !mayCommand() || !state || !MODE_STATES.has(state.name);
 }
 
 /** Counts under the view, and the test hooks. */
@@ -405,6 +547,7 @@ let legendFamilies = -1; // weft families in the legend shown
 
 function drawLegend() {
   const legend = $('legend');
+  if (!legend) return;
   legendFamilies = palette.weftColours.size;
   if (palette.mode === 'yarn') {
     legend.textContent = 'a hue per yarn id';
@@ -421,17 +564,47 @@ function drawLegend() {
   );
 }
 
+// ----- the yarn picked in the 3D view or the matrix -----
+
+/** Highlight yarn `id` in both views and describe it (null: no selection). */
+function select(id) {
+  selected = id ?? null;
+  hooks.selected = selected;
+  if (typeof view.highlight === 'function') view.highlight(selected);
+  if (typeof grid.highlight === 'function') grid.highlight(selected);
+  const box = $('selection');
+  const info = selected !== null && typeof view.yarnInfo === 'function' ? view.yarnInfo(selected) : null;
+  box.hidden = selected === null;
+  const mm = (value) => (typeof value === 'number' ? `${Number(value.toFixed(2))} mm` : '—');
+  const text = (value) => (value === undefined || value === null ? '—' : String(value));
+  $('selection-id').textContent = text(info?.id ?? selected);
+  $('selection-kind').textContent = text(info?.kind);
+  $('selection-family').textContent = text(info?.family);
+  $('selection-contacts').textContent = text(info?.contacts);
+  $('selection-length').textContent = mm(info?.length);
+}
+
+function picked(id) {
+  select(id === selected ? null : id); // picking the selected yarn again clears it
+}
+
+view.onPick = picked;
+grid.onPick = picked;
+$('selection-clear').addEventListener('click', () => select(null));
+
 // ----- events -----
 
 function onEvent(event) {
+  heard();
   switch (event.event) {
     case 'hello':
-      if ($('message').textContent.includes('cannot be reached')) say('', ''); // back again
       refetch(); // (re)connected: fetch it all
+      refreshHistory();
       break;
     case 'program':
     case 'dropped':
       refetch(); // a new program, or events missed: fetch it all
+      refreshHistory();
       break;
     case 'instruction':
       inbox.push(event);
@@ -446,17 +619,22 @@ function onEvent(event) {
         scheduleFrame();
       }
       refreshState();
+      refreshHistory();
       break;
-    default: // fault, mode, ...: the state answer has it all
+    case 'mode':
+      refreshState();
+      refreshHistory();
+      break;
+    default: // fault, bus, ...: the state answer has it all
       refreshState();
   }
 }
 
 function onLink(up) {
-  const box = $('link');
-  const text = up ? 'live' : link.wanted ? 'reconnecting' : 'off';
-  box.textContent = text;
-  box.dataset.link = text;
+  connection.linkUp = up;
+  if (up) heard();
+  statusDirty = true;
+  scheduleFrame();
   if (up || !link.wanted) return;
   // Lost (or never had) the stream: show what the daemon says now; this also finds a
   // token that was revoked meanwhile (a 401 logs out and stops the retries).
@@ -464,21 +642,21 @@ function onLink(up) {
   else refreshState();
 }
 
-// ----- session -----
-
-// The token's role, once a refusal (403) named it: a viewer's token cannot command.
-let role = null;
-const COMMANDING_ROLES = new Set(['operator', 'admin']);
-
-function mayCommand() {
-  return Boolean(getToken()) && (role === null || COMMANDING_ROLES.has(role));
+let historyTimer = null;
+function refreshHistory() {
+  clearTimeout(historyTimer);
+  historyTimer = setTimeout(() => {
+    if (link.wanted) record.refresh();
+  }, 200);
 }
 
-/** A 403: remember the role it names, and say what is needed. */
+// ----- session -----
+
+/** A 403: the role it names; say what is needed. */
 function forbidden(answer, what) {
-  if (typeof answer.body?.role === 'string') role = answer.body.role;
+  if (typeof answer.body?.role === 'string') session.role = answer.body.role;
   const needs = answer.body?.needs ? ` (needs ${answer.body.needs})` : '';
-  say(`${what}: your token's role is ${role ?? 'too low'}${needs}`, 'error');
+  say(`${what}: your token's role is ${session.role ?? 'too low'}${needs}`, 'error');
   drawSession();
   drawButtons();
 }
@@ -487,22 +665,61 @@ function forbidden(answer, what) {
 function loggedOut(refused) {
   if (refused && getToken()) say('the token was refused: log in again', 'error');
   setToken(null);
+  session.name = session.role = null;
   link.stop();
+  clearPicture();
   drawSession();
-  drawButtons();
+}
+
+/** Forget everything shown: the 3D view, the matrix, the job, the history, the status. */
+function clearPicture() {
+  generation += 1;
+  dismissConfirm();
+  select(null);
+  view.clear();
+  $('view-note').hidden = false;
+  live = fresh();
+  inbox = [];
+  waiting = [];
+  faultedAsked = '';
+  job.clear();
+  record.clear();
+  programs.clear();
+  $('reason-input').value = '';
+  $('mode-message').textContent = '';
+  Object.assign(hooks, { ready: false, done: 0, nodes: 0, yarns: 0, contacts: 0, state: null, allowed: [] });
+  $('view-stats').textContent = '';
+  connection.lastSeen = null;
+  connection.answering = true;
+  gridDirty = true;
+  statusDirty = true;
+  scheduleFrame();
 }
 
 function drawSession() {
   const token = getToken();
   $('login').hidden = Boolean(token);
   $('session').hidden = !token;
-  $('session-role').textContent = role ? `logged in (${role})` : 'logged in';
+  $('remember').checked = tokenRemembered();
+  const who = session.name ? `${session.name}, ` : '';
+  $('session-role').textContent = session.role ? `logged in (${who}${session.role})` : 'logged in';
+  hooks.role = session.role;
+}
+
+/** The token's holder and role, before anything is tried (a 401 logs out). */
+async function readRole() {
+  const answer = await request('api/v1/whoami');
+  if (answer.ok) {
+    session.name = answer.body.name;
+    session.role = answer.body.role;
+  }
+  return answer;
 }
 
 /**
  * Start (again): without a token, ask the daemon whether reads are open (else only the
- * login form shows, and nothing is asked that would be refused); then read the state and
- * follow the events.
+ * login form shows, and nothing is asked that would be refused); then learn the token's
+ * role, read the state and follow the events.
  */
 async function start() {
   drawSession();
@@ -511,21 +728,35 @@ async function start() {
   try {
     if (!getToken()) {
       const health = await request('healthz');
+      heard();
       if (!(health.ok && health.body?.open_reads)) return; // the login form is showing
     }
-    answer = await request('api/v1/state');
+    answer = await readRole();
+    if (answer.ok) answer = await request('api/v1/state');
   } catch (error) {
-    say(`the daemon cannot be reached (${error.message})`, 'error');
+    unreachable(error);
     link.start(); // keeps trying; the first "hello" fetches everything
+    drawSession();
     return;
   }
   if (answer.status === 401) {
     loggedOut(Boolean(getToken()));
     return;
   }
+  drawSession();
   if (!accept(answer)) return;
   showState(answer.body);
   link.start(); // its "hello" fetches the skeleton
+}
+
+/** Log in with `token` (from the form, or a link opened in this tab). */
+function logIn(token, remember) {
+  if (link.wanted || getToken()) clearPicture(); // another token: nothing of the old one stays
+  link.stop();
+  setToken(token, remember);
+  session.name = session.role = null;
+  say('', '');
+  start();
 }
 
 $('login').addEventListener('submit', (event) => {
@@ -533,20 +764,35 @@ $('login').addEventListener('submit', (event) => {
   const input = $('token-input');
   const token = input.value.trim();
   if (!token) return;
-  setToken(token);
-  role = null;
   input.value = '';
-  say('', '');
-  start();
+  logIn(token, $('remember').checked);
 });
 
 $('logout').addEventListener('click', () => {
   setToken(null);
-  role = null;
+  session.name = session.role = null;
   link.stop();
+  clearPicture();
   say('logged out', '');
   start();
 });
+
+// A link with `#token=...` opened in a tab that shows the page already.
+window.addEventListener('hashchange', () => {
+  const token = takeTokenFromFragment();
+  if (token) logIn(token, false);
+});
+
+/** A program of the history: its text in the Program panel, to check or load again. */
+async function openProgram(id, name) {
+  try {
+    const answer = await request(`api/v1/programs/${id}`);
+    if (answer.ok) programs.open(name, answer.body.text ?? '');
+    else answered(answer);
+  } catch (error) {
+    unreachable(error);
+  }
+}
 
 // ----- commands -----
 
@@ -560,17 +806,42 @@ function say(text, kind) {
   if (kind === 'ok') sayTimer = setTimeout(() => say('', ''), 8000);
 }
 
-async function sendCommand(name) {
-  const reason = $('reason-input').value.trim();
+/** "program braid.bws (#3), instruction 22 of 50" */
+function describeRun() {
+  const state = live.state;
+  if (!state || state.program_id === null || state.program_id === undefined) return `${state?.name ?? ''}`;
+  return `${state.name}: ${state.program_name ?? 'program'} (#${state.program_id}), ${currentIndex()} of ${state.count} instructions done`;
+}
+
+async function ask(name) {
+  let reason = $('reason-input').value.trim();
+  if (CONFIRMED.has(name)) {
+    const answer = await confirmCommand(name, describeRun(), reason);
+    if (!answer) {
+      say(`${name}: cancelled, nothing sent`, '');
+      return;
+    }
+    reason = answer.reason;
+  }
+  if (!mayCommand() || !(live.state?.allowed ?? []).includes(name)) {
+    say(`${name}: no longer accepted (now ${live.state?.name ?? 'unknown'}), nothing sent`, 'error');
+    return;
+  }
+  sendCommand(name, reason);
+}
+
+async function sendCommand(name, reason) {
   const body = WITH_REASON.has(name) && reason ? { reason } : {};
   say(`${name}…`, 'pending');
   let answer;
   try {
-    answer = await request(`api/v1/commands/${name}`, { method: 'POST', body });
+    answer = await request(`api/v1/commands/${name}`, { method: 'POST', body, timeoutMs: 0 }); // a stop waits for the move
   } catch (error) {
+    unreachable(error);
     say(`${name}: the daemon cannot be reached (${error.message})`, 'error');
     return;
   }
+  heard();
   if (answer.ok) {
     say(`${name}: now ${answer.body.name}`, 'ok');
     if (WITH_REASON.has(name)) $('reason-input').value = '';
@@ -588,13 +859,45 @@ async function sendCommand(name) {
 }
 
 for (const button of document.querySelectorAll('button[data-command]')) {
-  button.addEventListener('click', () => sendCommand(button.dataset.command));
+  button.addEventListener('click', () => ask(button.dataset.command));
 }
+
+// ----- unit mode -----
+
+let modeBusy = false;
+$('mode-select').addEventListener('change', async (event) => {
+  const mode = event.target.value;
+  const message = $('mode-message');
+  modeBusy = true;
+  drawMode();
+  message.textContent = `asking for ${mode}…`;
+  message.dataset.kind = 'pending';
+  try {
+    const answer = await request('api/v1/mode', { method: 'PUT', body: { mode } });
+    heard();
+    if (answer.ok) {
+      message.textContent = `now ${answer.body.mode_name}`;
+      message.dataset.kind = 'ok';
+    } else {
+      if (answer.status === 401) loggedOut(true);
+      message.textContent = `refused: ${errorText(answer)}`;
+      message.dataset.kind = 'error';
+    }
+  } catch (error) {
+    unreachable(error);
+    message.textContent = `the daemon cannot be reached (${error.message})`;
+    message.dataset.kind = 'error';
+  } finally {
+    modeBusy = false;
+    await refreshState(); // the mode the daemon has, whatever it answered
+    drawMode();
+  }
+});
 
 // ----- view tools -----
 
 $('colour-by').addEventListener('change', (event) => {
-  const mode = event.target.value === 'yarn' ? 'yarn' : 'family';
+  const mode = COLOUR_MODES.includes(event.target.value) ? event.target.value : 'family';
   try {
     localStorage.setItem(COLOUR_KEY, mode);
   } catch {

@@ -37,7 +37,8 @@ export class ProgramPanel {
     this.loadButton = $('load');
     this.result = $('dry-run');
     this.busy = false;
-    this.allowed = false;
+    this.checkAllowed = false;
+    this.loadAllowed = false;
 
     this.file.addEventListener('change', () => this.readFile());
     this.checkButton.addEventListener('click', () => this.submit(true));
@@ -45,16 +46,36 @@ export class ProgramPanel {
     this.text.addEventListener('input', () => this.update());
   }
 
-  /** Enable Check and Load only with a token (and not while a request runs). */
-  setAllowed(allowed) {
-    this.allowed = allowed;
+  /**
+   * Which of Check and Load the page offers: `check` (a dry run, in any state) and `load`
+   * (only where the daemon takes a program), each for a token that may change things;
+   * `loadWhy` says why Load is not offered.
+   */
+  setAllowed({ check, load, loadWhy = '' }) {
+    this.checkAllowed = check;
+    this.loadAllowed = load;
+    this.loadButton.title = load ? 'make it the program to run' : loadWhy;
     this.update();
   }
 
   update() {
-    const usable = this.allowed && !this.busy && this.text.value.trim() !== '';
-    this.checkButton.disabled = !usable;
-    this.loadButton.disabled = !usable;
+    const usable = !this.busy && this.text.value.trim() !== '';
+    this.checkButton.disabled = !(usable && this.checkAllowed);
+    this.loadButton.disabled = !(usable && this.loadAllowed);
+  }
+
+  /** Put a program's text in the panel (from the history), to check or load it again. */
+  open(name, text) {
+    this.text.value = text;
+    this.name.value = name;
+    this.file.value = '';
+    this.result.replaceChildren();
+    this.update();
+  }
+
+  /** Forget the text and the last answer (logged out). */
+  clear() {
+    this.open('', '');
   }
 
   async readFile() {
@@ -83,6 +104,7 @@ export class ProgramPanel {
       const answer = await request(`api/v1/programs${dryRun ? '?dry_run=true' : ''}`, {
         method: 'POST',
         body: { name, text },
+        timeoutMs: 0, // a large program's dry run takes its time
       });
       if (answer.ok) {
         this.showTotals(answer.body, dryRun);
@@ -125,7 +147,7 @@ export class ProgramPanel {
   showProgramError({ error, line, column }, text) {
     const box = element('div', 'program-error');
     box.setAttribute('role', 'alert');
-    const where = line > 0 ? `line ${line}${column > 0 ? `, column ${column}` : ''}` : 'line unknown';
+    const where = line > 0 ? `line ${line}${column > 0 ? `, column ${column}` : ''}` : 'the whole program';
     const head = element('p', 'error');
     if (line > 0) {
       // The place, as a button that puts the text cursor there.
