@@ -6,8 +6,9 @@
 // arrow keys) and fit; a click picks the yarn in a cell.
 
 import { css, textOn } from './colours.js';
-import { CELL, arrow, band, differMark, faultMark, patterns, rulers, svg, weftPath } from './matrix-draw.js';
+import { CELL, arrow, band, differMark, faultMark, rulers, svg, weftPath } from './matrix-draw.js';
 import { axisCells, differingCells, movesByLine, weftInCells } from './matrix-geometry.js';
+import { describeWeft, panel, statusLine } from './matrix-panel.js';
 import { ZoomPan } from './matrix-zoom.js';
 
 export { signed } from './matrix-draw.js';
@@ -15,6 +16,8 @@ export { signed } from './matrix-draw.js';
 const FIT_CELL_PX = 44; // a small matrix stops growing at this cell size
 const TOP = 14; // px: the column numbers
 const BOTTOM = 28; // px: room under the matrix for the columns' arrows
+const ARROWS = 40; // px: room right of the matrix for the rows' arrows...
+const ROOMY_CELL_PX = 24; // ...kept while the cells stay at least this big
 const ID_PX = 8.5; // the smallest id worth printing in a cell
 let grids = 0; // numbers each grid's hatch patterns
 
@@ -46,46 +49,11 @@ export class MatrixGrid {
   }
 
   construct() {
-    const tools = document.createElement('div');
-    tools.className = 'matrix-tools';
-    const button = (label, title, action) => {
-      const element = document.createElement('button');
-      element.type = 'button';
-      element.textContent = label;
-      element.title = title;
-      element.addEventListener('click', action);
-      tools.append(element);
-      return element;
-    };
-    this.buttons = [button('−', 'zoom out (−)', () => this.view.zoomBy(1 / 1.5)), button('+', 'zoom in (+)', () => this.view.zoomBy(1.5)),
-      button('fit', 'show the whole matrix (0)', () => this.view.fit())];
-    this.buttons[2].className = 'matrix-fit';
-    const hint = document.createElement('span');
-    hint.className = 'matrix-hint';
-    hint.textContent = 'wheel zooms · drag pans · click picks a yarn';
-    tools.append(hint);
-    this.frame = document.createElement('div');
-    this.frame.className = 'matrix-frame';
-    this.frame.tabIndex = 0;
-    this.root = svg('svg', { class: 'matrix-svg', role: 'img' });
-    this.world = svg('g', { class: 'world' });
-    this.layers = {};
-    for (const name of ['cells', 'faults', 'differs', 'highlights', 'marks', 'weft']) {
-      this.layers[name] = svg('g', { class: name });
-      this.world.append(this.layers[name]);
-    }
+    const parts = panel(this.host, this.prefix, {
+      zoomOut: () => this.view.zoomBy(1 / 1.5), zoomIn: () => this.view.zoomBy(1.5), fit: () => this.view.fit(),
+    });
+    Object.assign(this, parts); // buttons, frame, root, world, layers, screen, note, estop, label, status
     this.highlights = this.layers.highlights;
-    this.screen = svg('g', { class: 'screen' });
-    this.root.append(patterns(this.prefix), this.world, this.screen);
-    this.note = element('p', 'grid-empty');
-    this.estop = element('div', 'matrix-estop');
-    this.estop.title = 'the emergency stop is pressed: no axis moves until it is released';
-    this.label = element('div', 'matrix-hover');
-    this.estop.replaceChildren(element('span', 'matrix-estop-sign', 'E-STOP'));
-    this.frame.append(this.root, this.note, this.estop, this.label);
-    this.status = element('p', 'matrix-machine');
-    this.status.setAttribute('aria-live', 'polite');
-    this.host.replaceChildren(tools, this.frame, this.status, legend());
     this.view = new ZoomPan(this.frame, {
       cell: CELL, maxCellPx: FIT_CELL_PX, onChange: () => this.schedule(),
       onTap: (x, y) => this.tap(x, y), onHover: (x, y) => this.pointAt(x, y),
@@ -158,7 +126,7 @@ export class MatrixGrid {
     }
     if (!changed) return;
     const most = Math.max(0, ...occupancy.map((line) => Math.max(...line)));
-    this.layers.cells.style.fontSize = `${Math.min(13, 21 / (0.62 * String(most).length))}px`; // the widest id fits
+    this.layers.cells.style.fontSize = `${Math.min(13, 19 / (0.62 * String(most).length))}px`; // the widest id fits
     this.drawShift();
     this.drawMachine(); // the sensors' side of a cell depends on the twin's
     this.drawPicked();
@@ -299,8 +267,8 @@ export class MatrixGrid {
   drawPicked() {
     const marks = this.layers.marks;
     marks.querySelector('.picked-edge')?.remove();
-    this.frame.classList.toggle('picking', this.picked !== null && this.rows > 0);
     const cell = this.picked === null ? null : this.cellOf(this.picked);
+    this.frame.classList.toggle('picking', cell !== null); // a weft has no cell: nothing dims
     if (cell) marks.append(svg('rect', { x: cell.c * CELL, y: cell.r * CELL, width: CELL, height: CELL, class: 'picked-edge', 'data-row': cell.r, 'data-col': cell.c }));
     this.drawStatus();
     return cell;
@@ -348,12 +316,14 @@ export class MatrixGrid {
   layout() {
     const width = this.frame.clientWidth;
     if (!this.rows || !width) return;
-    const left = this.rows > 100 ? 22 : 16;
+    const left = this.rows > 100 ? 20 : 14; // px: the row numbers (9 px digits)
     const tallest = Math.max(220, Math.min(560, 0.7 * window.innerHeight));
-    const px = Math.min(FIT_CELL_PX, (width - left) / this.cols, (tallest - TOP - BOTTOM) / this.rows);
+    // Room right of the matrix for the rows' arrows, unless the cells would be too small for it.
+    const right = (width - left - ARROWS) / this.cols >= ROOMY_CELL_PX ? ARROWS : 0;
+    const px = Math.min(FIT_CELL_PX, (width - left - right) / this.cols, (tallest - TOP - BOTTOM) / this.rows);
     const height = Math.ceil(TOP + this.rows * px + BOTTOM);
     if (this.frame.style.height !== `${height}px`) this.frame.style.height = `${height}px`;
-    this.view.setContent(this.cols * CELL, this.rows * CELL, { left, top: TOP, right: 0, bottom: BOTTOM });
+    this.view.setContent(this.cols * CELL, this.rows * CELL, { left, top: TOP, right, bottom: BOTTOM });
     this.view.resize(width, height);
   }
 
@@ -406,69 +376,16 @@ export class MatrixGrid {
     this.label.hidden = false;
     const room = this.view.width - this.label.offsetWidth - 4;
     this.label.style.left = `${Math.max(2, Math.min(room, this.hover.x + 14))}px`;
-    this.label.style.top = `${this.hover.y > this.view.height - 40 ? this.hover.y - 34 : this.hover.y + 16}px`;
+    const tall = this.label.offsetHeight;
+    this.label.style.top = `${this.hover.y + 16 + tall > this.view.height ? this.hover.y - tall - 8 : this.hover.y + 16}px`;
   }
 
   /** The line under the matrix: e-stop, faulted axes, differing sensors, the weft, the pick. */
   drawStatus() {
-    const parts = [];
-    const machine = this.machine;
-    let alarm = false;
-    if (machine) {
-      if (machine.estop) parts.push('E-STOP pressed');
-      if (machine.faulted.length) parts.push(`faulted: ${machine.faulted.join(', ')}`);
-      alarm = machine.estop || machine.faulted.length > 0 || machine.differs.length > 0;
-      parts.push(describeDiffers(machine.differs, this));
-    }
-    if (this.weft) parts.push(this.weftCells ? describeWeft(this.weft, this.weftCells) : 'next weft: waiting for the matrix geometry');
-    if (this.picked !== null) {
-      const cell = this.rows ? this.cellOf(this.picked) : null;
-      parts.push(cell ? `yarn ${this.picked}: row ${cell.r}, col ${cell.c}` : `yarn ${this.picked} has no case on the matrix`);
-    }
-    this.status.textContent = parts.filter(Boolean).join(' · ');
+    const cell = this.picked !== null && this.rows ? this.cellOf(this.picked) : null;
+    const twin = (r, c) => this.cells[r]?.[c]?.yarn;
+    const { text, alarm } = statusLine(this.machine, twin, this.rows > 0, this.weft, this.weftCells, this.picked, cell);
+    this.status.textContent = text;
     this.status.dataset.alarm = String(alarm);
   }
-}
-
-function element(tag, className, text) {
-  const made = document.createElement(tag);
-  made.className = className;
-  if (text !== undefined) made.textContent = text;
-  return made;
-}
-
-/** "sensors differ from the twin at (1, 2) case, (0, 0) empty". */
-function describeDiffers(differs, grid) {
-  if (!differs.length) return grid.rows ? 'sensors agree with the twin' : '';
-  if (differs.some(([r, c]) => r < 0 || c < 0)) return "the sensors' matrix is not the twin's size";
-  const shown = differs.slice(0, 6).map(([r, c]) => {
-    const twin = grid.cells[r]?.[c]?.yarn;
-    return `(${r}, ${c}) ${twin >= 0 ? 'empty' : 'case'}`;
-  });
-  const more = differs.length > 6 ? ` and ${differs.length - 6} more` : '';
-  return `sensors differ from the twin at ${shown.join(', ')}${more}`;
-}
-
-/** "next weft: 0°, 60.8 mm, 10.5 mm above the fell (drawn ×1.81, at the guides' scale)". */
-function describeWeft(weft, cells) {
-  const number = (value) => String(Number(Number(value).toFixed(2)));
-  return `next weft: ${number(weft.angle)}°, ${number(weft.length)} mm, ${number(weft.z)} mm above the fell (drawn ×${number(1 / cells.fan)}, at the guides' scale)`;
-}
-
-/** What the marks mean. */
-function legend() {
-  const box = element('div', 'matrix-legend');
-  const entries = [
-    ['moving', 'moves next'],
-    ['differs', 'sensor ≠ twin (● sees a case, ○ sees none)'],
-    ['faulted', 'axis fault'],
-    ['weft', "next weft, at the guides' scale"],
-    ['picked', 'picked yarn'],
-  ];
-  for (const [kind, text] of entries) {
-    const item = element('span', `matrix-key key-${kind}`, text);
-    item.dataset.key = kind;
-    box.append(item);
-  }
-  return box;
 }
