@@ -112,7 +112,10 @@ export class MatrixGrid {
     const rows = occupancy.length;
     const cols = rows ? occupancy[0].length : 0;
     const built = rows !== this.rows || cols !== this.cols;
-    if (built) this.build(rows, cols);
+    if (built) {
+      this.build(rows, cols);
+      this.drawWeft();
+    }
     let changed = built;
     for (let r = 0; r < rows; r += 1) {
       for (let c = 0; c < cols; c += 1) {
@@ -187,7 +190,9 @@ export class MatrixGrid {
 
   /** The next weft ({kind: "weft", x, y, z, angle, length}) drawn over the matrix, or null. */
   setNextWeft(instruction) {
-    this.weft = instruction && instruction.kind === 'weft' ? instruction : null;
+    const weft = instruction && instruction.kind === 'weft' ? instruction : null;
+    if (JSON.stringify(weft) === JSON.stringify(this.weft)) return; // asked again every frame
+    this.weft = weft;
     this.drawWeft();
   }
 
