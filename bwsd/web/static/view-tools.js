@@ -1,0 +1,287 @@
+// The 3D view's tools beyond drawing the yarns: the section (its height, the plane and
+// crossings in 3D, the cut above it, the 2D view beside), the braided section's zones for
+// colouring, picking a yarn with the mouse, the view's controls in the page and its test
+// hooks on `window.bwsd` (`section(z)`, and `view`: the PreformView).
+//
+// The section is recomputed when it is shown and the skeleton or the height changed; while
+// a program runs, at most every SECTION_EVERY_MS (a pass over every node).
+// The view's `onColoursChanged` is called when the zones arrive (the program's section line).
+
+import * as THREE from 'three';
+
+import { request } from './api.js';
+import { bands, crossings, fellXY } from './section.js';
+import { listenForClicks, pickYarn } from './view-pick.js';
+import { SectionMarks, SectionView } from './view-section.js';
+import { sectionFrom } from './view-zones.js';
+
+const SECTION_EVERY_MS = 250;
+const $ = (id) => document.getElementById(id);
+
+export class ViewTools {
+  constructor(view) {
+    this.view = view;
+    this.shown = false;
+    this.z = 0;
+    this.userZ = false; // the operator chose the height (kept over reloads)
+    this.cut = false;
+    this.cutPlane = new THREE.Plane(new THREE.Vector3(0, 0, -1), 0); // keeps z <= constant
+    this.dirty = true;
+    this.lastAt = 0;
+    this.timer = null;
+    this.found = [];
+    this.strips = [];
+    this.marks = new SectionMarks();
+    for (const object of this.marks.objects) view.layers.liveScene.add(object);
+    const canvas = $('section-view');
+    this.sectionView = canvas ? new SectionView(canvas) : null;
+    this.sectionGiven = false; // setSection was called: no fetching of the program's text
+    this.loads = 0;
+    this.programText = null; // {id, text} of the last program read
+    this.sectionError = null;
+    listenForClicks(view.canvas, (x, y) => this.pickAt(x, y));
+    if (canvas) listenForClicks(canvas, (x, y) => view.onPick?.(this.sectionView.yarnAt(x, y)));
+    this.wire();
+    // Not enumerable: `{...window.bwsd}` copies the page's numbers, not the whole view.
+    const hooks = window.bwsd ?? (window.bwsd = {});
+    Object.defineProperty(hooks, 'section', { value: (z) => view.section(z), configurable: true });
+    Object.defineProperty(hooks, 'view', { value: view, configurable: true });
+  }
+
+  get pointMaterials() {
+    return [this.marks.fixed.material, this.marks.free.material];
+  }
+
+  // ----- the model's life -----
+
+  cleared() {
+    this.found = [];
+    this.strips = [];
+    this.dirty = true;
+  }
+
+  loaded() {
+    this.loads += 1;
+    if (!this.userZ || this.z > this.top()) this.z = this.defaultHeight();
+    if (!this.sectionGiven) this.fetchSection(this.loads);
+    this.applyCut();
+    this.syncControls();
+  }
+
+  modelChanged() {
+    this.dirty = true;
+  }
+
+  /** The top of what is drawn: the guides. */
+  top() {
+    const view = this.view;
+    return view.machine ? Math.max(view.bounds.max.z, view.machine.d_mat + view.takeup) : Math.max(view.bounds.max.z, 0);
+  }
+
+  /** Half way up the zone where contacts were made, else half way to the fell, else to the guides. */
+  defaultHeight() {
+    const { contactNodes, contactCount, nodes, takeup, machine } = this.view;
+    if (contactCount > 0) {
+      let [lo, hi] = [Infinity, -Infinity];
+      for (let i = 0; i < 2 * contactCount; i += 1) {
+        const z = nodes.xyz[3 * contactNodes[i] + 2];
+        lo = Math.min(lo, z);
+        hi = Math.max(hi, z);
+      }
+      return Number(((lo + hi) / 2).toFixed(1));
+    }
+    if (takeup > 0) return Number((takeup / 2).toFixed(1));
+    return machine ? machine.d_mat / 2 : 0;
+  }
+
+  // ----- the section -----
+
+  setShown(shown) {
+    this.shown = Boolean(shown);
+    this.marks.setVisible(this.shown);
+    const pane = $('section-pane');
+    if (pane) pane.hidden = !this.shown;
+    this.view.resize(); // the 3D view shares its row with the section: its size now, not after layout
+    this.view.machineMarks.fillFell = !this.shown;
+    this.view.machineDirty = true;
+    if (!this.shown) this.setCut(false);
+    this.dirty = true;
+    this.syncControls();
+    this.view.invalidate();
+  }
+
+  setHeight(z) {
+    const value = Number(z);
+    if (!Number.isFinite(value)) return;
+    this.z = value;
+    this.userZ = true;
+    this.dirty = true;
+    this.applyCut();
+    this.syncControls();
+  }
+
+  setCut(cut) {
+    this.cut = Boolean(cut) && this.shown;
+    this.applyCut();
+    this.syncControls();
+  }
+
+  /** Clip the yarns, the contacts and the matrix above the section (or nothing). */
+  applyCut() {
+    const view = this.view;
+    this.cutPlane.constant = this.z;
+    const planes = this.cut ? [this.cutPlane] : null;
+    const { yarnMaterial, highlightYarn } = view.layers;
+    const materials = [yarnMaterial, view.contactMaterial, highlightYarn.line.material, ...view.machineMarks.clipped];
+    for (const material of materials) material.clippingPlanes = planes;
+    view.invalidate(true);
+  }
+
+  crossingsAt(z) {
+    return crossings(this.view.yarnsInOrder(), Number(z)).map(({ yarn, x, y, free }) => ({ yarn, x, y, free }));
+  }
+
+  /** Called before each frame: recompute the section when it is shown and out of date. */
+  beforeRender() {
+    if (!this.shown || !this.dirty) return;
+    const flowing = performance.now() - this.view.lastDeltaAt < SECTION_EVERY_MS * 4;
+    const wait = this.lastAt + SECTION_EVERY_MS - performance.now();
+    if (flowing && wait > 0) {
+      if (!this.timer) this.timer = setTimeout(() => {
+        this.timer = null;
+        this.view.invalidate();
+      }, wait);
+      return;
+    }
+    this.lastAt = performance.now();
+    this.dirty = false;
+    this.compute();
+  }
+
+  compute() {
+    const view = this.view;
+    const yarns = view.yarnsInOrder();
+    this.found = crossings(yarns, this.z);
+    this.strips = bands(yarns, this.z, view.diameter);
+    const colour = (id) => view.shownColour(id);
+    const m = view.machine;
+    const extent = m ? [-0.5 * m.pitch_x, -0.5 * m.pitch_y, (m.cols - 0.5) * m.pitch_x, (m.rows - 0.5) * m.pitch_y] : [-50, -50, 50, 50];
+    this.marks.update(this.found, colour, view.diameter, extent, this.z);
+    const section = view.palette.section;
+    const cells = section ? section.zones.flatMap(([, set]) => [...set].map((key) => key.split(',').map(Number))) : null;
+    this.sectionView?.draw({
+      found: this.found, strips: this.strips, machine: m, diameter: view.diameter,
+      z: this.z, takeup: view.takeup, colour, cells, spec: section?.spec,
+    });
+    this.syncRange();
+  }
+
+  /** The region the top view frames when the section is cut: the preform below the cut. */
+  focusBox(fresh) {
+    const view = this.view;
+    if (!(this.shown && this.cut && view.rig.preset === 'top' && view.machine)) return null;
+    if (fresh && this.dirty) this.compute();
+    const m = view.machine;
+    const [x0, y0] = fellXY(m, 0, 0);
+    const [x1, y1] = fellXY(m, m.rows - 1, m.cols - 1);
+    const xs = [x0, x1, ...this.found.map((c) => c.x), ...this.strips.flatMap((b) => [b.start[0], b.end[0]])];
+    const ys = [y0, y1, ...this.found.map((c) => c.y), ...this.strips.flatMap((b) => [b.start[1], b.end[1]])];
+    const pad = 2 * Math.max(view.diameter, 1);
+    return new THREE.Box3(
+      new THREE.Vector3(Math.min(...xs) - pad, Math.min(...ys) - pad, Math.min(0, this.z)),
+      new THREE.Vector3(Math.max(...xs) + pad, Math.max(...ys) + pad, Math.max(this.z, 0)),
+    );
+  }
+
+  /** A preset was chosen: the top view shows the section, cut, to read the preform's shape. */
+  presetChosen(preset) {
+    if (preset !== 'top') return;
+    if (!this.shown) this.setShown(true);
+    this.setCut(true);
+  }
+
+  // ----- zones -----
+
+  /** The braided section from a spec or a program's text (`given`: by the page, not fetched here). */
+  setSection(text, given = false) {
+    if (given) this.sectionGiven = true;
+    const { section, error } = sectionFrom(text);
+    this.sectionError = error;
+    this.view.palette.setSection(section);
+    this.view.changed(true);
+    this.dirty = true;
+    this.view.onColoursChanged?.();
+  }
+
+  /** Read the loaded program's text from the daemon, for its "# section:" line. */
+  async fetchSection(load) {
+    try {
+      const state = await request('api/v1/state');
+      const id = state.ok ? state.body?.program_id : null;
+      if (id === null || id === undefined) return;
+      if (this.programText?.id !== id) {
+        const answer = await request(`api/v1/programs/${id}`);
+        if (!answer.ok || typeof answer.body?.text !== 'string') return;
+        this.programText = { id, text: answer.body.text };
+      }
+      if (load === this.loads && !this.sectionGiven) this.setSection(this.programText.text);
+    } catch {
+      // the daemon cannot be reached: no zones until the next load
+    }
+  }
+
+  // ----- picking -----
+
+  pickAt(x, y) {
+    const view = this.view;
+    const cutZ = this.cut ? this.z : Infinity;
+    const id = pickYarn(view.yarnsInOrder(), view.camera, view.width, view.height, x, y, cutZ);
+    view.onPick?.(id);
+  }
+
+  // ----- the controls in the page -----
+
+  wire() {
+    const view = this.view;
+    for (const button of document.querySelectorAll('[data-view]')) {
+      button.addEventListener('click', () => view.setView(button.dataset.view));
+    }
+    $('ortho')?.addEventListener('change', (event) => view.setOrthographic(event.target.checked));
+    $('show-axes')?.addEventListener('change', (event) => view.setAxesVisible(event.target.checked));
+    $('show-section')?.addEventListener('change', (event) => view.setSectionShown(event.target.checked));
+    $('section-cut')?.addEventListener('change', (event) => view.setSectionCut(event.target.checked));
+    for (const id of ['section-z', 'section-z-value']) {
+      $(id)?.addEventListener('input', (event) => {
+        if (event.target.value !== '') view.setSectionHeight(event.target.value);
+      });
+    }
+  }
+
+  /** Show in the controls what the view does now. */
+  syncControls() {
+    const view = this.view;
+    for (const button of document.querySelectorAll('[data-view]')) {
+      button.setAttribute('aria-pressed', String(button.dataset.view === view.rig.preset));
+    }
+    const set = (id, property, value) => {
+      const element = $(id);
+      if (element && element[property] !== value) element[property] = value;
+    };
+    set('ortho', 'checked', view.rig.isOrthographic);
+    set('show-section', 'checked', this.shown);
+    set('section-cut', 'checked', this.cut);
+    set('section-cut', 'disabled', !this.shown);
+    for (const id of ['section-z', 'section-z-value']) set(id, 'disabled', !this.shown);
+    this.syncRange();
+  }
+
+  syncRange() {
+    const slider = $('section-z');
+    const field = $('section-z-value');
+    const top = String(Number(this.top().toFixed(1)));
+    if (slider && slider.max !== top) slider.max = top;
+    const value = String(this.z);
+    if (slider && document.activeElement !== slider && slider.value !== value) slider.value = value;
+    if (field && document.activeElement !== field && field.value !== value) field.value = value;
+  }
+}
