@@ -1,9 +1,11 @@
 """Benchmark of the live preview page: prints the markdown tables of docs/benchmarks.md.
 
-    python bench/page.py [--cycles 40] [--screenshot docs/preview.png]
+    python bench/page.py [--cycles 40] [--speed MM_S] [--screenshot docs/preview.png]
 
-`bwsd serve` and the mock loom (zero travel time) run in their own processes on loopback
-with the 24x24 braid; Debian's chromium shows the page while the program runs. Measured:
+`bwsd serve` and the mock loom run in their own processes on loopback with the 24x24
+braid; Debian's chromium shows the page while the program runs. The loom's actuators
+travel at ``--speed`` mm/s (a 10 mm shift goes out and back: 0.1 s at 200 mm/s), or in no
+time by default, when the daemon sends instructions as fast as it predicts them. Measured:
 
 - how long an executed instruction takes to appear: from the instruction event's own time
   stamp (taken when the instruction is done) to the page's frame that drew it, against
@@ -22,8 +24,11 @@ import asyncio
 import json
 import statistics
 import sys
+import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +39,11 @@ from playwright.sync_api import sync_playwright
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.daemon import braid_24x24, serving  # noqa: E402
+from bench.daemon import braid_24x24, machine_table  # noqa: E402
+from bwsd.api.auth import TokenStore  # noqa: E402
+from bwsd.config import load_config  # noqa: E402
+from bwsd.paths import state_folder, tokens_file  # noqa: E402
+from tests.fieldbus.conftest import BUS, start_mock, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 from tests.web.conftest import ARGS, CHROMIUM  # noqa: E402
 
@@ -49,9 +58,15 @@ class Listener(threading.Thread):
         self.sizes: list[int] = []  # bytes of each instruction event
         self.connected = threading.Event()
         self.finished = threading.Event()
+        self.error: str | None = None  # why the stream ended early, if it did
 
     def run(self) -> None:
-        asyncio.run(self._listen())
+        try:
+            asyncio.run(self._listen())
+        except Exception as exc:  # the run goes on; the baseline then covers part of it
+            self.error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self.finished.set()
 
     async def _listen(self) -> None:
         async with websockets.connect(self.url, max_size=None) as ws:
@@ -66,6 +81,31 @@ class Listener(threading.Thread):
                     "Complete", "Held", "Aborted"):  # fmt: skip
                     self.finished.set()
                     return
+
+
+@contextmanager
+def serving(program: str, speed: float) -> Iterator[Served]:
+    """The mock loom (actuators at ``speed`` mm/s, 0: no travel time) and `bwsd serve`."""
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        speeds = {"stroke_speed": speed, "takeup_speed": speed}
+        mock = start_mock(tmp, speeds, machine=machine_table(), program=program)
+        config = tmp / "bwsd.toml"
+        # body_timeout: the head deadline also closes an upgraded WebSocket after that many
+        # seconds (the page would reconnect and read the whole skeleton every 10 s)
+        config.write_text(toml({
+            "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
+            "fieldbus.modbus": {"port": mock.ports["modbus"]},
+            "api": {"port": 0, "body_timeout": 3600.0}, "plc": {"port": 0},
+        }))  # fmt: skip
+        state = state_folder(tmp / "state")
+        token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
+        served = Served(config, state, token)
+        try:
+            yield served
+        finally:
+            served.stop()
+            mock.stop()
 
 
 def row(name: str, ms: list[float], unit: float = 1.0) -> str:
@@ -106,8 +146,10 @@ def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
             done = page.evaluate("window.bwsd.done")
             print(f"  {done}/{count} instructions, {time.monotonic() - began:.0f} s",
                   file=sys.stderr)  # fmt: skip
+            if done == count:
+                break
         page.wait_for_function(f"() => window.bwsd.done === {count}", timeout=120_000)
-        hooks = page.evaluate("({...window.bwsd})")
+        hooks = page.evaluate("({...window.bwsd, stats: window.bwsd.view?.layers?.stats ?? null})")
         if shot is not None:
             page.screenshot(path=str(shot))
         browser.close()
@@ -117,23 +159,31 @@ def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
         "sizes": listener.sizes,
         "errors": errors,
         "count": count,
+        "listener": listener.error,
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--cycles", type=int, default=40)
+    parser.add_argument(
+        "--speed",
+        type=float,
+        default=0.0,
+        help="the loom's actuator speed, mm/s (default 0: no travel time)",
+    )
     parser.add_argument("--screenshot", type=Path, help="save the page at the end (PNG)")
     args = parser.parse_args()
     program = braid_24x24(args.cycles)
-    with serving(program) as served:
+    with serving(program, args.speed) as served:
         result = run(served, program, args.screenshot)
     hooks, count = result["hooks"], result["count"]
     work = hooks.get("work", [])
     first, last = tenths(work)
     size_first, size_last = tenths(result["sizes"])
-    print(f"24x24 braid (624 carriers), {args.cycles} cycles ({count} instructions), zero "
-          f"travel time; headless chromium (software WebGL), 1280x800.\n")  # fmt: skip
+    travel = f"actuators at {args.speed:g} mm/s" if args.speed else "zero travel time"
+    print(f"24x24 braid (624 carriers), {args.cycles} cycles ({count} instructions), {travel}; "
+          f"headless chromium (software WebGL), 1280x800.\n")  # fmt: skip
     print("| measure | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
     print(row("instruction event to a Python WebSocket client (baseline)", result["lag"]))
     print(row("instruction event to the page's frame that drew it", hooks["latencies"]))
@@ -158,6 +208,13 @@ def main() -> None:
         f"Page over baseline (p50): {page / lag if lag else float('nan'):.2f}x. "
         f"Console errors: {len(result['errors'])}."
     )
+    stats = hooks.get("stats")
+    if stats:
+        print(f"Settled image: drawn whole {len(stats['images'])} times, split from scratch "
+              f"{stats['splits']} times, {stats['increments']} incremental draws.")  # fmt: skip
+    if result["listener"]:
+        print(f"The baseline client's stream ended early ({result['listener']}): its row "
+              f"covers {len(result['lag'])} of {count} instructions.")  # fmt: skip
 
 
 if __name__ == "__main__":
