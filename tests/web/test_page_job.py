@@ -295,6 +295,37 @@ def test_a_program_too_big_shows_where_and_the_size_it_needs(live: Live, page: B
     assert errors == []
 
 
+def test_a_yarn_picked_in_the_matrix_or_the_view_is_selected_in_both(live: Live,
+                                                                     page: Browsing):  # fmt: skip
+    _load(live)
+    _command(live, "reset")
+    _command(live, "start")
+    page.open(live, live.tokens["viewer"])
+    page.ready()
+    page.state("Complete")
+    page.until("n => window.bwsd.done === n", BRAID_STEPS)
+    cell = page.page.locator("#grid [data-yarn]").first
+    yarn = int(cell.get_attribute("data-yarn") or -1)
+    cell.click()
+    page.until("y => window.bwsd.selected === y", yarn)
+    box = page.page.locator("#selection")
+    assert box.is_visible()
+    assert page.page.locator("#selection-id").inner_text() == str(yarn)
+    info = page.page.evaluate("y => window.bwsd.view?.yarnInfo?.(y) ?? null", yarn)
+    if info is not None:  # the 3D view describes the yarn
+        assert page.page.locator("#selection-family").inner_text() == info["family"]
+        assert page.page.locator("#selection-contacts").inner_text() == str(info["contacts"])
+        assert page.page.locator("#selection-length").inner_text().endswith(" mm")
+    cell.click()  # the same yarn again: no selection
+    page.until("() => window.bwsd.selected === null")
+    assert box.is_hidden()
+    page.page.evaluate("y => window.bwsd.view.onPick(y)", yarn)  # as a click in the 3D view
+    page.until("y => window.bwsd.selected === y", yarn)
+    page.page.click("#selection-clear")
+    page.until("() => window.bwsd.selected === null")
+    assert page.errors == []
+
+
 # ----- the layout, at three window sizes, in each view -----
 
 

@@ -104,6 +104,7 @@ def test_no_button_is_enabled_that_the_daemon_would_refuse(slow_live: Live, page
     _click(page, "reset")
     assert _in_step(page, live, "Idle") == ["stop", "abort"]  # no green Start after Complete
     _click(page, "stop")
+    assert _in_step(page, live, "Stopped") == ["reset", "abort"]
     _load(live, LONG)
     assert _in_step(page, live, "Stopped") == ["reset", "abort"]
     # (command, state reached, the run has ended: Start is refused from here on)

@@ -14,13 +14,20 @@
 // means events were missed, and the whole skeleton is fetched again. Events that arrive
 // while a fetch is under way wait, then go through the same rule.
 
-import { EventLink, errorText, getToken, request, setToken, takeTokenFromFragment, tokenRemembered } from './api.js';
+import { EventLink, errorText, getToken, request, takeTokenFromFragment } from './api.js';
 import * as colours from './colours.js';
-import { confirmCommand, dismissConfirm } from './confirm.js';
-import { MatrixGrid, signed } from './grid.js';
+import { Coalesced } from './coalesced.js';
+import { Commands } from './commands.js';
+import { dismissConfirm } from './confirm.js';
+import { Connection } from './connection.js';
+import { describeNext } from './describe.js';
+import { MatrixGrid } from './grid.js';
 import { HistoryPanel } from './history.js';
 import { JobPanel } from './job.js';
+import { say } from './message.js';
 import { ProgramPanel } from './program.js';
+import { Selection } from './selection.js';
+import { Session } from './session.js';
 import { PreformView } from './skeleton.js';
 import { StatusPanel } from './status.js';
 
@@ -28,16 +35,13 @@ const $ = (id) => document.getElementById(id);
 const { Palette, css } = colours;
 const COLOUR_KEY = 'bwsd.colourBy';
 const COLOUR_MODES = colours.COLOUR_MODES ?? ['family', 'yarn'];
-const WITH_REASON = new Set(['stop', 'hold', 'abort']); // commands that send the reason field
-const CONFIRMED = new Set(['stop', 'abort']); // commands asked about first
 const KEEP = 1000; // samples kept in window.bwsd.latencies, .frames and .work
 const FLOW_MS = 1000; // updates "flow" while the last instruction event is younger than this
 const STATE_EVERY_MS = 2000; // while a program runs, the state (bus health…) is read this often
 const WATCH_EVERY_MS = 5000; // at rest, the state is read this often: a silent daemon is seen
-const COMMANDING_ROLES = new Set(['operator', 'admin']);
-// Where the daemon takes a program and a unit mode change (docs/api.md, docs/packml.md).
+// Where the daemon takes a program (docs/api.md): Load is offered only there.
 const LOADABLE = new Set(['Stopped', 'Idle', 'Complete', 'Aborted']);
-const MODE_STATES = new Set(['Stopped', 'Idle', 'Aborted']);
+const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspending']);
 
 // ----- test and diagnostics hooks -----
 const hooks = {
@@ -81,10 +85,10 @@ function fresh() {
 
 // The link to the daemon: up while the event stream is open and the last request was
 // answered; `lastSeen` is when it last answered or sent an event.
-const connection = { linkUp: false, answering: true, lastSeen: null };
-// Who is logged in: the token's name and role (null until /whoami answers).
-const session = { name: null, role: null };
-let selected = null; // the yarn picked, or null
+const connection = new Connection(() => {
+  statusDirty = true;
+  scheduleFrame();
+});
 let generation = 0; // counts logins and logouts: an answer asked for before one is dropped
 
 let inbox = []; // instruction events to apply at the next frame
@@ -116,6 +120,23 @@ const programs = new ProgramPanel({
   onForbidden: (answer) => forbidden(answer, 'program'),
 });
 const link = new EventLink({ onEvent, onLink });
+const session = new Session({ onLogIn: logIn, onLogOut: logOut });
+const selection = new Selection(view, grid, (id) => {
+  hooks.selected = id;
+});
+const commands = new Commands({
+  state: () => live.state,
+  index: currentIndex,
+  may: mayCommand,
+  answered: (body) => {
+    if (live.state) showState({ ...live.state, name: body.name, reason: body.reason, allowed: body.allowed });
+  },
+  refreshState: () => refreshState(),
+  heard,
+  unreachable,
+  loggedOut: () => loggedOut(true),
+  forbidden,
+});
 $('colour-by').value = colourMode;
 
 // ----- the animation frame: every change reaches the screen here, once per frame -----
@@ -208,43 +229,15 @@ function noteProgress(event) {
 
 // ----- fetching -----
 
-/** Runs `work` one at a time: asking while it runs asks for one more run after it. */
-class Coalesced {
-  constructor(work, after = () => {}) {
-    this.work = work;
-    this.after = after; // once the runs are over, whatever happened
-    this.running = null; // the runs under way, if any
-    this.again = false;
-  }
-
-  run() {
-    if (this.running) {
-      this.again = true;
-      return this.running;
-    }
-    this.running = (async () => {
-      try {
-        do {
-          this.again = false;
-          await this.work();
-        } while (this.again);
-      } catch (error) {
-        unreachable(error);
-      } finally {
-        this.running = null;
-        this.after();
-      }
-    })();
-    return this.running;
-  }
-}
-
 /** The fetch of the state and the whole skeleton; events wait while it runs. */
-const fullFetch = new Coalesced(fetchAll, () => {
-  live.fetchedOnce = true;
-  inbox = waiting.concat(inbox); // then the same rule, in order
-  waiting = [];
-  scheduleFrame();
+const fullFetch = new Coalesced(fetchAll, {
+  after: () => {
+    live.fetchedOnce = true;
+    inbox = waiting.concat(inbox); // then the same rule, in order
+    waiting = [];
+    scheduleFrame();
+  },
+  onError: unreachable,
 });
 
 /** Fetch the state and the whole skeleton again (one fetch at a time; asks coalesce). */
@@ -274,14 +267,17 @@ async function fetchAll() {
 }
 
 /** GET the state alone (after a state, mode or fault event, or a command). */
-const stateFetch = new Coalesced(async () => {
-  const asked = generation;
-  const answer = await request('api/v1/state');
-  if (asked === generation && accept(answer)) showState(answer.body);
-});
+const stateFetch = new Coalesced(
+  async () => {
+    const asked = generation;
+    const answer = await request('api/v1/state');
+    if (asked === generation && accept(answer)) showState(answer.body);
+  },
+  { onError: unreachable },
+);
 
 function refreshState() {
-  if (!getToken() && session.role === null) return Promise.resolve(); // logged out
+  if (!link.wanted) return Promise.resolve(); // logged out, or not started
   return stateFetch.run();
 }
 
@@ -313,29 +309,17 @@ function answered(answer) {
 
 /** The daemon answered or sent an event. */
 function heard() {
-  connection.lastSeen = new Date();
-  if (!connection.answering) {
-    connection.answering = true;
-    if ($('message').dataset.kind === 'error' && $('message').textContent.includes('cannot be reached')) say('', '');
-    statusDirty = true;
-    scheduleFrame();
-  }
+  connection.heard();
 }
 
 /** A request found no daemon (a network error or no answer in time). */
 function unreachable(error) {
-  if (connection.answering) {
-    connection.answering = false;
-    say(`the daemon cannot be reached (${error?.message ?? error})`, 'error');
-  }
-  statusDirty = true;
-  scheduleFrame();
+  connection.unreachable(error);
 }
 
 /** The daemon answers and the event link is up; null while the page does not ask. */
 function online() {
-  if (!link.wanted) return null;
-  return connection.linkUp && connection.answering;
+  return connection.online(link.wanted);
 }
 
 // At rest nothing arrives on the event link: read the state now and then, so a daemon that
@@ -355,31 +339,13 @@ function showState(state) {
   }
   if (!sameProgram) refreshHistory();
   live.state = state;
-  if ((state.bus?.faulted ?? []).length > 0) readFaultNames(state.bus.faulted);
+  status.readFaultNames(state.bus?.faulted ?? [], () => {
+    statusDirty = true;
+    scheduleFrame();
+  });
   statusDirty = true;
   gridDirty = true;
   scheduleFrame();
-}
-
-const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspending']);
-
-/** The fault names of the faulted axes (stall, jam...), read from /machine once per change. */
-let faultedAsked = '';
-async function readFaultNames(faulted) {
-  const key = faulted.join(',');
-  if (key === faultedAsked) return;
-  faultedAsked = key;
-  try {
-    const asked = generation;
-    const answer = await request('api/v1/machine');
-    if (answer.ok && asked === generation) {
-      status.setFaultNames(answer.body.axes);
-      statusDirty = true;
-      scheduleFrame();
-    }
-  } catch {
-    faultedAsked = ''; // asked again with the next state
-  }
 }
 
 function showNoProgram() {
@@ -388,7 +354,7 @@ function showNoProgram() {
   live.programId = null;
   live.noProgram = true;
   live.done = 0;
-  select(null);
+  selection.select(null);
   gridDirty = true;
   statusDirty = true;
   $('view-note').hidden = false;
@@ -406,7 +372,7 @@ function showSkeleton(skeleton, programId) {
   $('view-note').hidden = true;
   if (newProgram) {
     view.fit(); // keep the operator's camera on a refetch of the same program
-    select(null);
+    selection.select(null);
   }
   drawLegend();
   gridDirty = true;
@@ -432,7 +398,7 @@ function drawGrid() {
     const known = bus && online() !== false && bus.connected === true;
     grid.setMachine(known ? { differs: bus.differs ?? [], estop: Boolean(bus.estop), faulted: bus.faulted ?? [] } : null);
   }
-  if ($('next')) $('next').textContent = describeNext(next);
+  if ($('next')) $('next').textContent = describeNext(live.state, next, currentIndex());
 }
 
 /** The next instruction: from the newest of the state and the instruction events. */
@@ -446,31 +412,6 @@ function currentNext() {
 function currentIndex() {
   const state = live.state;
   return state ? Math.max(state.index, live.eventIndex) : 0;
-}
-
-/** "next: line 12 — ROW 1:+1 2:-1", "next: line 14 — TAKEUP 3 mm". */
-function describeNext(next) {
-  const state = live.state;
-  if (!state) return 'next: —';
-  if (state.program_id === null || state.program_id === undefined) return 'next: — (no program loaded)';
-  if (!next) return currentIndex() >= state.count ? 'next: — (program done)' : 'next: — (the run has ended)';
-  const where = next.line ? `line ${next.line}` : `instruction ${next.index}`;
-  const i = next.instruction ?? {};
-  const number = (value) => String(Number(Number(value).toFixed(3)));
-  let what;
-  if (i.kind === 'shift') {
-    // a move is [line, k], or [line, k, first, last] on a segment: "ROW 1:+1 3[0..3]:-1"
-    const move = ([line, k, first, last]) =>
-      `${line}${first === undefined ? '' : `[${first}..${last}]`}:${signed(k)}`;
-    what = `${String(i.axis).toUpperCase()} ${i.moves.map(move).join(' ')}`;
-  } else if (i.kind === 'takeup') {
-    what = `TAKEUP ${number(i.length)} mm`;
-  } else if (i.kind === 'weft') {
-    what = `WEFT at x=${number(i.x)} y=${number(i.y)} z=${number(i.z)} mm, angle ${number(i.angle)}°, length ${number(i.length)} mm`;
-  } else {
-    what = String(i.kind ?? 'unknown');
-  }
-  return `next: ${where} — ${what}`;
 }
 
 /** State, program, status, job; and which commands are open. */
@@ -489,25 +430,18 @@ function drawStatus() {
   } else {
     $('program-label').textContent = '—';
   }
-  drawMode();
   drawButtons();
 }
 
-/** The token may command, the daemon answers, and the state is fresh. */
+/** The token may command and the daemon answers. */
 function mayCommand() {
-  return Boolean(getToken()) && COMMANDING_ROLES.has(session.role) && online() === true;
+  return session.mayCommand() && online() === true;
 }
 
 function drawButtons() {
   const may = mayCommand();
-  const allowed = new Set(may ? live.state?.allowed ?? [] : []);
-  const enabled = [];
-  for (const button of document.querySelectorAll('button[data-command]')) {
-    const open = allowed.has(button.dataset.command);
-    button.disabled = !open;
-    if (open) enabled.push(button.dataset.command);
-  }
-  hooks.allowed = enabled;
+  hooks.allowed = commands.drawButtons(live.state?.allowed, may);
+  commands.drawMode(live.state, may);
   const state = live.state;
   const loadable = Boolean(state) && LOADABLE.has(state.name) && !state.recovering;
   programs.setAllowed({
@@ -515,19 +449,7 @@ function drawButtons() {
     load: may && loadable,
     loadWhy: may ? 'a program is loaded only in Stopped, Idle, Complete or Aborted' : 'needs an operator token and a daemon that answers',
   });
-  const readOnly = $('read-only');
-  readOnly.hidden = !session.role || COMMANDING_ROLES.has(session.role);
-  readOnly.textContent = getToken()
-    ? `read only: a ${session.role}'s token may not command the machine or load programs`
-    : 'read only: log in with an operator token to command the machine';
-}
-
-/** The unit mode: shown always; changeable by an operator where PackML allows it. */
-function drawMode() {
-  const select = $('mode-select');
-  const state = live.state;
-  if (!modeBusy) select.value = String(state?.mode_name ?? 'production').toLowerCase();
-  select.disabled = modeBusy || !mayCommand() || !state || !MODE_STATES.has(state.name);
+  session.draw();
 }
 
 /** Counts under the view, and the test hooks. */
@@ -539,6 +461,7 @@ function drawCounts() {
   $('view-stats').textContent = live.loaded
     ? `${hooks.yarns} yarns · ${hooks.nodes} nodes · ${hooks.contacts} contacts · instruction ${live.done} · take-up ${Number(view.takeup.toFixed(3))} mm`
     : '';
+  if (selection.selected !== null) selection.draw(); // its contacts and length grow
   if (palette.weftColours.size !== legendFamilies) drawLegend(); // a weft of a new angle
   if (!hooks.ready && live.state && (live.loaded || live.noProgram)) hooks.ready = true;
 }
@@ -563,34 +486,6 @@ function drawLegend() {
     }),
   );
 }
-
-// ----- the yarn picked in the 3D view or the matrix -----
-
-/** Highlight yarn `id` in both views and describe it (null: no selection). */
-function select(id) {
-  selected = id ?? null;
-  hooks.selected = selected;
-  if (typeof view.highlight === 'function') view.highlight(selected);
-  if (typeof grid.highlight === 'function') grid.highlight(selected);
-  const box = $('selection');
-  const info = selected !== null && typeof view.yarnInfo === 'function' ? view.yarnInfo(selected) : null;
-  box.hidden = selected === null;
-  const mm = (value) => (typeof value === 'number' ? `${Number(value.toFixed(2))} mm` : '—');
-  const text = (value) => (value === undefined || value === null ? '—' : String(value));
-  $('selection-id').textContent = text(info?.id ?? selected);
-  $('selection-kind').textContent = text(info?.kind);
-  $('selection-family').textContent = text(info?.family);
-  $('selection-contacts').textContent = text(info?.contacts);
-  $('selection-length').textContent = mm(info?.length);
-}
-
-function picked(id) {
-  select(id === selected ? null : id); // picking the selected yarn again clears it
-}
-
-view.onPick = picked;
-grid.onPick = picked;
-$('selection-clear').addEventListener('click', () => select(null));
 
 // ----- events -----
 
@@ -631,10 +526,7 @@ function onEvent(event) {
 }
 
 function onLink(up) {
-  connection.linkUp = up;
-  if (up) heard();
-  statusDirty = true;
-  scheduleFrame();
+  connection.setLink(up);
   if (up || !link.wanted) return;
   // Lost (or never had) the stream: show what the daemon says now; this also finds a
   // token that was revoked meanwhile (a 401 logs out and stops the retries).
@@ -642,30 +534,24 @@ function onLink(up) {
   else refreshState();
 }
 
-let historyTimer = null;
 function refreshHistory() {
-  clearTimeout(historyTimer);
-  historyTimer = setTimeout(() => {
-    if (link.wanted) record.refresh();
-  }, 200);
+  if (link.wanted) record.refreshSoon();
 }
 
 // ----- session -----
 
 /** A 403: the role it names; say what is needed. */
 function forbidden(answer, what) {
-  if (typeof answer.body?.role === 'string') session.role = answer.body.role;
+  session.noteRefusal(answer);
   const needs = answer.body?.needs ? ` (needs ${answer.body.needs})` : '';
   say(`${what}: your token's role is ${session.role ?? 'too low'}${needs}`, 'error');
-  drawSession();
   drawButtons();
 }
 
-/** Show the login form (the token was refused, or the operator logged out). */
+/** Show the login form (the token was refused). */
 function loggedOut(refused) {
   if (refused && getToken()) say('the token was refused: log in again', 'error');
-  setToken(null);
-  session.name = session.role = null;
+  session.end();
   link.stop();
   clearPicture();
   drawSession();
@@ -675,13 +561,13 @@ function loggedOut(refused) {
 function clearPicture() {
   generation += 1;
   dismissConfirm();
-  select(null);
+  selection.select(null);
   view.clear();
   $('view-note').hidden = false;
   live = fresh();
   inbox = [];
   waiting = [];
-  faultedAsked = '';
+  status.clear();
   job.clear();
   record.clear();
   programs.clear();
@@ -689,31 +575,15 @@ function clearPicture() {
   $('mode-message').textContent = '';
   Object.assign(hooks, { ready: false, done: 0, nodes: 0, yarns: 0, contacts: 0, state: null, allowed: [] });
   $('view-stats').textContent = '';
-  connection.lastSeen = null;
-  connection.answering = true;
+  connection.reset();
   gridDirty = true;
   statusDirty = true;
   scheduleFrame();
 }
 
 function drawSession() {
-  const token = getToken();
-  $('login').hidden = Boolean(token);
-  $('session').hidden = !token;
-  $('remember').checked = tokenRemembered();
-  const who = session.name ? `${session.name}, ` : '';
-  $('session-role').textContent = session.role ? `logged in (${who}${session.role})` : 'logged in';
+  session.draw();
   hooks.role = session.role;
-}
-
-/** The token's holder and role, before anything is tried (a 401 logs out). */
-async function readRole() {
-  const answer = await request('api/v1/whoami');
-  if (answer.ok) {
-    session.name = answer.body.name;
-    session.role = answer.body.role;
-  }
-  return answer;
 }
 
 /**
@@ -731,7 +601,7 @@ async function start() {
       heard();
       if (!(health.ok && health.body?.open_reads)) return; // the login form is showing
     }
-    answer = await readRole();
+    answer = await session.readRole();
     if (answer.ok) answer = await request('api/v1/state');
   } catch (error) {
     unreachable(error);
@@ -753,35 +623,18 @@ async function start() {
 function logIn(token, remember) {
   if (link.wanted || getToken()) clearPicture(); // another token: nothing of the old one stays
   link.stop();
-  setToken(token, remember);
-  session.name = session.role = null;
+  session.keep(token, remember);
   say('', '');
   start();
 }
 
-$('login').addEventListener('submit', (event) => {
-  event.preventDefault();
-  const input = $('token-input');
-  const token = input.value.trim();
-  if (!token) return;
-  input.value = '';
-  logIn(token, $('remember').checked);
-});
-
-$('logout').addEventListener('click', () => {
-  setToken(null);
-  session.name = session.role = null;
+function logOut() {
+  session.end();
   link.stop();
   clearPicture();
   say('logged out', '');
   start();
-});
-
-// A link with `#token=...` opened in a tab that shows the page already.
-window.addEventListener('hashchange', () => {
-  const token = takeTokenFromFragment();
-  if (token) logIn(token, false);
-});
+}
 
 /** A program of the history: its text in the Program panel, to check or load again. */
 async function openProgram(id, name) {
@@ -793,106 +646,6 @@ async function openProgram(id, name) {
     unreachable(error);
   }
 }
-
-// ----- commands -----
-
-/** A line in the message area; a success fades after a while, an error stays. */
-let sayTimer = null;
-function say(text, kind) {
-  const message = $('message');
-  message.textContent = text;
-  message.dataset.kind = kind;
-  clearTimeout(sayTimer);
-  if (kind === 'ok') sayTimer = setTimeout(() => say('', ''), 8000);
-}
-
-/** "program braid.bws (#3), instruction 22 of 50" */
-function describeRun() {
-  const state = live.state;
-  if (!state || state.program_id === null || state.program_id === undefined) return `${state?.name ?? ''}`;
-  return `${state.name}: ${state.program_name ?? 'program'} (#${state.program_id}), ${currentIndex()} of ${state.count} instructions done`;
-}
-
-async function ask(name) {
-  let reason = $('reason-input').value.trim();
-  if (CONFIRMED.has(name)) {
-    const answer = await confirmCommand(name, describeRun(), reason);
-    if (!answer) {
-      say(`${name}: cancelled, nothing sent`, '');
-      return;
-    }
-    reason = answer.reason;
-  }
-  if (!mayCommand() || !(live.state?.allowed ?? []).includes(name)) {
-    say(`${name}: no longer accepted (now ${live.state?.name ?? 'unknown'}), nothing sent`, 'error');
-    return;
-  }
-  sendCommand(name, reason);
-}
-
-async function sendCommand(name, reason) {
-  const body = WITH_REASON.has(name) && reason ? { reason } : {};
-  say(`${name}…`, 'pending');
-  let answer;
-  try {
-    answer = await request(`api/v1/commands/${name}`, { method: 'POST', body, timeoutMs: 0 }); // a stop waits for the move
-  } catch (error) {
-    unreachable(error);
-    say(`${name}: the daemon cannot be reached (${error.message})`, 'error');
-    return;
-  }
-  heard();
-  if (answer.ok) {
-    say(`${name}: now ${answer.body.name}`, 'ok');
-    if (WITH_REASON.has(name)) $('reason-input').value = '';
-    if (live.state) showState({ ...live.state, name: answer.body.name, reason: answer.body.reason, allowed: answer.body.allowed });
-  } else if (answer.status === 401) {
-    loggedOut(true);
-  } else if (answer.status === 403) {
-    forbidden(answer, name);
-  } else {
-    const allowed = answer.body?.allowed;
-    const hint = Array.isArray(allowed) ? ` (accepted now: ${allowed.join(', ') || 'none'})` : '';
-    say(`${name} refused: ${errorText(answer)}${answer.status === 409 ? hint : ''}`, 'error');
-  }
-  refreshState();
-}
-
-for (const button of document.querySelectorAll('button[data-command]')) {
-  button.addEventListener('click', () => ask(button.dataset.command));
-}
-
-// ----- unit mode -----
-
-let modeBusy = false;
-$('mode-select').addEventListener('change', async (event) => {
-  const mode = event.target.value;
-  const message = $('mode-message');
-  modeBusy = true;
-  drawMode();
-  message.textContent = `asking for ${mode}…`;
-  message.dataset.kind = 'pending';
-  try {
-    const answer = await request('api/v1/mode', { method: 'PUT', body: { mode } });
-    heard();
-    if (answer.ok) {
-      message.textContent = `now ${answer.body.mode_name}`;
-      message.dataset.kind = 'ok';
-    } else {
-      if (answer.status === 401) loggedOut(true);
-      message.textContent = `refused: ${errorText(answer)}`;
-      message.dataset.kind = 'error';
-    }
-  } catch (error) {
-    unreachable(error);
-    message.textContent = `the daemon cannot be reached (${error.message})`;
-    message.dataset.kind = 'error';
-  } finally {
-    modeBusy = false;
-    await refreshState(); // the mode the daemon has, whatever it answered
-    drawMode();
-  }
-});
 
 // ----- view tools -----
 

@@ -52,6 +52,7 @@ export class HistoryPanel {
   }
 
   clear() {
+    clearTimeout(this.timer);
     this.generation = (this.generation ?? 0) + 1; // answers to an older one are dropped
     this.programs = []; // records shown, newest first
     this.olderLeft = false;
@@ -62,6 +63,12 @@ export class HistoryPanel {
     $('history-log').replaceChildren();
     $('history-older').hidden = true;
     $('history-more').hidden = true;
+  }
+
+  /** Refresh shortly: the changes a burst of events announces are read once. */
+  refreshSoon() {
+    clearTimeout(this.timer);
+    this.timer = setTimeout(() => this.refresh(), 200);
   }
 
   /** Bring both lists up to date (one refresh at a time; asks meanwhile coalesce). */

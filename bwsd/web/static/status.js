@@ -7,6 +7,7 @@
 // daemon cannot be reached the last picture stays on screen, greyed, with the time it was
 // last heard from.
 
+import { request } from './api.js';
 import { clock } from './eta.js';
 
 const $ = (id) => document.getElementById(id);
@@ -72,6 +73,7 @@ export function stopText(state) {
 export class StatusPanel {
   constructor() {
     this.faultNames = {}; // axis -> fault name, from /machine (while axes report faults)
+    this.faultedAsked = ''; // the faulted axes the names were asked for
   }
 
   /**
@@ -140,9 +142,29 @@ export class StatusPanel {
     $('recovering').hidden = $('recovering-label').hidden = true;
   }
 
-  /** The fault name of each faulted axis, as `/machine` reports it. */
-  setFaultNames(axes) {
+  /**
+   * The fault names (stall, jam...) of the `faulted` axes, read from `/machine` once per
+   * change of the list; `onRead` is called when they are in.
+   */
+  async readFaultNames(faulted, onRead) {
+    const key = faulted.join(',');
+    if (key === this.faultedAsked) return;
+    this.faultedAsked = key;
+    if (faulted.length === 0) return;
+    try {
+      const answer = await request('api/v1/machine');
+      if (!answer.ok || key !== this.faultedAsked) return; // refused, or cleared meanwhile
+      this.faultNames = {};
+      for (const axis of answer.body.axes ?? []) if (axis.fault) this.faultNames[axis.name] = axis.fault_name;
+      onRead();
+    } catch {
+      this.faultedAsked = ''; // asked again with the next state
+    }
+  }
+
+  /** Forget the fault names (logged out). */
+  clear() {
     this.faultNames = {};
-    for (const axis of axes ?? []) if (axis.fault) this.faultNames[axis.name] = axis.fault_name;
+    this.faultedAsked = '';
   }
 }

@@ -1,0 +1,52 @@
+// Whether the daemon answers: up while the event stream is open and the last request was
+// answered; `lastSeen` is when it last answered or sent an event (what the page shows as
+// "disconnected since").
+
+import { say, saysUnreachable } from './message.js';
+
+export class Connection {
+  /** @param onChange called when the page must draw the link again */
+  constructor(onChange) {
+    this.onChange = onChange;
+    this.linkUp = false; // the event WebSocket is open
+    this.answering = true; // the last request was answered
+    this.lastSeen = null; // a Date
+  }
+
+  /** The daemon answered or sent an event. */
+  heard() {
+    this.lastSeen = new Date();
+    if (this.answering) return;
+    this.answering = true;
+    if (saysUnreachable()) say('', '');
+    this.onChange();
+  }
+
+  /** A request found no daemon (a network error, or no answer in time). */
+  unreachable(error) {
+    if (this.answering) {
+      this.answering = false;
+      say(`the daemon cannot be reached (${error?.message ?? error})`, 'error');
+    }
+    this.onChange();
+  }
+
+  /** The event stream opened or closed. */
+  setLink(up) {
+    this.linkUp = up;
+    if (up) this.heard();
+    this.onChange();
+  }
+
+  /** True when the daemon answers; null when the page does not ask (`wanted` false). */
+  online(wanted) {
+    if (!wanted) return null;
+    return this.linkUp && this.answering;
+  }
+
+  /** Nothing heard yet (after log out). */
+  reset() {
+    this.answering = true;
+    this.lastSeen = null;
+  }
+}

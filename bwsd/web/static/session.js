@@ -1,0 +1,79 @@
+// Who is logged in: the token (api.js keeps it), its holder and role as `/whoami` names
+// them, the login form with "remember me", log out, and a `#token=` link opened in a tab
+// that shows the page already.
+
+import { getToken, request, setToken, takeTokenFromFragment, tokenRemembered } from './api.js';
+
+const $ = (id) => document.getElementById(id);
+const COMMANDING_ROLES = new Set(['operator', 'admin']);
+
+export class Session {
+  /**
+   * @param onLogIn called with a token to log in with, and whether to remember it
+   * @param onLogOut called when the operator logs out
+   */
+  constructor({ onLogIn, onLogOut }) {
+    this.name = null; // the token's holder, from /whoami
+    this.role = null; // its role (null: not known yet)
+    $('login').addEventListener('submit', (event) => {
+      event.preventDefault();
+      const input = $('token-input');
+      const token = input.value.trim();
+      if (!token) return;
+      input.value = '';
+      onLogIn(token, $('remember').checked);
+    });
+    $('logout').addEventListener('click', () => onLogOut());
+    window.addEventListener('hashchange', () => {
+      const token = takeTokenFromFragment();
+      if (token) onLogIn(token, false);
+    });
+  }
+
+  /** The token's role may command the machine and load programs. */
+  mayCommand() {
+    return Boolean(getToken()) && COMMANDING_ROLES.has(this.role);
+  }
+
+  /** Keep `token` (for the session, or beyond with `remember`); its role is not known yet. */
+  keep(token, remember) {
+    setToken(token, remember);
+    this.name = this.role = null;
+  }
+
+  /** Forget the token and who held it. */
+  end() {
+    setToken(null);
+    this.name = this.role = null;
+  }
+
+  /** Ask the daemon whose token this is (an open read without one: anonymous viewer). */
+  async readRole() {
+    const answer = await request('api/v1/whoami');
+    if (answer.ok) {
+      this.name = answer.body.name;
+      this.role = answer.body.role;
+    }
+    return answer;
+  }
+
+  /** A 403 names the role the token holds. */
+  noteRefusal(answer) {
+    if (typeof answer.body?.role === 'string') this.role = answer.body.role;
+  }
+
+  /** The login form or the session line, and the read-only note. */
+  draw() {
+    const token = getToken();
+    $('login').hidden = Boolean(token);
+    $('session').hidden = !token;
+    $('remember').checked = tokenRemembered();
+    const who = this.name ? `${this.name}, ` : '';
+    $('session-role').textContent = this.role ? `logged in (${who}${this.role})` : 'logged in';
+    const readOnly = $('read-only');
+    readOnly.hidden = !this.role || COMMANDING_ROLES.has(this.role);
+    readOnly.textContent = token
+      ? `read only: a ${this.role}'s token may not command the machine or load programs`
+      : 'read only: log in with an operator token to command the machine';
+  }
+}
