@@ -87,6 +87,7 @@ function fresh() {
 // answered; `lastSeen` is when it last answered or sent an event.
 const connection = new Connection(() => {
   statusDirty = true;
+  gridDirty = true; // the machine's marks on the matrix are known only while it answers
   scheduleFrame();
 });
 let generation = 0; // counts logins and logouts: an answer asked for before one is dropped
