@@ -379,3 +379,31 @@ def test_after_stop_progress_and_next_line_are_what_the_daemon_says(slow_live: L
     assert page.page.locator("#next").inner_text() == "next: — (the run has ended)"
     assert page.page.locator("#job-text .current").count() == 0
     assert page.errors == []
+
+
+@pytest.fixture
+def reads_open(mock: Mock, tmp_path: Path) -> Iterator[Live]:
+    """A daemon that serves reads without a token (`[api] open_reads = true`)."""
+    yield from start_live(mock, tmp_path, open_reads=True)
+
+
+def test_open_reads_show_everything_and_offer_nothing_without_a_token(reads_open: Live,
+                                                                     page: Browsing):  # fmt: skip
+    live = reads_open
+    _load(live)
+    page.page.add_init_script(WATCH_ENABLED)
+    page.open(live)
+    page.ready()
+    page.state("Stopped")
+    page.until("() => window.bwsd.role === 'viewer'")
+    assert page.page.locator("#login").is_visible()  # a token only to change something
+    assert page.page.locator("#read-only").inner_text() == (
+        "read only: log in with an operator token to command the machine"
+    )
+    assert page.page.evaluate("window.bwsd.yarns") == 4
+    assert page.page.evaluate("[...window.__everEnabled]") == []
+    page.page.fill("#token-input", live.tokens["operator"])
+    page.page.click("#login button[type=submit]")
+    page.until("() => window.bwsd.role === 'operator' && window.bwsd.ready")
+    assert _in_step(page, live, "Stopped") == ["reset", "abort"]
+    assert page.errors == []
