@@ -122,6 +122,12 @@ const programs = new ProgramPanel({
 });
 const link = new EventLink({ onEvent, onLink });
 const session = new Session({ onLogIn: logIn, onLogOut: logOut });
+// The view's colours changed on their own (a section line's zones arrived, a pause
+// refreshed them): what shares the palette follows.
+view.onColoursChanged = () => {
+  grid.repaint();
+  drawLegend();
+};
 const selection = new Selection(view, grid, (id) => {
   hooks.selected = id;
 });
@@ -474,7 +480,7 @@ function drawLegend() {
   if (!legend) return;
   legendFamilies = palette.weftColours.size;
   if (palette.mode === 'yarn') {
-    legend.textContent = 'a hue per yarn id';
+    legend.textContent = 'a colour per yarn, no two neighbours alike';
     return;
   }
   legend.replaceChildren(
