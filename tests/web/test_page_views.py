@@ -27,8 +27,7 @@ from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 
 ROOT = Path(__file__).resolve().parents[2]
-SHOTS = ROOT / "docs"
-SHOOT = os.environ.get("BWSD_SCREENSHOTS") == "1"  # rewrite docs/preview-view-*.png
+SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-view-*.png there
 
 
 @dataclass
@@ -492,8 +491,8 @@ def _pixels(png: bytes) -> Any:
 
 @pytest.mark.parametrize("stem", ["braid-L", "weave-U"])
 def test_pictures_of_each_view_and_colouring(runs: Runs, page: Browsing, stem: str):
-    """Every view and colouring draws something of its own; with BWSD_SCREENSHOTS=1 the
-    pictures are written to docs/preview-view-<stem>-<name>.png."""
+    """Every view and colouring draws something of its own; with BWSD_SCREENSHOTS=DIR the
+    pictures are written to DIR/preview-view-<stem>-<name>.png (docs/preview.md shows them)."""
     run = runs(stem)
     _open(page, run)
     page.page.select_option("#colour-by", "yarn")
@@ -523,7 +522,7 @@ def test_pictures_of_each_view_and_colouring(runs: Runs, page: Browsing, stem: s
         for b in names[i + 1 :]:
             if pictures[a].shape == pictures[b].shape:
                 assert abs(pictures[a] - pictures[b]).max() > 0.02, (a, b)
-    if SHOOT:
+    if SHOTS:
         for name, png in shots.items():
-            (SHOTS / f"preview-view-{stem}-{name}.png").write_bytes(png)
+            (Path(SHOTS) / f"preview-view-{stem}-{name}.png").write_bytes(png)
     assert page.errors == []
