@@ -126,12 +126,12 @@ class TokenUsers:
 
     def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:  # fmt: skip
-        if username is None and certificate is None:
+        if username is None:  # anonymous (X509 user tokens are not offered)
             if self.anonymous:
                 return LoomUser(UserRole.User, "anonymous", "viewer")
             REFUSED_LOGIN.note("OPC UA: refused an anonymous session")
             return None
-        holder = self.tokens.check(password or "") if username else None
+        holder = self.tokens.check(password or "")
         if holder is None or holder[0] != username:
             REFUSED_LOGIN.note("OPC UA: refused user %r: unknown name or token", username)
             return None

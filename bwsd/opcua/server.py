@@ -213,7 +213,7 @@ class OpcUaServer:
         return call
 
     async def _set_mode_method(self, parent: ua.NodeId, mode: Any) -> ua.StatusCode | list[Any]:
-        return await self._answer(self._mode(mode))
+        return await self._answer(self._mode(mode.Value if isinstance(mode, ua.Variant) else mode))
 
     async def _answer(self, request: Any) -> ua.StatusCode | list[Any]:
         try:
@@ -225,7 +225,7 @@ class OpcUaServer:
     async def _command(self, number: Any) -> None:
         """Apply a PackML command through the controller; Refused when it refuses."""
         try:
-            command = Command(number)
+            command = Command(_whole(number))
         except ValueError:
             await self._refused(_unknown(number, "command"))
         await self._through(self.controller.command(command, REASON, WHO),
@@ -233,7 +233,7 @@ class OpcUaServer:
 
     async def _mode(self, number: Any) -> None:
         try:
-            mode = UnitMode(number)
+            mode = UnitMode(_whole(number))
         except ValueError:
             await self._refused(_unknown(number, "unit mode"))
         await self._through(self.controller.set_mode(mode, WHO), f"mode {mode.label}")
@@ -290,6 +290,13 @@ class OpcUaServer:
     def _id(self, path: str) -> ua.NodeId:
         assert self._space is not None
         return self._space.variables[path].nodeid
+
+
+def _whole(number: Any) -> int:
+    """An integer as written (a Boolean or a Double is no command number)."""
+    if isinstance(number, bool) or not isinstance(number, int):
+        raise ValueError(number)
+    return number
 
 
 def _unknown(number: Any, what: str) -> Refused:
