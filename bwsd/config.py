@@ -126,8 +126,9 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "enabled": Flag(False),
         "host": Text("127.0.0.1"),
         "port": Num(int, 0, 65535, 4840),
-        "policy": Text("Basic256Sha256", ("Basic256Sha256", "Aes128Sha256RsaOaep",
-                                          "Aes256Sha256RsaPss")),
+        "policy": Text(
+            "Basic256Sha256", ("Basic256Sha256", "Aes128Sha256RsaOaep", "Aes256Sha256RsaPss")
+        ),
         "mode": Text("SignAndEncrypt", ("SignAndEncrypt", "Sign")),
         "allow_none": Flag(False),
         "anonymous": Flag(False),

@@ -24,6 +24,7 @@ from asyncua import ua
 from asyncua.common.utils import Buffer, ServiceError
 from asyncua.crypto import cert_gen
 from asyncua.crypto.permission_rules import USER_TYPES, PermissionRuleset, User, UserRole
+from asyncua.crypto.security_policies import SecurityPolicyFactory, SecurityPolicyNone
 from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 from asyncua.ua.ua_binary import struct_from_binary
@@ -167,6 +168,27 @@ class Ruleset(PermissionRuleset):
             calls = struct_from_binary(ua.CallParameters, body.copy())
             return [m.MethodId for m in calls.MethodsToCall]
         return []
+
+
+class DiscoveryOnly(PermissionRuleset):
+    """For a channel without security that the config does not offer: nothing but finding
+    the endpoints (which needs no session). asyncua 2.1 opens such a channel whatever the
+    policies, and would serve a session over it."""
+
+    def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
+        return False
+
+
+def close_unsecured(server: Any) -> None:
+    """Put ``DiscoveryOnly`` on channels without security (after ``server.start()``).
+
+    The listener picks a channel's policy from the server's policy list, which it shares;
+    asyncua has no public call for this, hence the private list.
+    """
+    none = SecurityPolicyFactory(  # type: ignore[no-untyped-call]
+        SecurityPolicyNone, ua.MessageSecurityMode.None_, permission_ruleset=DiscoveryOnly()
+    )
+    server._policies.append(none)
 
 
 # ----- client certificates -----

@@ -33,7 +33,14 @@ from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, InstructionDone, ProgramLoaded, StateChanged
 from bwsd.errors import BwsdError
 from bwsd.opcua import space
-from bwsd.opcua.security import OpcUaError, Ruleset, TokenUsers, TrustFolder, application_uri
+from bwsd.opcua.security import (
+    OpcUaError,
+    Ruleset,
+    TokenUsers,
+    TrustFolder,
+    application_uri,
+    close_unsecured,
+)
 from bwsd.opcua.security import certificate as server_certificate
 from bwsd.opcua.values import Tally, history_lines, status_values
 
@@ -111,6 +118,8 @@ class OpcUaServer:
         server.subscribe_server_callback(CallbackType.PreWrite, self._pre_write)
         server.subscribe_server_callback(CallbackType.PostWrite, self._post_write)
         await self._listen(server)
+        if not self.allow_none:
+            close_unsecured(server)
         self.server = server
         self._tally = Tally(time.monotonic(), self.controller.packml.state)
         self._events = asyncio.Queue()

@@ -8,7 +8,8 @@ import time
 from typing import Any
 
 import pytest
-from asyncua import ua
+from asyncua import Client, ua
+from asyncua.common.utils import create_nonce
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from bwsd.controller.packml import Command, State, UnitMode
@@ -16,6 +17,7 @@ from bwsd.controller.status import StateChanged, StopCause
 from bwsd.opcua.space import NAMESPACE, TAGS, node_id
 from tests.opcua.conftest import TEXT, client_cert, loom, rig, run, session, var
 
+MAINTENANCE = ua.Variant(int(UnitMode.MAINTENANCE), ua.VariantType.Int32)
 EXPECTED_RUN = [State.RESETTING, State.IDLE, State.STARTING, State.EXECUTE, State.COMPLETING,
                 State.COMPLETE]  # fmt: skip
 
@@ -142,12 +144,10 @@ def test_unit_mode_changes_need_an_admin(mock, tmp_path):
             async with r.session("operator") as client:
                 idx = await client.get_namespace_index(NAMESPACE)
                 with pytest.raises(ua.uaerrors.BadUserAccessDenied):
-                    await (await loom(client)).call_method(f"{idx}:SetUnitMode",
-                                                           ua.Variant(2, ua.VariantType.Int32))  # fmt: skip
+                    await (await loom(client)).call_method(f"{idx}:SetUnitMode", MAINTENANCE)
                 assert r.controller.packml.mode is UnitMode.PRODUCTION
             async with r.session("admin") as client:
-                await (await loom(client)).call_method(f"{idx}:SetUnitMode",
-                                                       ua.Variant(2, ua.VariantType.Int32))  # fmt: skip
+                await (await loom(client)).call_method(f"{idx}:SetUnitMode", MAINTENANCE)
                 assert r.controller.packml.mode is UnitMode.MAINTENANCE
                 mode = await var(client, "Command/UnitMode")
                 await mode.write_value(ua.Variant(3, ua.VariantType.Int32))
@@ -256,5 +256,50 @@ def test_anonymous_reads_when_the_config_allows_and_still_commands_nothing(mock,
             with pytest.raises(ua.uaerrors.BadUserAccessDenied):
                 await (await loom(c)).call_method(f"{idx}:Reset")
             assert r.controller.packml.state is State.STOPPED
+
+    run(scenario())
+
+
+async def unsecured_session(url: str, user: str, password: str) -> Any:
+    """What a hostile client can do by hand: a session over a channel with no security at
+    all, though the server offers no such endpoint, the password in clear."""
+    client = Client(url, timeout=5)
+    await client.connect_socket()
+    await client.send_hello()
+    await client.open_secure_channel()  # None: allowed, for GetEndpoints (OPC 10000-4)
+    params = ua.CreateSessionParameters(
+        ClientDescription=ua.ApplicationDescription(ApplicationUri="urn:intruder",
+                                                    ApplicationType=ua.ApplicationType.Client),
+        EndpointUrl=url, SessionName="intruder", ClientNonce=create_nonce(32),
+        RequestedSessionTimeout=60000, MaxResponseMessageSize=0,
+    )  # fmt: skip
+    await client.uaclient.create_session(params)
+    token = ua.UserNameIdentityToken(
+        PolicyId="username", UserName=user, Password=password.encode(), EncryptionAlgorithm=None
+    )
+    await client.uaclient.activate_session(ua.ActivateSessionParameters(UserIdentityToken=token))
+    return client
+
+
+def test_a_session_over_an_unsecured_channel_can_do_nothing(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path) as r:
+            client = await unsecured_session(r.server.url, "operator", r.users["operator"])
+            try:
+                idx = (await client.uaclient.read_attributes(
+                    [ua.NodeId(ua.ObjectIds.Server_NamespaceArray)], ua.AttributeIds.Value
+                ))  # fmt: skip
+                pytest.fail(f"read over an unsecured channel: {idx}")
+            except ua.uaerrors.BadUserAccessDenied:
+                pass
+            idx = 0
+            async with r.session("viewer") as secured:
+                idx = await secured.get_namespace_index(NAMESPACE)
+            call = ua.CallMethodRequest(ObjectId=node_id(idx, ""),
+                                        MethodId=node_id(idx, "Reset"))  # fmt: skip
+            with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                await client.uaclient.call([call])
+            assert r.controller.packml.state is State.STOPPED
+            client.disconnect_socket()
 
     run(scenario())
