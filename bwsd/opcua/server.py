@@ -20,6 +20,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Mapping
+from datetime import UTC
 from pathlib import Path
 from typing import Any
 
@@ -88,7 +89,8 @@ class OpcUaServer:
         self._tally = Tally(time.monotonic())
         self._events: asyncio.Queue[Event | None] = asyncio.Queue()
         self._updater: asyncio.Task[None] | None = None
-        self._values: dict[str, Any] = {}
+        self._values: dict[str, Any] = {}  # as last written (and notified)
+        self._live: dict[ua.NodeId, str] = {}  # status variables: read from the controller
 
     @property
     def url(self) -> str:
@@ -125,12 +127,32 @@ class OpcUaServer:
         self._events = asyncio.Queue()
         self._values["Command/UnitMode"] = int(self.controller.packml.mode)
         await self._write_now("Command/UnitMode")
+        self._read_live(server)
         await self._refresh()
         self.controller.events.subscribe(self._on_event)
         self._updater = asyncio.create_task(self._update_forever(), name="bwsd-opcua")
         self._updater.add_done_callback(_ended)
         log.info("OPC UA on %s (%s%s), certificate %s", self.url, self.policy.name,
                  ", None too" if self.allow_none else "", cert.thumbprint())  # fmt: skip
+
+    def _read_live(self, server: Server) -> None:
+        """A read of a status variable answers from the controller as it is at that moment
+        (as REST and the Modbus tags do); the updater's writes only notify subscribers."""
+        assert self._space is not None
+        now = time.monotonic()
+        for path in status_values(self.controller.status(), self._tally, now):
+            nodeid = self._space.variables[path].nodeid
+            self._live[nodeid] = path
+            server.set_attribute_value_callback(nodeid, self._live_value)
+            server.set_attribute_value_setter(nodeid, _notify_only)
+
+    def _live_value(self, nodeid: ua.NodeId, attr: ua.AttributeIds) -> ua.DataValue:
+        now = time.monotonic()
+        path = self._live[nodeid]
+        value = status_values(self.controller.status(), self._tally, now)[path]
+        stamp = ua.DateTime.now(UTC)
+        return ua.DataValue(ua.Variant(value, _KINDS[path]), SourceTimestamp=stamp,
+                            ServerTimestamp=stamp)  # fmt: skip
 
     async def _listen(self, server: Server) -> None:
         try:
@@ -299,6 +321,10 @@ class OpcUaServer:
     def _id(self, path: str) -> ua.NodeId:
         assert self._space is not None
         return self._space.variables[path].nodeid
+
+
+def _notify_only(node: Any, attr: ua.AttributeIds, value: ua.DataValue) -> None:
+    """A status variable keeps no value: its reads ask the controller."""
 
 
 def _whole(number: Any) -> int:
