@@ -195,7 +195,7 @@ class OpcUaServer:
             now = time.monotonic()
             if isinstance(event, StateChanged):
                 self._tally.state_changed(event.new, now)
-                await self._write("Status/StateCurrent", int(event.new))
+                await self._write("Status/StateCurrent", int(event.new), event.at)
             elif isinstance(event, InstructionDone):
                 self._tally.instruction_done(now)
             if self._events.empty():  # a burst of events: the rest once, at its end
@@ -223,18 +223,20 @@ class OpcUaServer:
         return {**values, "Machine/TwinOccupancy": occupancy, "Machine/TakeUp": twin.takeup,
                 "Machine/Contacts": twin.contact_count}  # fmt: skip
 
-    async def _write_now(self, path: str) -> None:
+    async def _write_now(self, path: str, at: float | None = None) -> None:
+        """Write (and notify) the value kept for ``path``; ``at``: when it became true."""
         assert self.server is not None and self._space is not None
         value = ua.Variant(self._values[path], _KINDS[path])
+        stamp = ua.DateTime.fromtimestamp(at, UTC) if at is not None else None
         await self.server.write_attribute_value(
-            self._space.variables[path].nodeid, ua.DataValue(value)
+            self._space.variables[path].nodeid, ua.DataValue(value, SourceTimestamp=stamp)
         )
 
-    async def _write(self, path: str, value: Any) -> None:
+    async def _write(self, path: str, value: Any, at: float | None = None) -> None:
         if self._values.get(path, _UNSET) == value or self._space is None or not self.server:
             return
         self._values[path] = value
-        await self._write_now(path)
+        await self._write_now(path, at)
 
     # ----- commands: methods -----
     def _method(self, command: Command) -> space.MethodCall:

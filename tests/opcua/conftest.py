@@ -125,8 +125,8 @@ async def rig(mock: Any, tmp_path: Path, **settings: Any) -> AsyncIterator[Rig]:
     cert = client_cert(tmp_path / "client")
     trust(folder, cert)
     server = OpcUaServer(ctl, tokens, folder, {"port": 0, **settings})
-    await server.start()
     try:
+        await server.start()
         yield Rig(ctl, journal, server, tokens, folder, cert, users)
     finally:
         await server.stop()

@@ -27,9 +27,11 @@ class Changes:
 
     def __init__(self) -> None:
         self.values: list[Any] = []
+        self.stamps: list[float] = []  # each value's source time stamp (epoch s)
 
     def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
         self.values.append(value)
+        self.stamps.append(data.monitored_item.Value.SourceTimestamp.timestamp())
 
     async def until(self, done: Any, seconds: float = 30.0) -> list[Any]:
         deadline = time.monotonic() + seconds
@@ -81,9 +83,9 @@ def test_the_packml_object_is_browsed_with_types_units_and_methods(mock, tmp_pat
 def test_a_subscription_sees_every_transition_of_a_run_to_complete(slow_mock, tmp_path):
     async def scenario() -> None:
         async with rig(slow_mock, tmp_path) as r, r.session("operator") as client:
-            published: list[State] = []
+            published: list[StateChanged] = []
             r.controller.events.subscribe(
-                lambda e: published.append(e.new) if isinstance(e, StateChanged) else None
+                lambda e: published.append(e) if isinstance(e, StateChanged) else None
             )
             changes = Changes()
             sub = await client.create_subscription(20, changes)
@@ -96,8 +98,10 @@ def test_a_subscription_sees_every_transition_of_a_run_to_complete(slow_mock, tm
             await root.call_method(f"{idx}:Reset")
             await root.call_method(f"{idx}:Start")
             seen = await changes.until(lambda v: v[-1:] == [State.COMPLETE])
-            assert published == EXPECTED_RUN
+            assert [e.new for e in published] == EXPECTED_RUN
             assert seen == [State.STOPPED, *EXPECTED_RUN]
+            # each notification carries the time of the change itself, not of its sending
+            assert changes.stamps[1:] == pytest.approx([e.at for e in published], abs=1e-6)
             assert await read(client, "Status/InstructionsDone") == 15
             assert await read(client, "Admin/ProdGoodCount") == 1
             assert await read(client, "Machine/Contacts") == r.controller.twin.contact_count
