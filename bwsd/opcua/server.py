@@ -46,7 +46,8 @@ from bwsd.opcua.security import certificate as server_certificate
 from bwsd.opcua.values import Tally, history_lines, status_values
 
 log = logging.getLogger(__name__)
-WHO = "opcua"  # who gave a command, in the log
+WHO = "opcua"  # who gave a command, in the log (a write adds the user: asyncua 2.1 tells a
+# write's user, not a method call's)
 REASON = "by OPC UA"  # the reason given with Stop, Hold, Suspend and Abort
 TICK = 1.0  # s between updates of the times and the speed
 HISTORY = 10  # programs in Admin.ProgramHistory
@@ -255,21 +256,21 @@ class OpcUaServer:
             return space.status(exc.code)
         return []
 
-    async def _command(self, number: Any) -> None:
+    async def _command(self, number: Any, who: str = WHO) -> None:
         """Apply a PackML command through the controller; Refused when it refuses."""
         try:
             command = Command(_whole(number))
         except ValueError:
             await self._refused(_unknown(number, "command"))
-        await self._through(self.controller.command(command, REASON, WHO),
+        await self._through(self.controller.command(command, REASON, who),
                             command.label)  # fmt: skip
 
-    async def _mode(self, number: Any) -> None:
+    async def _mode(self, number: Any, who: str = WHO) -> None:
         try:
             mode = UnitMode(_whole(number))
         except ValueError:
             await self._refused(_unknown(number, "unit mode"))
-        await self._through(self.controller.set_mode(mode, WHO), f"mode {mode.label}")
+        await self._through(self.controller.set_mode(mode, who), f"mode {mode.label}")
 
     async def _through(self, request: Any, what: str) -> None:
         try:
@@ -304,7 +305,7 @@ class OpcUaServer:
             if written.get(self._id(request)) is True:
                 wanted = written.get(self._id(number), self._values.get(number))
                 try:
-                    await apply(wanted)
+                    await apply(wanted, f"{WHO}:{getattr(event.user, 'name', '?')}")
                 except Refused as exc:
                     raise ServiceError(exc.code) from exc
 

@@ -158,6 +158,12 @@ def test_unit_mode_changes_need_an_admin(mock, tmp_path):
                 await (await var(client, "Command/UnitModeChangeRequest")).write_value(True)
                 assert r.controller.packml.mode is UnitMode.MANUAL
                 assert await read(client, "Status/UnitModeCurrent") == UnitMode.MANUAL
+            for _ in range(500):  # the journal's writer records who, in order, soon after
+                by = [e.data["by"] for e in r.journal.events(0, 100) if e.kind == "mode"]
+                if len(by) == 2:
+                    break
+                await asyncio.sleep(0.01)
+            assert by == ["opcua", "opcua:admin"]  # a method's caller is not told, a writer is
 
     run(scenario())
 
