@@ -28,13 +28,13 @@ READ = ("Status/StateCurrent", "Status/UnitModeCurrent", "Status/InstructionsDon
         "Status/InstructionCount", "Admin/StopReason/ID", "Machine/EStop")  # fmt: skip
 
 
-def served_config(tmp: Path, modbus_port: int) -> Path:
+def served_config(tmp: Path, modbus_port: int, **api: Any) -> Path:
     path = tmp / "bwsd.toml"
     path.write_text(toml({
         "machine": MACHINE,
         "fieldbus": {"backend": "modbus", **BUS},
         "fieldbus.modbus": {"port": modbus_port},
-        "api": {"port": 0},
+        "api": {"port": 0, **api},
         "plc": {"port": 0},
         "opcua": {"enabled": True, "port": 0},
     }))  # fmt: skip
