@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import time
 from collections.abc import Mapping
 from datetime import UTC
@@ -33,6 +34,7 @@ from bwsd.controller.packml import Command, UnitMode
 from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, InstructionDone, ProgramLoaded, StateChanged
 from bwsd.errors import BwsdError
+from bwsd.logs import Summary
 from bwsd.opcua import space
 from bwsd.opcua.security import (
     OpcUaError,
@@ -46,6 +48,7 @@ from bwsd.opcua.security import certificate as server_certificate
 from bwsd.opcua.values import Tally, history_lines, status_values
 
 log = logging.getLogger(__name__)
+REFRESH = Summary(log, "failed refreshes of the OPC UA variables")
 WHO = "opcua"  # who gave a command, in the log (a write adds the user: asyncua 2.1 tells a
 # write's user, not a method call's)
 REASON = "by OPC UA"  # the reason given with Stop, Hold, Suspend and Abort
@@ -106,6 +109,7 @@ class OpcUaServer:
         cert = await asyncio.to_thread(server_certificate, self.folder)
         trust = await asyncio.to_thread(TrustFolder, self.folder)
         server = Server(user_manager=TokenUsers(self.tokens, self.anonymous))  # type: ignore[arg-type]
+        self.server = server  # from here on ``stop`` closes what a failed start left open
         await server.init()
         server.set_server_name("bwsd")
         await server.set_application_uri(application_uri())
@@ -123,7 +127,6 @@ class OpcUaServer:
         await self._listen(server)
         if not self.allow_none:
             close_unsecured(server)
-        self.server = server
         self._tally = Tally(time.monotonic(), self.controller.packml.state)
         self._events = asyncio.Queue()
         self._values["Command/UnitMode"] = int(self.controller.packml.mode)
@@ -159,8 +162,8 @@ class OpcUaServer:
         try:
             await server.start()
         except OSError as exc:
-            raise OpcUaError(f"[opcua] cannot listen on {self.host}:{self.port}: "
-                             f"{exc.strerror or exc}") from None  # fmt: skip
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            raise OpcUaError(f"[opcua] cannot listen on {self.host}:{self.port}: {why}") from None
         bound = server.bserver
         if bound is not None and self.port == 0:
             self.port = bound.port
@@ -189,7 +192,7 @@ class OpcUaServer:
             try:
                 event = await asyncio.wait_for(self._events.get(), TICK)
             except TimeoutError:
-                await self._refresh()
+                await self._refresh_guarded(history=False)
                 continue
             if event is None:
                 return
@@ -200,7 +203,15 @@ class OpcUaServer:
             elif isinstance(event, InstructionDone):
                 self._tally.instruction_done(now)
             if self._events.empty():  # a burst of events: the rest once, at its end
-                await self._refresh(history=isinstance(event, ProgramLoaded | StateChanged))
+                await self._refresh_guarded(isinstance(event, ProgramLoaded | StateChanged))
+
+    async def _refresh_guarded(self, history: bool) -> None:
+        """A refresh that fails (the journal unreadable a moment) is logged; the next one
+        tries again. Reads of the status variables do not depend on it."""
+        try:
+            await self._refresh(history)
+        except Exception as exc:
+            REFRESH.note("OPC UA: the variables could not be refreshed: %s", exc)
 
     async def _refresh(self, history: bool = True) -> None:
         """Write every variable that changed, from the controller as it stands now."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import re
 import socket
+import subprocess
+import sys
 
 import pytest
 from asyncua import Client
@@ -57,3 +59,21 @@ def test_a_port_in_use_is_an_error_naming_the_table(mock, tmp_path):
 
         with pytest.raises(OpcUaError, match=rf"\[opcua\] cannot listen on 127.0.0.1:{port}"):
             run(scenario())
+
+
+def test_serve_stops_with_the_error_when_the_opcua_port_is_taken(tmp_path):
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = held.getsockname()[1]
+        config = tmp_path / "bwsd.toml"
+        config.write_text(toml({"machine": MACHINE, "api": {"port": 0}, "plc": {"port": 0},
+                                "opcua": {"enabled": True, "port": port}}))  # fmt: skip
+        served = subprocess.run(
+            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config), "--state-dir",
+             str(tmp_path / "state")], capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    assert served.returncode == 2, served.stderr
+    assert served.stdout == ""  # never ready
+    assert served.stderr.endswith(f"bwsd: error: [opcua] cannot listen on 127.0.0.1:{port}: "
+                                  "Address already in use\n"), served.stderr[-300:]  # fmt: skip
