@@ -313,3 +313,18 @@ def test_a_session_over_an_unsecured_channel_can_do_nothing(mock, tmp_path):
             client.disconnect_socket()
 
     run(scenario())
+
+
+def test_allow_none_offers_an_unsecured_endpoint_with_the_same_roles(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path, allow_none=True) as r:
+            async with session(r.server.url, None, "viewer", r.users["viewer"]) as plain:
+                assert await read(plain, "Status/StateCurrent") == State.STOPPED
+                idx = await plain.get_namespace_index(NAMESPACE)
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                    await (await loom(plain)).call_method(f"{idx}:Reset")
+            async with r.session("operator") as secured:  # the secured endpoint is still there
+                await (await loom(secured)).call_method(f"{idx}:Reset")
+            assert r.controller.packml.state is State.IDLE
+
+    run(scenario())
