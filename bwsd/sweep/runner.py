@@ -1,0 +1,128 @@
+"""A whole sweep: the candidates still to run, on the cluster, rows to the log, then Parquet."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from bwsd.sweep.candidate import Row
+from bwsd.sweep.engine import (
+    IN_FLIGHT_PER_WORKER,
+    batch_size,
+    batches,
+    connect,
+    dispatch,
+    worker_count,
+)
+from bwsd.sweep.errors import SweepError
+from bwsd.sweep.spec import Spec
+from bwsd.sweep.store import RowLog, log_path, merged, read_log, read_table_rows, write_table
+
+WORKERS_TIMEOUT = 60.0  # seconds to wait for a scheduler's first worker
+
+
+@dataclass(frozen=True)
+class Options:
+    """How to run: where, how wide, whether to continue an earlier run, what to write."""
+
+    scheduler: str | None = None
+    workers: int | None = None
+    batch: int | None = None
+    resume: bool = False
+    csv: bool = False
+    progress: bool = False
+
+
+@dataclass(frozen=True)
+class Summary:
+    """What a sweep did: candidates in all, found finished, run now, refused, workers."""
+
+    total: int
+    resumed: int
+    ran: int
+    refused: int
+    workers: int
+
+    def text(self, output: Path) -> str:
+        where = f"{self.workers} workers" if self.ran else "nothing left to run"
+        return (f"{output}: {self.total} candidates, {self.total - self.refused} ok, "
+                f"{self.refused} refused; {self.resumed} already done, {self.ran} run now "
+                f"({where})")  # fmt: skip
+
+
+def _earlier(output: Path, log: Path, resume: bool) -> list[Row]:
+    """The rows of an earlier run of this sweep (``--resume``), or a clear refusal."""
+    if not output.parent.is_dir():
+        raise SweepError(f"{output}: no such folder {output.parent}")
+    if not resume:
+        if log.exists():
+            raise SweepError(f"{log} holds the rows of an unfinished sweep: --resume goes "
+                             "on with it; delete it to start over")  # fmt: skip
+        return []
+    earlier = read_table_rows(output) if output.exists() else []
+    return [*earlier, *read_log(log)]
+
+
+@contextmanager
+def _bar(enabled: bool, total: int, done: int) -> Iterator[Callable[[int], None]]:
+    """A progress bar on stderr (done/total, elapsed, ETA); a no-op when disabled."""
+    if not enabled:
+        yield lambda _n: None
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = (TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TextColumn("ETA"), TimeRemainingColumn())  # fmt: skip
+    with Progress(*columns, console=Console(stderr=True)) as bar:
+        task = bar.add_task("sweep", total=total, completed=done)
+        yield lambda n: bar.advance(task, n)
+
+
+def _workers(client: object, scheduler: str | None) -> int:
+    count = worker_count(client)
+    if count == 0:
+        try:
+            client.wait_for_workers(1, timeout=WORKERS_TIMEOUT)  # type: ignore[attr-defined]
+        except TimeoutError:
+            raise SweepError(f"the Dask scheduler {scheduler} has no workers") from None
+        count = worker_count(client)
+    return count
+
+
+def run_sweep(spec: Spec, output: Path, options: Options) -> Summary:
+    """Run every candidate not yet finished; write the table; remove the log."""
+    candidates = spec.candidates()
+    log = log_path(output)
+    earlier = _earlier(output, log, options.resume)
+    finished = {row["id"] for row in earlier}
+    todo = [c for c in candidates if c.id not in finished]
+    workers = 0
+    with RowLog(log) as rows:
+        if todo:
+            with connect(options.scheduler, options.workers) as client:
+                workers = _workers(client, options.scheduler)
+                size = options.batch or batch_size(len(todo), workers)
+                done = len(candidates) - len(todo)
+                with _bar(options.progress, len(candidates), done) as advance:
+
+                    def on_rows(found: list[Row]) -> None:
+                        rows.append(found)
+                        advance(len(found))
+
+                    in_flight = workers * IN_FLIGHT_PER_WORKER
+                    dispatch(client, batches(todo, size), on_rows, in_flight)
+    table = merged(candidates, [*earlier, *read_log(log)])
+    write_table(table, [*spec.fixed, *spec.vary], output, options.csv)
+    log.unlink(missing_ok=True)
+    refused = sum(1 for row in table if row["status"] != "ok")
+    return Summary(len(candidates), len(candidates) - len(todo), len(todo), refused, workers)
