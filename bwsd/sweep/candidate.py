@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bwsd.config import parse_config
-from bwsd.errors import BwsdError
+from bwsd.errors import BwsdError, TwinError
 from bwsd.export.metrics import metrics, section
 from bwsd.export.mixing import NamedSection, section_header, simulate_with_visits
 from bwsd.program.generators import GENERATORS
@@ -129,10 +129,14 @@ def _run(machine: Machine, text: str, name: str) -> tuple[Twin, Program, Any, Na
         named = section_header(text, name)
     with stage("validate"):
         validate(program, machine, name, positions)
-    with stage("simulate"):
+    try:
         if named is None or any(not machine.inside(*c) for c in named.section.cells):
             return simulate(machine, program), program, None, None
         twin, visits = simulate_with_visits(machine, program, named.section)
+    except TwinError as exc:
+        index = exc.instruction
+        line = program.lines[index - 1] if 0 < index <= len(program.lines) else 0
+        raise Refused("simulate", f"{name}:{line}: {exc}" if line else str(exc)) from exc
     return twin, program, visits, named
 
 
