@@ -7,6 +7,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from bwsd.extras import needs
 from bwsd.sweep.candidate import Row
 from bwsd.sweep.engine import (
     IN_FLIGHT_PER_WORKER,
@@ -16,7 +17,7 @@ from bwsd.sweep.engine import (
     dispatch,
     worker_count,
 )
-from bwsd.sweep.errors import SweepError
+from bwsd.sweep.errors import DASK, PYARROW, SweepError
 from bwsd.sweep.spec import Spec
 from bwsd.sweep.store import RowLog, log_path, merged, read_log, read_table_rows, write_table
 
@@ -99,8 +100,17 @@ def _workers(client: object, scheduler: str | None) -> int:
     return count
 
 
+def _require() -> None:
+    """Dask and pyarrow, before anything is written."""
+    with needs(DASK, "bwsd sweep", SweepError):
+        import distributed  # noqa: F401
+    with needs(PYARROW, "bwsd sweep", SweepError):
+        import pyarrow  # noqa: F401
+
+
 def run_sweep(spec: Spec, output: Path, options: Options) -> Summary:
     """Run every candidate not yet finished; write the table; remove the log."""
+    _require()
     candidates = spec.candidates()
     log = log_path(output)
     earlier = _earlier(output, log, options.resume)

@@ -52,7 +52,6 @@ class RowLog:
 
     def __enter__(self) -> RowLog:
         self._drop_cut_tail()
-        self._file = open(self.path, "ab")  # closed in __exit__
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -72,7 +71,8 @@ class RowLog:
 
     def append(self, rows: Iterable[Row]) -> None:
         """Write the rows and flush: a kill after this keeps them."""
-        assert self._file is not None, "append outside the with block"
+        if self._file is None:  # opened on the first rows: a sweep that never ran leaves no log
+            self._file = open(self.path, "ab")  # noqa: SIM115 - closed in __exit__
         text = "".join(json.dumps(r, allow_nan=False) + "\n" for r in rows)
         self._file.write(text.encode())
         self._file.flush()

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import pyarrow.parquet as pq
 
 from bwsd.cli import main
@@ -36,3 +40,21 @@ def test_the_shipped_example_runs_by_name(tmp_path):
     missing = bwsd("sweep", "example:nothing.toml", "-o", "n.parquet", cwd=tmp_path)
     assert missing.returncode == 2
     assert "examples/nothing.toml is not shipped" in missing.stderr
+
+
+def test_without_the_sweep_extra_the_command_names_it_and_writes_nothing(tmp_path):
+    folder = tmp_path / "site"
+    folder.mkdir()
+    (folder / "sitecustomize.py").write_text(
+        "import sys\nfor name in ('dask', 'distributed', 'pyarrow'):\n"
+        "    sys.modules[name] = None\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), str(ROOT)])}
+    spec = write(tmp_path, '[sweep]\ngenerator = "twist"\n')
+    for args in (["sweep", str(spec), "-o", "r.parquet"], ["sweep", "plot", "r.parquet",
+                                                          "--x", "a", "--y", "b"]):  # fmt: skip
+        run = subprocess.run([sys.executable, "-m", "bwsd.cli", *args], cwd=tmp_path, env=env,
+                             capture_output=True, text=True, check=False)  # fmt: skip
+        assert run.returncode == 2, run.stderr
+        assert "needs " in run.stderr and "pip install 'bwsd[sweep]'" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["site", "spec.toml"]
