@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 from bwsd.extras import needs
-from bwsd.sweep.candidate import Row
+from bwsd.sweep.candidate import Candidate, Row
 from bwsd.sweep.engine import (
     IN_FLIGHT_PER_WORKER,
     batch_size,
@@ -45,9 +46,12 @@ class Summary:
     ran: int
     refused: int
     workers: int
+    start_seconds: float = 0.0  # connecting, or starting the local cluster
+    run_seconds: float = 0.0  # from the first task sent to the last row logged
 
     def text(self, output: Path) -> str:
-        where = f"{self.workers} workers" if self.ran else "nothing left to run"
+        where = (f"{self.workers} workers, {self.run_seconds:.1f} s" if self.ran
+                 else "nothing left to run")  # fmt: skip
         return (f"{output}: {self.total} candidates, {self.total - self.refused} ok, "
                 f"{self.refused} refused; {self.resumed} already done, {self.ran} run now "
                 f"({where})")  # fmt: skip
@@ -108,6 +112,30 @@ def _require() -> None:
         import pyarrow  # noqa: F401
 
 
+@dataclass(frozen=True)
+class _Ran:
+    workers: int = 0
+    start_seconds: float = 0.0
+    run_seconds: float = 0.0
+
+
+def _run(todo: list[Candidate], total: int, rows: RowLog, options: Options) -> _Ran:
+    """Run ``todo`` on the cluster, each batch's rows logged as it comes back."""
+    begin = time.perf_counter()
+    with connect(options.scheduler, options.workers) as client:
+        workers = _workers(client, options.scheduler)
+        started = time.perf_counter()
+        size = options.batch or batch_size(len(todo), workers)
+        with _bar(options.progress, total, total - len(todo)) as advance:
+
+            def on_rows(found: list[Row]) -> None:
+                rows.append(found)
+                advance(len(found))
+
+            dispatch(client, batches(todo, size), on_rows, workers * IN_FLIGHT_PER_WORKER)
+        return _Ran(workers, started - begin, time.perf_counter() - started)
+
+
 def run_sweep(spec: Spec, output: Path, options: Options) -> Summary:
     """Run every candidate not yet finished; write the table; remove the log."""
     _require()
@@ -116,23 +144,12 @@ def run_sweep(spec: Spec, output: Path, options: Options) -> Summary:
     earlier = _earlier(output, log, options.resume)
     finished = {row["id"] for row in earlier}
     todo = [c for c in candidates if c.id not in finished]
-    workers = 0
     with RowLog(log) as rows:
-        if todo:
-            with connect(options.scheduler, options.workers) as client:
-                workers = _workers(client, options.scheduler)
-                size = options.batch or batch_size(len(todo), workers)
-                done = len(candidates) - len(todo)
-                with _bar(options.progress, len(candidates), done) as advance:
-
-                    def on_rows(found: list[Row]) -> None:
-                        rows.append(found)
-                        advance(len(found))
-
-                    in_flight = workers * IN_FLIGHT_PER_WORKER
-                    dispatch(client, batches(todo, size), on_rows, in_flight)
+        ran = _run(todo, len(candidates), rows, options) if todo else _Ran()
     table = merged(candidates, [*earlier, *read_log(log)])
     write_table(table, [*spec.fixed, *spec.vary], output, options.csv)
     log.unlink(missing_ok=True)
     refused = sum(1 for row in table if row["status"] != "ok")
-    return Summary(len(candidates), len(candidates) - len(todo), len(todo), refused, workers)
+    resumed = len(candidates) - len(todo)
+    return Summary(len(candidates), resumed, len(todo), refused, ran.workers,
+                   ran.start_seconds, ran.run_seconds)  # fmt: skip
