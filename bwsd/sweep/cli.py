@@ -41,7 +41,7 @@ def sweep_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive, metavar="N",
                    help="local cluster: worker processes (default: one per core)")  # fmt: skip
     p.add_argument("--batch", type=_positive, metavar="N",
-                   help="candidates per task (default: about 16 tasks per worker)")  # fmt: skip
+                   help="candidates per task (default: sized to about 0.25 s a task)")  # fmt: skip
     p.add_argument("--resume", action="store_true",
                    help="go on with an unfinished (killed) sweep of the same output")  # fmt: skip
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

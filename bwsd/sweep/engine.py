@@ -12,7 +12,6 @@ import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from itertools import islice
 from typing import Any
 
 from bwsd.extras import needs
@@ -20,7 +19,8 @@ from bwsd.sweep.candidate import Candidate, Row, evaluate_batch
 from bwsd.sweep.errors import DASK, SweepError
 
 IN_FLIGHT_PER_WORKER = 4  # batches queued per worker: enough to keep it busy, few to cancel
-MAX_BATCH = 64
+MAX_BATCH = 1024
+TASK_SECONDS = 0.25  # a task's length the batches aim at: the scheduler's cost a task is ms
 CONNECT_TIMEOUT = "20s"
 
 
@@ -56,36 +56,70 @@ def worker_count(client: Any) -> int:
     return sum(client.nthreads().values())
 
 
-def batch_size(todo: int, workers: int) -> int:
-    """Candidates per task: about 16 tasks per worker, between 1 and ``MAX_BATCH``."""
-    return max(1, min(MAX_BATCH, todo // (16 * max(workers, 1))))
+class Batcher:
+    """Hands out the candidates in batches: of ``size`` when given, else sized from the
+    candidates' own times so that a task takes about ``TASK_SECONDS`` (one candidate a task
+    until the first come back), and small enough at the end to keep every worker busy."""
 
+    def __init__(self, todo: Sequence[Candidate], workers: int, size: int | None = None) -> None:
+        self.todo = todo
+        self.workers = max(workers, 1)
+        self.size = size
+        self.next = 0
+        self.seconds = 0.0
+        self.measured = 0
 
-def batches(candidates: Sequence[Candidate], size: int) -> Iterator[list[Candidate]]:
-    """The candidates in consecutive batches of ``size``."""
-    for start in range(0, len(candidates), size):
-        yield list(candidates[start : start + size])
+    def observe(self, rows: Sequence[Row]) -> None:
+        """Note the candidates' own times (the ``seconds`` of their rows)."""
+        self.seconds += sum(float(row["seconds"]) for row in rows)
+        self.measured += len(rows)
+
+    def _size(self) -> int:
+        if self.size is not None:
+            return self.size
+        if not self.measured:
+            return 1
+        target = TASK_SECONDS / max(self.seconds / self.measured, 1e-6)
+        tail = (len(self.todo) - self.next) // (2 * self.workers)  # the rest, twice round
+        return max(1, min(MAX_BATCH, int(target), tail))
+
+    def take(self) -> list[Candidate] | None:
+        """The next batch, None when every candidate has been handed out."""
+        if self.next >= len(self.todo):
+            return None
+        end = self.next + self._size()
+        batch = list(self.todo[self.next : end])
+        self.next = end
+        return batch
 
 
 def dispatch(
     client: Any,
-    work: Iterator[list[Candidate]],
+    batcher: Batcher,
     on_rows: Callable[[list[Row]], None],
     in_flight: int,
 ) -> None:
-    """Run every batch of ``work`` on the cluster, ``in_flight`` at a time; rows as they come.
+    """Run every batch of ``batcher`` on the cluster, ``in_flight`` at a time; hand on each
+    batch's rows as it comes back.
 
     A batch that fails (a bug, or a worker lost again and again) stops the sweep with a
     SweepError naming its candidates; rows handed on before stay handed on.
     """
     from distributed import as_completed
 
-    def submit(batch: list[Candidate]) -> Any:
-        key = f"bwsd-sweep-{batch[0].id}-{len(batch)}"
-        return client.submit(evaluate_batch, batch, key=key, pure=False)
+    running: dict[Any, list[Candidate]] = {}
 
-    running = {submit(b): b for b in islice(work, in_flight)}
-    done = as_completed(list(running))
+    def submit() -> Any:
+        batch = batcher.take()
+        if batch is None:
+            return None
+        key = f"bwsd-sweep-{batch[0].id}-{len(batch)}"
+        future = client.submit(evaluate_batch, batch, key=key, pure=False)
+        running[future] = batch
+        return future
+
+    first = [f for f in (submit() for _ in range(in_flight)) if f is not None]
+    done = as_completed(first)
     for future in done:
         batch = running.pop(future)
         try:
@@ -97,9 +131,8 @@ def dispatch(
                 f"candidates {ids} failed on the cluster: {type(exc).__name__}: "
                 f"{exc}; the rows finished so far are kept (--resume)"
             ) from exc
+        batcher.observe(rows)
         on_rows(rows)
-        following = next(work, None)
+        following = submit()
         if following is not None:
-            nxt = submit(following)
-            running[nxt] = following
-            done.add(nxt)
+            done.add(following)

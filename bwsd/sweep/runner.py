@@ -12,8 +12,7 @@ from bwsd.extras import needs
 from bwsd.sweep.candidate import Candidate, Row
 from bwsd.sweep.engine import (
     IN_FLIGHT_PER_WORKER,
-    batch_size,
-    batches,
+    Batcher,
     connect,
     dispatch,
     worker_count,
@@ -125,14 +124,14 @@ def _run(todo: list[Candidate], total: int, rows: RowLog, options: Options) -> _
     with connect(options.scheduler, options.workers) as client:
         workers = _workers(client, options.scheduler)
         started = time.perf_counter()
-        size = options.batch or batch_size(len(todo), workers)
+        batcher = Batcher(todo, workers, options.batch)
         with _bar(options.progress, total, total - len(todo)) as advance:
 
             def on_rows(found: list[Row]) -> None:
                 rows.append(found)
                 advance(len(found))
 
-            dispatch(client, batches(todo, size), on_rows, workers * IN_FLIGHT_PER_WORKER)
+            dispatch(client, batcher, on_rows, workers * IN_FLIGHT_PER_WORKER)
         return _Ran(workers, started - begin, time.perf_counter() - started)
 
 
