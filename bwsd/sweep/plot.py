@@ -16,6 +16,19 @@ from bwsd.extras import needs
 from bwsd.sweep.errors import MATPLOTLIB, PYARROW, SweepError
 
 Row = Mapping[str, Any]
+MM = ("takeup", "pitch", "pitch_x", "pitch_y", "d_mat", "diameter", "width", "thickness",
+      "takeup_total", "footprint_z")  # fmt: skip
+
+
+def axis_label(column: str) -> str:
+    """An axis label: the column's name and its unit, when it has one."""
+    if column in MM:
+        return f"{column} (mm)"
+    if column.startswith("angle_"):
+        return f"{column} (degrees)"
+    if column in ("footprint_area", "footprint_outside"):
+        return f"{column} (mm²)"
+    return f"{column} (s)" if column == "seconds" else column
 
 
 def _number(value: Any) -> bool:
@@ -60,8 +73,8 @@ def figure(rows: Sequence[Row], x: str, y: str, hue: str | None = None) -> Any:
     for key, points in lines.items():
         label = None if hue is None else f"{key}"
         ax.plot([p[0] for p in points], [p[1] for p in points], marker="o", label=label)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    ax.set_xlabel(axis_label(x))
+    ax.set_ylabel(axis_label(y))
     ax.grid(True, alpha=0.3)
     most = max((p[2] for points in lines.values() for p in points), default=1)
     title = f"{y} against {x}" + (f", by {hue}" if hue else "")

@@ -38,6 +38,10 @@ def test_one_line_per_hue_value_through_the_mean_of_each_point():
     assert lines[0].get_xydata().tolist() == [[1.0, 10.0], [2.0, 7.0]]
     assert lines[1].get_xydata().tolist() == [[1.0, 12.0]]
     assert "mean of up to 2 candidates" in fig.axes[0].get_title()
+    assert (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel()) == (
+        "takeup (mm)",
+        "angle_warp (degrees)",
+    )
 
 
 def test_the_png_has_a_line_of_each_colour(results, tmp_path):
