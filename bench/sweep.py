@@ -7,6 +7,8 @@ per candidate over the bare twin run, measured in the same run. Prints markdown 
 The candidates are those of examples/braid-angle.sweep.toml with the cycles varied too. The
 baseline is the bare twin run (generate, parse, simulate; no metrics) of the same candidates,
 one after the other in this process; "in-process" adds the metrics, as a worker runs them.
+"No Dask" runs the candidates in 1 and 2 plain processes (multiprocessing), a share each:
+the most the machine's cores give, to read the sweep's scaling against.
 A sweep's wall time includes starting its local cluster; the sweep reports that start and
 its running time (first task sent to last row logged) apart.
 """
@@ -14,6 +16,7 @@ its running time (first task sent to last row logged) apart.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import statistics
 import sys
@@ -74,6 +77,22 @@ def sweep(the_spec: Spec, workers: int) -> tuple[float, float, float, float]:
         return wall, done.start_seconds, done.run_seconds, own
 
 
+def _evaluate_all(candidates: list[Candidate]) -> None:
+    for candidate in candidates:
+        evaluate(candidate)
+
+
+def plain(candidates: list[Candidate], processes: int) -> float:
+    """Seconds for ``processes`` plain processes (no Dask) to evaluate a share each, once
+    started: what the machine's cores give at best."""
+    shares = [candidates[i::processes] for i in range(processes)]
+    with multiprocessing.get_context("spawn").Pool(processes) as pool:
+        pool.map(_evaluate_all, [shares[0][:1]] * processes)  # started and imported
+        start = time.perf_counter()
+        pool.map(_evaluate_all, shares, chunksize=1)
+        return time.perf_counter() - start
+
+
 def ms(values: list[float]) -> tuple[str, str]:
     p50, p99 = np.percentile(1e3 * np.array(values), [50, 99])
     return f"{p50:.2f}", f"{p99:.2f}"
@@ -86,6 +105,7 @@ def table(size: int, cycles: list[int], repeat: int) -> None:
     base = [bare(c) for _ in range(repeat) for c in candidates]
     full = [in_process(c) for _ in range(repeat) for c in candidates]
     runs = {w: [sweep(the_spec, w) for _ in range(repeat)] for w in (1, 2)}
+    plains = {w: statistics.median(plain(candidates, w) for _ in range(repeat)) for w in (1, 2)}
     print(f"### {n} candidates: braid4 {size} x {size}, cycles {cycles}, 8 take-ups, "
           f"3 c_mat; {repeat} repeats\n")  # fmt: skip
     print("| per candidate | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
@@ -105,6 +125,10 @@ def table(size: int, cycles: list[int], repeat: int) -> None:
         print(f"| {w} process{'es' * (w > 1)} | {wall:.2f} | {start:.2f} | {running:.2f} | "
               f"{n / wall:.1f} | {n / running:.1f} | {one / running:.2f}x | "
               f"{1e3 * own:.2f} |")  # fmt: skip
+    for w in (1, 2):
+        name, seconds = f"no Dask: {w} plain process{'es' * (w > 1)} (ceiling)", plains[w]
+        print(f"| {name} | | | {seconds:.2f} | | {n / seconds:.1f} | "
+              f"{plains[1] / seconds:.2f}x | |")  # fmt: skip
     bare_s, full_s, per = statistics.median(base), statistics.median(full), one / n
     print(f"\n- Per candidate on 1 process (running time / {n}): {1e3 * per:.2f} ms; over "
           f"the bare twin run ({1e3 * bare_s:.2f} ms): {1e3 * (per - bare_s):.2f} ms more "
