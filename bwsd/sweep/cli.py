@@ -89,10 +89,13 @@ def run_sweep(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.scheduler is not None:
         raise SweepError("--workers sizes the local cluster: a scheduler has its own workers")
+    output = Path(args.output)
+    if args.csv and output.suffix.lower() == ".csv":
+        raise SweepError(f"-o {output}: the results are Parquet (e.g. -o results.parquet); "
+                         "--csv writes the CSV beside them")  # fmt: skip
     spec = load_spec(spec_path(args.spec))
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     options = Options(args.scheduler, args.workers, args.batch, args.resume, args.csv, progress)
-    output = Path(args.output)
     print(sweep(spec, output, options).text(output))
     return 0
 

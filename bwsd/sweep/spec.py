@@ -24,7 +24,7 @@ from bwsd.sweep.candidate import Candidate, GeneratorSource, ProgramSource, Sour
 from bwsd.sweep.errors import SpecError
 
 SAMPLES = ("grid", "random")
-MAX_CANDIDATES = 10_000_000
+MAX_CANDIDATES = 1_000_000  # each is a row in memory at the end: about a kB
 # The keys of a fixed program's config a sweep may change ("pitch" sets pitch_x and pitch_y).
 CONFIG_PARAMS = {"rows": "int", "cols": "int", "pitch": "float", "pitch_x": "float",
                  "pitch_y": "float", "d_mat": "float", "c_mat": "float",

@@ -27,6 +27,13 @@ def test_workers_and_a_scheduler_together_are_refused(tmp_path, capsys):
     assert "--workers sizes the local cluster" in capsys.readouterr().err
 
 
+def test_csv_beside_an_output_named_csv_is_refused(tmp_path, capsys):
+    spec = write(tmp_path, '[sweep]\ngenerator = "twist"\n')
+    assert main(["sweep", str(spec), "-o", str(tmp_path / "r.csv"), "--csv"]) == 2
+    assert "the results are Parquet (e.g. -o results.parquet)" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == [spec]
+
+
 def test_the_shipped_example_runs_by_name(tmp_path):
     run = bwsd("sweep", "example:braid-angle.sweep.toml", "-o", "b.parquet", "--workers", "2",
                "--csv", cwd=tmp_path)  # fmt: skip

@@ -125,7 +125,7 @@ BAD = [
         '[sweep]\ngenerator = "braid4"\n[vary]\n'
         + "".join(f"{k} = {list(range(1, 11))}\n" for k in ("rows", "cols", "cycles", "takeup"))
         + f"pitch = {list(range(1, 11))}\nd_mat = {list(range(100, 300))}\n",
-        r"\[vary\]: 20000000 candidates: at most 10000000",
+        r"\[vary\]: 20000000 candidates: at most 1000000",
     ),
     ('[sweep]\ngenerator = "braid4"\nconfig = "x.toml"\n', r"\[sweep\.config\]: a generator"),
     ('[sweep]\nprogram = "nothing.bws"\nconfig = "nothing.toml"\n', r"\[sweep\]: cannot read"),
