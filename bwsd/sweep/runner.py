@@ -49,7 +49,8 @@ class Summary:
     run_seconds: float = 0.0  # from the first task sent to the last row logged
 
     def text(self, output: Path) -> str:
-        where = (f"{self.workers} workers, {self.run_seconds:.1f} s" if self.ran
+        plural = "s" * (self.workers != 1)
+        where = (f"{self.workers} worker{plural}, {self.run_seconds:.1f} s" if self.ran
                  else "nothing left to run")  # fmt: skip
         return (f"{output}: {self.total} candidates, {self.total - self.refused} ok, "
                 f"{self.refused} refused; {self.resumed} already done, {self.ran} run now "
