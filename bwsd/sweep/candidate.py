@@ -18,7 +18,7 @@ from typing import Any
 from bwsd.config import parse_config
 from bwsd.errors import BwsdError, TwinError
 from bwsd.export.metrics import metrics, section
-from bwsd.export.mixing import NamedSection, section_header, simulate_with_visits
+from bwsd.export.mixing import NamedSection, ZoneVisits, section_header, simulate_with_visits
 from bwsd.program.generators import GENERATORS
 from bwsd.program.parser import MAX_INSTRUCTIONS, parse_program_with_positions
 from bwsd.program.validate import validate
@@ -123,7 +123,10 @@ def _build(candidate: Candidate) -> tuple[Machine, str, str]:
         return _configured(source, candidate.params), source.text, source.name
 
 
-def _run(machine: Machine, text: str, name: str) -> tuple[Twin, Program, Any, NamedSection | None]:
+def _run(
+    machine: Machine, text: str, name: str
+) -> tuple[Twin, Program, ZoneVisits | None, NamedSection | None]:
+    """Parse, validate and simulate; the carriers' zones too when the program names its section."""
     with stage("program"):
         program, positions = parse_program_with_positions(text, name, MAX_INSTRUCTIONS)
         named = section_header(text, name)
