@@ -188,6 +188,7 @@ def main() -> None:
     print(row("instruction event to a Python WebSocket client (baseline)", result["lag"]))
     print(row("instruction event to the page's frame that drew it", hooks["latencies"]))
     print(row("page frame interval while updates flow", hooks["frames"]))
+    print(row("interval between drawings of the 3D view while updates flow", hooks["drawn"]))
     nodes0 = int(np.median([w["nodes"] for w in first])) if first else 0
     nodes1 = int(np.median([w["nodes"] for w in last])) if last else 0
     print(row(f"page work per frame, first tenth (~{nodes0:,} nodes)", [w["ms"] for w in first]))

@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bwsd.journal.cli import configure as configure_journal
     from bwsd.opcua.cli import configure as configure_opcua
     from bwsd.program.cli import configure as configure_program
+    from bwsd.sweep.cli import configure as configure_sweep
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
     parser.add_argument("--version", action="version", version=f"bwsd {__version__}")
@@ -30,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     configure_export(sub)
     configure_hw(sub)
     configure_journal(sub)
+    configure_sweep(sub)
     configure_opcua(sub)
     return parser
 

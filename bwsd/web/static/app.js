@@ -57,6 +57,7 @@ const hooks = {
   selected: null, // the yarn picked in the view or the matrix
   latencies: [], // ms from an instruction's time to the frame that drew it
   frames: [], // ms between consecutive frames while updates flow
+  drawn: [], // ms between consecutive drawings of the 3D view while updates flow
   work: [], // per frame that applied instructions: {ms: applying and drawing, nodes: shown}
   dump: () => view.dump(), // every yarn shown: [{id, node_ids, nodes}], as the skeleton JSON
 };
@@ -100,6 +101,16 @@ let lastTick = 0; // time of the previous frame while updates flow (0: none)
 let flowingUntil = 0;
 let gridDirty = false;
 let statusDirty = false;
+const SLOW_FRAME_MS = 20; // a drawing that takes longer than this leaves time free after it
+let renderedAt = 0; // time of the frame that last drew the 3D view
+let renderCost = 0; // ms from that frame to the next one: what drawing the view costs
+let measured = true; // renderCost measured since the last drawing
+let unshown = []; // instruction events applied but not drawn yet
+let panelsDrawn = 0; // time the matrix and the status were last drawn while updates flow
+// While instructions flow, the matrix, the status and the job are drawn at most this often:
+// repainting hundreds of SVG cells at every frame (a 24x24 braid moves half of them at each
+// instruction) costs the browser more than the 3D view, and no one reads 20 matrices a second.
+const PANEL_MS = 200;
 
 // ----- the parts of the page -----
 let colourMode = 'family';
@@ -157,21 +168,40 @@ function scheduleFrame() {
 function frame(now) {
   const started = performance.now();
   frameRequested = false;
+  if (renderedAt && !measured) {
+    renderCost = now - renderedAt; // from the frame that drew the view to the next one
+    measured = true;
+  }
   const applied = applyInbox();
-  const drawn = applied.length > 0 || view.needsRender;
-  if (drawn) view.render();
-  if (gridDirty) drawGrid();
-  if (statusDirty) drawStatus();
+  unshown.push(...applied);
+  const flowing = performance.now() < flowingUntil;
+  // While updates flow and drawing the view takes longer than a frame (software WebGL: up to
+  // 50 ms), the view leaves as much time free as its last drawing took before it draws again:
+  // drawing at every frame would leave no time to take the events in, and they would queue.
+  const due = !flowing || renderCost <= SLOW_FRAME_MS || now - renderedAt >= 2 * renderCost;
+  const drawn = (unshown.length > 0 || view.needsRender) && due;
+  if (drawn) {
+    view.render();
+    if (lastTick && renderedAt) keep(hooks.drawn, now - renderedAt);
+    renderedAt = now;
+    measured = false;
+  }
+  if ((gridDirty || statusDirty) && (!flowing || now - panelsDrawn >= PANEL_MS)) {
+    panelsDrawn = now;
+    if (gridDirty) drawGrid();
+    if (statusDirty) drawStatus();
+  }
   if (drawn) {
     const shown = Date.now();
-    for (const event of applied) keep(hooks.latencies, shown - event.at * 1000);
+    for (const event of unshown) keep(hooks.latencies, shown - event.at * 1000);
+    unshown = [];
     drawCounts();
   }
   if (applied.length > 0) keep(hooks.work, { ms: performance.now() - started, nodes: view.nodeCount });
   if (lastTick) keep(hooks.frames, now - lastTick); // every frame while updates flow
   // While instructions keep coming, keep ticking so frame times measure the real pace;
   // otherwise draw only on demand.
-  if (performance.now() < flowingUntil) {
+  if (flowing) {
     lastTick = now;
     scheduleFrame();
   } else if (lastTick) {

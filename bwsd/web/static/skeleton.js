@@ -44,6 +44,23 @@ const FLOW_MS = 1000; // updates flow while the last instruction's change is you
 const BACKGROUND = 0xf3f4f6;
 const CONTACT_COLOUR = 0xe67e22;
 
+/**
+ * Whether WebGL is drawn by the CPU (SwiftShader, llvmpipe: a PC without a graphics card).
+ * There the view draws without antialiasing, which would cost it about half of every frame.
+ */
+export function softwareWebGL() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    if (!gl) return true;
+    const info = gl.getExtension('WEBGL_debug_renderer_info');
+    const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    gl.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+  } catch {
+    return true;
+  }
+}
+
 /** The canvas, its camera and controls, and everything drawn in it. */
 export class PreformView {
   /**
@@ -57,7 +74,8 @@ export class PreformView {
     this.requestFrame = requestFrame;
     this.needsRender = true;
 
-    const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+    this.software = softwareWebGL();
+    const renderer = new THREE.WebGLRenderer({ canvas, antialias: !this.software, preserveDrawingBuffer: true });
     renderer.outputColorSpace = THREE.LinearSRGBColorSpace; // colours as given (see above)
     renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     renderer.setClearColor(BACKGROUND, 1);

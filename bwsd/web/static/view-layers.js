@@ -26,8 +26,12 @@ export class Layers {
     this.highlightYarn = new StripBatch(new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false }));
     this.highlightYarn.line.renderOrder = 3;
     this.liveScene.add(this.highlightYarn.line);
-    // 4x MSAA; its colour and depth are kept between draws, so new segments go on top.
-    this.settledImage = new THREE.WebGLRenderTarget(1, 1, { samples: 4, storeMultisampledDepthBuffer: true });
+    // 4x MSAA as the canvas (none on software WebGL, as the canvas); its colour and depth are
+    // kept between draws, so new segments go on top.
+    this.settledImage = new THREE.WebGLRenderTarget(1, 1, {
+      samples: view.software ? 0 : 4,
+      storeMultisampledDepthBuffer: true,
+    });
     // Linear: shown 1:1 it samples texel centres (exact); scaled while following, it smooths.
     this.settledImage.texture.minFilter = this.settledImage.texture.magFilter = THREE.LinearFilter;
     this.layered = false; // whether the settled image is in use

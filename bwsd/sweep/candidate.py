@@ -1,0 +1,225 @@
+"""One candidate of a sweep: generated (or configured), simulated, measured, as one row.
+
+Pure and self-contained, so that a Dask worker runs it as it is: no Dask, no files, no
+daemon. A candidate the generator, the validation or the twin refuses is a row with
+``status = "refused"``, the ``stage`` that refused it and the ``reason``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from bwsd.config import parse_config
+from bwsd.errors import BwsdError, TwinError
+from bwsd.export.metrics import metrics, section
+from bwsd.export.mixing import NamedSection, ZoneVisits, section_header, simulate_with_visits
+from bwsd.program.generators import GENERATORS
+from bwsd.program.parser import MAX_INSTRUCTIONS, parse_program_with_positions
+from bwsd.program.validate import validate
+from bwsd.twin import Machine, Program, Twin, simulate
+
+Row = dict[str, Any]
+# Columns every row has, in this order; the parameters come after ``index``, the metrics
+# after ``reason``, and ``seconds`` (the candidate's own run time) last.
+HEAD = ("id", "index")
+STATUS = ("status", "stage", "reason")
+
+
+@dataclass(frozen=True)
+class GeneratorSource:
+    """Candidates written by a ``bwsd program`` generator."""
+
+    kind: str
+
+    def fingerprint(self) -> dict[str, str]:
+        return {"generator": self.kind}
+
+
+@dataclass(frozen=True)
+class ProgramSource:
+    """One fixed program, on its config with some keys of [machine] and [yarn] changed."""
+
+    name: str
+    text: str
+    config_name: str
+    config: Mapping[str, Any] = field(repr=False)
+    config_digest: str = ""
+
+    def fingerprint(self) -> dict[str, str]:
+        text = hashlib.sha256(self.text.encode()).hexdigest()
+        return {"program": text, "config": self.config_digest}
+
+
+Source = GeneratorSource | ProgramSource
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A point of the sweep: ``params`` as the generator (or config) takes them, ``columns``
+    as the result table writes them (a block as ``2x6``, angles as ``0,90``)."""
+
+    index: int
+    id: str
+    source: Source
+    params: Mapping[str, Any]
+    columns: Mapping[str, Any]
+
+
+def candidate_id(source: Source, columns: Mapping[str, Any]) -> str:
+    """A stable id: the same source and parameter values give the same id in every run."""
+    text = json.dumps({"source": source.fingerprint(), "params": dict(columns)},
+                      sort_keys=True, allow_nan=False)  # fmt: skip
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class Refused(Exception):
+    """A candidate refused at ``stage``, for ``reason``."""
+
+    def __init__(self, stage: str, reason: str) -> None:
+        super().__init__(reason)
+        self.stage = stage
+        self.reason = reason
+
+
+@contextmanager
+def stage(name: str, *also: type[Exception]) -> Iterator[None]:
+    """Turn a user-facing error raised in the block into a refusal at stage ``name``."""
+    caught: tuple[type[Exception], ...] = (BwsdError, *also)
+    try:
+        yield
+    except caught as exc:
+        raise Refused(name, str(exc)) from exc
+
+
+def _configured(source: ProgramSource, params: Mapping[str, Any]) -> Machine:
+    """The source's config with the candidate's keys changed, validated as a config file."""
+    data = {table: dict(values) for table, values in source.config.items()}
+    machine = data.setdefault("machine", {})
+    for name, value in params.items():
+        if name == "pitch":
+            machine["pitch_x"] = machine["pitch_y"] = value
+        elif name == "diameter":
+            data.setdefault("yarn", {})["diameter"] = value
+        else:
+            machine[name] = value
+    config = parse_config(data, source.config_name)
+    return config.machine
+
+
+def _build(candidate: Candidate) -> tuple[Machine, str, str]:
+    """The candidate's machine, program text and program name."""
+    source = candidate.source
+    if isinstance(source, GeneratorSource):
+        with stage("generate", ValueError):
+            generated = GENERATORS[source.kind](**candidate.params)
+        return generated.machine, generated.program, f"<{source.kind}>"
+    with stage("config", ValueError):
+        return _configured(source, candidate.params), source.text, source.name
+
+
+def _run(
+    machine: Machine, text: str, name: str
+) -> tuple[Twin, Program, ZoneVisits | None, NamedSection | None]:
+    """Parse, validate and simulate; the carriers' zones too when the program names its section."""
+    with stage("program"):
+        program, positions = parse_program_with_positions(text, name, MAX_INSTRUCTIONS)
+        named = section_header(text, name)
+    with stage("validate"):
+        validate(program, machine, name, positions)
+    try:
+        if named is None or any(not machine.inside(*c) for c in named.section.cells):
+            return simulate(machine, program), program, None, None
+        twin, visits = simulate_with_visits(machine, program, named.section)
+    except TwinError as exc:
+        index = exc.instruction
+        line = program.lines[index - 1] if 0 < index <= len(program.lines) else 0
+        raise Refused("simulate", f"{name}:{line}: {exc}" if line else str(exc)) from exc
+    return twin, program, visits, named
+
+
+def measure(candidate: Candidate) -> Row:
+    """The metrics of one candidate as flat columns; a refusal raises ``Refused``."""
+    machine, text, name = _build(candidate)
+    twin, program, visits, named = _run(machine, text, name)
+    sk = twin.skeleton()
+    with stage("metrics"):
+        band = section(sk)
+        z = None if band is None else (band["z"][0] + band["z"][1]) / 2
+        found = metrics(sk, program.cycle_length, z=z, named=named, visits=visits)
+    return flatten(found, z)
+
+
+def flatten(found: Mapping[str, Any], z: float | None) -> Row:
+    """``bwsd metrics`` output (docs/exports.md) as one row's columns (docs/sweeps.md)."""
+    band = found["section"] or {}
+    cycles = found["cycles"]
+    groups = found["groups"]
+    row: Row = {
+        "instructions": found["instructions"],
+        "takeup_total": found["takeup"],
+        "yarns_warp": found["yarns"]["warp"],
+        "yarns_weft": found["yarns"]["weft"],
+        "nodes": found["nodes"],
+        "contacts": found["contacts"],
+        "cycle_length": cycles["length"],
+        "contacts_per_cycle": cycles["mean"],
+        "contacts_per_cycle_min": cycles["min"],
+        "contacts_per_cycle_max": cycles["max"],
+        "groups": groups["count"],
+        "group_largest": groups["sizes"][0] if groups["sizes"] else 0,
+        "unconnected": found["unconnected"]["count"],
+        "width": band.get("width"),
+        "thickness": band.get("thickness"),
+    }
+    for family, numbers in found["angles"].items():
+        row[f"angle_{family}"] = numbers["mean"]
+        row[f"angle_{family}_std"] = numbers["std"]
+    row.update(_footprint(found["footprint"], z))
+    row.update(_mixing(found["mixing"]))
+    return row
+
+
+def _footprint(found: Mapping[str, Any] | None, z: float | None) -> Row:
+    measured = found["measured"] if found else None
+    return {
+        "footprint_z": z,
+        "crossings": found["crossings"] if found else None,
+        "footprint_area": float(measured["area"]) if measured else None,
+        "footprint_ratio": found["ratio"] if found else None,
+        "footprint_coverage": found["coverage"] if found else None,
+        "footprint_outside": found["outside"] if found else None,
+    }
+
+
+def _mixing(found: Mapping[str, Any] | None) -> Row:
+    return {
+        "section": found["section"] if found else None,
+        "mixed_carriers": found["complete"] if found else None,
+        "unmixed_carriers": found["incomplete"] if found else None,
+        "mixed_by_cycle": found["k"] if found else None,
+    }
+
+
+def evaluate(candidate: Candidate) -> Row:
+    """The candidate's row: its parameters, its status and, when it ran, its metrics."""
+    start = time.perf_counter()
+    row: Row = {"id": candidate.id, "index": candidate.index, **candidate.columns}
+    try:
+        found = measure(candidate)
+    except Refused as refused:
+        row.update(status="refused", stage=refused.stage, reason=refused.reason)
+    else:
+        row.update(status="ok", stage=None, reason=None, **found)
+    row["seconds"] = time.perf_counter() - start
+    return row
+
+
+def evaluate_batch(batch: list[Candidate]) -> list[Row]:
+    """The rows of a batch of candidates, in order: what a Dask task runs."""
+    return [evaluate(candidate) for candidate in batch]
