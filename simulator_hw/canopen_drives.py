@@ -39,9 +39,12 @@ from bwsd.fieldbus.canopen import (
     MODE_HOMING,
     MODE_PROFILE_POSITION,
     OCCUPANCY,
+    OWNER,
+    OWNER_PID,
     POSITION,
     SETPOINT_SEQ,
     STATUSWORD,
+    STROKES,
     SW_SETPOINT_ACK,
     SW_TARGET_REACHED,
     TARGET,
@@ -117,7 +120,8 @@ class _Drive:
         node.add_write_callback(self.on_write)  # type: ignore[no-untyped-call]
 
     def on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
-        live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE)
+        live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE,
+                STROKES)  # fmt: skip
         return self.owner.call(self._live, index) if index in live else None
 
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
@@ -141,6 +145,7 @@ class _Drive:
             LAST_STROKE: sim.last_stroke,
             DONE_SEQ: sim.done_seq,
             FAULT_CODE: sim.fault,
+            STROKES: sim.strokes,
         }
         return values[index]
 
@@ -240,6 +245,7 @@ class CanopenLoom:
         self.network = _DriveNetwork(loom.faults)
         self.drives: list[_Drive] = []
         self._stopping = threading.Event()
+        self._pid = 0  # the pid of the claim being made
         self._beater: threading.Thread | None = None
 
     def start(self) -> None:
@@ -249,6 +255,7 @@ class CanopenLoom:
         self.drives = [_Drive(self, i, node) for i, node in enumerate(nodes)]
         io = self._node(self.io_node, IO_OBJECTS)
         io.add_read_callback(self._io_read)  # type: ignore[no-untyped-call]
+        io.add_write_callback(self._io_write)  # type: ignore[no-untyped-call]
         self.network.connect(interface=self.interface, channel=self.channel)
         for node in [*nodes, io]:
             node.nmt.send_command(NMT_BOOT)
@@ -291,7 +298,20 @@ class CanopenLoom:
             return self.call(lambda: occupancy_bytes(self.loom.sensed()))
         if index == ESTOP:
             return self.call(lambda: int(self.loom.estop))
+        if index in (OWNER, OWNER_PID):
+            owner = self.call(lambda: self.loom.owner)
+            return owner.ident if index == OWNER else owner.pid
         return None
+
+    def _io_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
+        """The claim: 0x2011 takes the claimer's pid, 0x2010 its id (refused: SDO abort)."""
+        value = int(od.decode_raw(data))
+        if index == OWNER_PID:
+            self._pid = value
+        elif index == OWNER:
+            held = self.call(self.loom.claim, value, self._pid, time.monotonic())
+            if held is not None or not value:
+                raise SdoAbortedError(ABORT_DEVICE_STATE)
 
     def _beat(self) -> None:
         while not self._stopping.wait(self.network.beat(time.monotonic())):

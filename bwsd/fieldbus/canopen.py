@@ -24,7 +24,14 @@ import numpy as np
 from can.interfaces.socketcand import SocketCanDaemonBus
 from canopen import Network, ObjectDictionary, RemoteNode, SdoAbortedError, SdoCommunicationError
 from canopen.objectdictionary import ODVariable
-from canopen.objectdictionary.datatypes import DOMAIN, INTEGER8, INTEGER32, UNSIGNED8, UNSIGNED16
+from canopen.objectdictionary.datatypes import (
+    DOMAIN,
+    INTEGER8,
+    INTEGER32,
+    UNSIGNED8,
+    UNSIGNED16,
+    UNSIGNED32,
+)
 
 from bwsd.config import Config
 from bwsd.fieldbus import settings_from_config
@@ -46,6 +53,8 @@ from bwsd.twin.machine import Machine
 CONTROLWORD, STATUSWORD, MODE, MODE_DISPLAY = 0x6040, 0x6041, 0x6060, 0x6061
 TARGET, POSITION, ERROR_CODE, HEARTBEAT = 0x607A, 0x6064, 0x603F, 0x1017
 OCCUPANCY, LAST_STROKE, DONE_SEQ, SETPOINT_SEQ, FAULT_CODE, ESTOP = range(0x2000, 0x2006)
+STROKES = 0x2006  # drive: set-points completed, mod 65536
+OWNER, OWNER_PID = 0x2010, 0x2011  # I/O node: the claim (id, pid) of docs/fieldbus-canopen.md
 
 DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
     CONTROLWORD: ("controlword", UNSIGNED16, "rw"),
@@ -60,10 +69,13 @@ DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
     DONE_SEQ: ("done sequence", UNSIGNED16, "ro"),
     SETPOINT_SEQ: ("set-point sequence", UNSIGNED16, "rw"),
     FAULT_CODE: ("fault code", UNSIGNED8, "ro"),
+    STROKES: ("stroke count", UNSIGNED16, "ro"),
 }
 IO_OBJECTS: dict[int, tuple[str, int, str]] = {
     OCCUPANCY: ("occupancy", DOMAIN, "ro"),
     ESTOP: ("emergency stop", UNSIGNED8, "ro"),
+    OWNER: ("owner", UNSIGNED32, "rw"),
+    OWNER_PID: ("owner pid", UNSIGNED32, "rw"),
     HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
 }
 
@@ -191,6 +203,11 @@ class CanopenBus(Fieldbus):
     async def _reset_faults(self) -> None:
         await self._ready()
         await self._each(lambda node: self._enable(node, reset=True), self.drive_ids)
+
+    async def _claim(self, ident: int, pid: int) -> tuple[int, int] | None:
+        await self._ready()
+        result: tuple[int, int] | None = await asyncio.to_thread(self._claim_io, ident, pid)
+        return result
 
     async def _home(self) -> None:
         await self._ready()
@@ -352,6 +369,17 @@ class CanopenBus(Fieldbus):
                 raise FieldbusTimeout(f"axis {axis.name}: set-point {seq} not acknowledged")
         self._set(node, CONTROLWORD, CW_ENABLE)
 
+    def _claim_io(self, ident: int, pid: int) -> tuple[int, int] | None:
+        """The claim on the I/O node: its pid, then its id (refused by SDO abort)."""
+        self._set(self.io_node, OWNER_PID, pid)
+        try:
+            self._set(self.io_node, OWNER, ident)
+        except FieldbusError as exc:
+            if not isinstance(exc.__cause__, SdoAbortedError):
+                raise
+            return self._get(self.io_node, OWNER), self._get(self.io_node, OWNER_PID)
+        return None
+
     def _home_drive(self, node_id: int) -> None:
         self._enable(node_id, reset=False)
         self._set(node_id, MODE, MODE_HOMING)
@@ -371,6 +399,7 @@ class CanopenBus(Fieldbus):
             done_seq=self._get(node, DONE_SEQ),
             fault=fault,
             last_stroke=self._get(node, LAST_STROKE),
+            strokes=self._get(node, STROKES),
         )
 
     def _read_io(self) -> tuple[np.ndarray[Any, np.dtype[np.bool_]], bool]:
