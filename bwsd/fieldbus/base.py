@@ -277,6 +277,10 @@ class Fieldbus(ABC):
         await self.move(moves)
         return await self.wait([m.axis for m in moves], timeout)
 
+    def known(self, axis: int) -> AxisState:
+        """What axis ``axis`` reported at the last read (nothing is read now)."""
+        return self._known[axis]
+
     async def state(self) -> MachineState:
         """The machine as the bus reports it now (a held claim is renewed when due)."""
         if self._claimed_at is not None:
