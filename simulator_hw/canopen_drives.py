@@ -12,28 +12,24 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any, TypeVar
 
-from canopen import LocalNode, Network, SdoAbortedError
+from canopen import LocalNode, Network, ObjectDictionary, SdoAbortedError
 from canopen.network import PeriodicMessageTask
 from canopen.objectdictionary import ODVariable
+from canopen.pdo import PdoMap
 
 from bwsd.fieldbus.canopen import (
-    CONTROLWORD,
     CW_FAULT_RESET,
     CW_NEW_SETPOINT,
     CW_RELATIVE,
-    DONE_SEQ,
-    DRIVE_OBJECTS,
     ERROR_CODE,
     ERROR_CODES,
-    ESTOP,
-    FAULT_CODE,
-    IO_OBJECTS,
-    LAST_STROKE,
     MODE,
     MODE_DISPLAY,
     MODE_HOMING,
@@ -41,16 +37,31 @@ from bwsd.fieldbus.canopen import (
     OCCUPANCY,
     OWNER,
     OWNER_PID,
+    SW_SETPOINT_ACK,
+    SW_TARGET_REACHED,
+    Cia402,
+    drive_dictionary,
+    io_dictionary,
+    occupancy_bytes,
+    occupancy_word_values,
+)
+from bwsd.fieldbus.canopen_pdo import (
+    CONTROLWORD,
+    DONE_SEQ,
+    ESTOP,
+    FAULT_CODE,
+    LAST_STROKE,
+    OCCUPANCY_WORDS,
     POSITION,
+    RPDO_COM,
     SETPOINT_SEQ,
     STATUSWORD,
     STROKES,
-    SW_SETPOINT_ACK,
-    SW_TARGET_REACHED,
+    SYNC_EVERY,
     TARGET,
-    Cia402,
-    dictionary,
-    occupancy_bytes,
+    TPDO_COM,
+    TPDO_MAP,
+    Entry,
 )
 from simulator_hw.loom import AxisSim, Faults, Loom
 
@@ -58,6 +69,7 @@ T = TypeVar("T")
 LOOM_CALL_TIMEOUT = 2.0  # s an access may wait for the loom's event loop
 ABORT_DEVICE_STATE = 0x08000022  # SDO abort: not possible in the present device state
 NMT_BOOT, NMT_PRE_OPERATIONAL = 0x81, 0x80  # reset node (sends boot-up), enter pre-operational
+SYNC = 0x80  # COB-ID of the SYNC message
 S = Cia402
 
 
@@ -118,11 +130,21 @@ class _Drive:
         self.ack = False
         node.add_read_callback(self.on_read)  # type: ignore[no-untyped-call]
         node.add_write_callback(self.on_write)  # type: ignore[no-untyped-call]
+        node.rpdo[1].add_callback(self.on_rpdo)
 
     def on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
         live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE,
                 STROKES)  # fmt: skip
         return self.owner.call(self._live, index) if index in live else None
+
+    def on_rpdo(self, pdo_map: PdoMap) -> None:
+        """A receive PDO: its objects as if written one by one, the controlword last."""
+        values = {var.index: int(var.raw) for var in pdo_map.map if var.length}
+        self.target = values.get(TARGET, self.target)
+        self.seq = values.get(SETPOINT_SEQ, self.seq)
+        if CONTROLWORD in values:
+            with contextlib.suppress(SdoAbortedError):  # refused: no acknowledgement comes
+                self.owner.call(self._controlword, values[CONTROLWORD])
 
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = int(od.decode_raw(data))
@@ -136,7 +158,11 @@ class _Drive:
             self.owner.call(self._controlword, value)
 
     def _live(self, index: int) -> int:
-        sim = self._sync()
+        return self.values(time.monotonic())[(index, 0)]
+
+    def values(self, now: float) -> dict[Entry, int]:
+        """Every live object of the drive at time ``now`` (the loom advanced to it)."""
+        sim = self._sync(now)
         values = {
             STATUSWORD: self.statusword(),
             MODE_DISPLAY: self.mode,
@@ -147,11 +173,11 @@ class _Drive:
             FAULT_CODE: sim.fault,
             STROKES: sim.strokes,
         }
-        return values[index]
+        return {(index, 0): value for index, value in values.items()}
 
-    def _sync(self) -> AxisSim:
+    def _sync(self, now: float | None = None) -> AxisSim:
         """Advance the loom; the drive is in FAULT exactly while its axis is faulted."""
-        self.owner.loom.tick(time.monotonic())
+        self.owner.loom.tick(time.monotonic() if now is None else now)
         sim = self.owner.loom.axes[self.index]
         if sim.fault:
             self.state = S.FAULT
@@ -251,11 +277,16 @@ class CanopenLoom:
     def start(self) -> None:
         """Connect the nodes, send their boot-up messages and start their heartbeats."""
         ids = [self.node_base + sim.axis.index for sim in self.loom.axes]
-        nodes = [self._node(node_id, DRIVE_OBJECTS) for node_id in ids]
+        nodes = [
+            self._node(node_id, drive_dictionary(node_id, self.heartbeat_ms)) for node_id in ids
+        ]
         self.drives = [_Drive(self, i, node) for i, node in enumerate(nodes)]
-        io = self._node(self.io_node, IO_OBJECTS)
+        cells = self.loom.machine.rows * self.loom.machine.cols
+        io = self._node(self.io_node, io_dictionary(cells, self.heartbeat_ms))
         io.add_read_callback(self._io_read)  # type: ignore[no-untyped-call]
         io.add_write_callback(self._io_write)  # type: ignore[no-untyped-call]
+        self._io = io
+        self.network.subscribe(SYNC, self._on_sync)
         self.network.connect(interface=self.interface, channel=self.channel)
         for node in [*nodes, io]:
             node.nmt.send_command(NMT_BOOT)
@@ -288,10 +319,37 @@ class CanopenLoom:
         loop.call_soon_threadsafe(run)
         return result.result(timeout=LOOM_CALL_TIMEOUT)
 
-    def _node(self, node_id: int, objects: dict[int, tuple[str, int, str]]) -> LocalNode:
-        node = LocalNode(node_id, dictionary(objects, self.heartbeat_ms))
+    def _node(self, node_id: int, od: ObjectDictionary) -> LocalNode:
+        node = LocalNode(node_id, od)
         self.network.add_node(node)
+        node.add_write_callback(partial(_follow_mapping, node))  # type: ignore[no-untyped-call]
         return node
+
+    # ----- PDOs -----
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """SYNC: every operational node sends its TPDOs of type 1, from one sample of the
+        loom (the occupancy and the drives' state of one instant)."""
+        nodes = [d.node for d in self.drives] + [self._io]
+        live = [node for node in nodes if node.nmt.state == "OPERATIONAL"]
+        if not live:
+            return
+        samples = self.call(self._sample, {node.id or 0 for node in live})
+        for node in live:
+            for pdo_map in node.tpdo.values():
+                if pdo_map.enabled and pdo_map.trans_type == SYNC_EVERY:
+                    for var in pdo_map.map:
+                        if var.length:
+                            var.raw = _value(node, (var.index, var.subindex), samples[node.id or 0])
+                    pdo_map.transmit()
+
+    def _sample(self, ids: set[int]) -> dict[int, dict[Entry, int]]:
+        now = time.monotonic()
+        self.loom.tick(now)
+        samples = {d.node.id or 0: d.values(now) for d in self.drives if d.node.id in ids}
+        words = occupancy_word_values(self.loom.sensed())
+        io = {(OCCUPANCY_WORDS, sub): word for sub, word in enumerate(words, start=1)}
+        samples[self.io_node] = {(ESTOP, 0): int(self.loom.estop), **io}
+        return samples
 
     def _io_read(self, index: int, subindex: int, od: ODVariable) -> bytes | int | None:
         if index == OCCUPANCY:
@@ -316,6 +374,25 @@ class CanopenLoom:
     def _beat(self) -> None:
         while not self._stopping.wait(self.network.beat(time.monotonic())):
             pass
+
+
+def _follow_mapping(node: LocalNode, index: int, subindex: int, od: ODVariable,
+                    data: bytes) -> None:  # fmt: skip
+    """A PDO's COB-ID written by a master makes its mapping (written before) take effect."""
+    if subindex != 1 or not (RPDO_COM <= index < RPDO_COM + 0x200 or TPDO_COM <= index < TPDO_MAP):
+        return
+    node.data_store.setdefault(index, {})[subindex] = bytes(data)  # read() below must see it
+    (node.rpdo if index < TPDO_COM else node.tpdo).read()  # type: ignore[no-untyped-call]
+
+
+def _value(node: LocalNode, key: Entry, sample: dict[Entry, int]) -> int:
+    """A mapped object's value: live from the sample, else what the node stores."""
+    if key in sample:
+        return sample[key]
+    od = node.object_dictionary[key[0]]
+    if not isinstance(od, ODVariable):
+        od = od[key[1]]
+    return int(od.decode_raw(node.get_data(*key)))
 
 
 def _running_in(loop: asyncio.AbstractEventLoop) -> bool:

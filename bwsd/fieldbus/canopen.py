@@ -1,9 +1,11 @@
-"""CANopen backend: CiA 402 drives in profile position mode and an I/O node, by SDO.
+"""CANopen backend: CiA 402 drives in profile position mode and an I/O node.
 
 The object map is docs/fieldbus-canopen.md; the dictionaries built here are the only copy
-of it in code (the mock loom's drives use them too). canopen is synchronous: every SDO
-exchange runs in a worker thread, the nodes of one request in parallel, so the event loop
-never blocks.
+of it in code (the mock loom's drives use them too). Motion and the read-back go by PDO
+(bwsd.fieldbus.canopen_pdo: a set-point is one receive PDO pair, a read-back one SYNC);
+SDO is left to configuration (heartbeat, mode, the PDO mapping), the CiA 402 state walk,
+homing, quick stop, fault reset and the claim. canopen is synchronous: SDO exchanges and
+the wait for a SYNC's answers run in worker threads, so the event loop never blocks.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import asyncio
 import contextlib
 import select
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -41,19 +44,39 @@ from bwsd.fieldbus.base import (
     AxisState,
     BusSettings,
     DriveFault,
-    EStopError,
     Fieldbus,
     FieldbusConnectionError,
     FieldbusError,
     FieldbusTimeout,
     MachineState,
 )
+from bwsd.fieldbus.canopen_pdo import (
+    CONTROLWORD,
+    DONE_SEQ,
+    ESTOP,
+    FAULT_CODE,
+    LAST_STROKE,
+    OCCUPANCY_WORDS,
+    POSITION,
+    SETPOINT_SEQ,
+    STATUSWORD,
+    STROKES,
+    TARGET,
+    Entry,
+    Pdo,
+    SyncSampler,
+    add_occupancy_words,
+    add_pdo_records,
+    configure,
+    drive_pdos,
+    io_pdos,
+    layout,
+    wanted_layout,
+)
 from bwsd.twin.machine import Machine
 
-CONTROLWORD, STATUSWORD, MODE, MODE_DISPLAY = 0x6040, 0x6041, 0x6060, 0x6061
-TARGET, POSITION, ERROR_CODE, HEARTBEAT = 0x607A, 0x6064, 0x603F, 0x1017
-OCCUPANCY, LAST_STROKE, DONE_SEQ, SETPOINT_SEQ, FAULT_CODE, ESTOP = range(0x2000, 0x2006)
-STROKES = 0x2006  # drive: set-points completed, mod 65536
+MODE, MODE_DISPLAY, ERROR_CODE, HEARTBEAT = 0x6060, 0x6061, 0x603F, 0x1017
+OCCUPANCY = 0x2000  # I/O node: the occupancy as one DOMAIN (by SDO; PDOs carry 0x2100)
 OWNER, OWNER_PID = 0x2010, 0x2011  # I/O node: the claim (id, pid) of docs/fieldbus-canopen.md
 
 DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
@@ -131,10 +154,32 @@ def dictionary(objects: Mapping[int, tuple[str, int, str]], heartbeat: int = 0) 
     return od
 
 
+def drive_dictionary(node_id: int, heartbeat: int = 0) -> ObjectDictionary:
+    """A drive's dictionary: its objects and the records of its PDOs."""
+    od = dictionary(DRIVE_OBJECTS, heartbeat)
+    add_pdo_records(od, drive_pdos(node_id))
+    return od
+
+
+def io_dictionary(cells: int, heartbeat: int = 0) -> ObjectDictionary:
+    """The I/O node's dictionary for ``cells`` occupancy sensors, with its PDO records."""
+    od = dictionary(IO_OBJECTS, heartbeat)
+    add_occupancy_words(od, cells)
+    add_pdo_records(od, io_pdos(cells))
+    return od
+
+
 def occupancy_bytes(occupied: Iterable[Iterable[bool]]) -> bytes:
     """The occupancy bitmap of 0x2000: row-major, least significant bit first."""
     bits = np.array([bool(v) for row in occupied for v in row], dtype=np.bool_)
     return np.packbits(bits, bitorder="little").tobytes()
+
+
+def occupancy_word_values(occupied: Iterable[Iterable[bool]]) -> list[int]:
+    """The occupancy as the words of 0x2100 (sub-index 1 first; cell 0 is bit 0)."""
+    data = occupancy_bytes(occupied)
+    data += bytes(-len(data) % 4)
+    return [int.from_bytes(data[i : i + 4], "little") for i in range(0, len(data), 4)] or [0]
 
 
 class CanopenBus(Fieldbus):
@@ -158,10 +203,13 @@ class CanopenBus(Fieldbus):
         self.io_node = io_node
         self.heartbeat_ms = heartbeat_ms
         self._network: Network | None = None
+        self._sampler: SyncSampler | None = None
         self._nodes: dict[int, RemoteNode] = {}
         self._locks = {i: threading.Lock() for i in [*self.drive_ids, io_node]}
         self._seen: dict[int, float] = {}
         self._watch: _LinkWatch | None = None
+        self._io_pdos = io_pdos(machine.rows * machine.cols)
+        self._statusword: dict[int, int] = {}  # each drive's, at the last SYNC
 
     @classmethod
     def from_config(cls, config: Config) -> CanopenBus:
@@ -186,15 +234,53 @@ class CanopenBus(Fieldbus):
         await self._teardown()
 
     async def _write_setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        """A set-point by RPDO: controlword 0x0F, then 0x1F (0x5F relative) with the target
+        and sequence, so bit 4 rises; ``wait`` sees it taken (or refused) at the next SYNC."""
         await self._ready()
-        await self._gather([partial(self._setpoint, axis, target, seq)])
+        node = self.drive_ids[axis.index]
+        state = Cia402.of(self._statusword.get(node, 0))
+        if state is not Cia402.OPERATION_ENABLED and state is not Cia402.FAULT:
+            await self._gather([partial(self._enable, node, False)])
+        rpdo = self._nodes[node].rpdo[1]
+        start = CW_ENABLE | CW_NEW_SETPOINT | (CW_RELATIVE * axis.relative)
+        try:
+            for word in (CW_ENABLE, start):
+                rpdo[CONTROLWORD].raw, rpdo[TARGET].raw, rpdo[SETPOINT_SEQ].raw = word, target, seq
+                rpdo.transmit()
+        except (can.CanError, OSError) as exc:
+            await self._teardown()
+            raise FieldbusConnectionError(f"{self._name(node)}: CAN bus lost: {exc}") from exc
+        except (ValueError, struct.error) as exc:
+            raise FieldbusError(f"axis {axis.name}: target {target} does not fit: {exc}") from None
 
     async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
+        """One SYNC: the TPDOs of the axes asked for and of the I/O node, sampled together."""
         await self._ready()
+        sampler = self._sampler
+        assert sampler is not None
         wanted = list(range(len(self.axes))) if axes is None else sorted(set(axes))
-        calls = [partial(self._read_axis, i) for i in wanted]
-        *states, (occupancy, estop) = await self._gather([*calls, self._read_io])
-        return self._merge(dict(zip(wanted, states, strict=True)), occupancy, estop)
+        keys = [(self.drive_ids[i], n) for i in wanted for n in (1, 2)]
+        keys += [(self.io_node, pdo.number) for pdo in self._io_pdos]
+        try:
+            got = await asyncio.to_thread(sampler.sample, keys, self.settings.io_timeout)
+        except FieldbusTimeout as exc:
+            problem = self._link_problem()
+            if problem:
+                await self._teardown()
+                raise FieldbusConnectionError(f"{problem} ({exc})") from exc
+            raise
+        except (can.CanError, OSError) as exc:
+            await self._teardown()
+            raise FieldbusConnectionError(f"CAN bus lost: {exc}") from exc
+        read = {}
+        for i in wanted:
+            values = got[(self.drive_ids[i], 1)] | got[(self.drive_ids[i], 2)]
+            self._statusword[self.drive_ids[i]] = values[(STATUSWORD, 0)]
+            read[i] = self._axis_state(values)
+        io: dict[Entry, int] = {}
+        for pdo in self._io_pdos:
+            io |= got[(self.io_node, pdo.number)]
+        return self._merge(read, self._occupancy(io), bool(io[(ESTOP, 0)]))
 
     async def _quick_stop(self) -> None:
         await self._ready()
@@ -216,7 +302,7 @@ class CanopenBus(Fieldbus):
 
     # ----- connection -----
     def _connect_network(self) -> None:
-        """Open python-can, add the nodes and start them (blocking)."""
+        """Open python-can and add the nodes (blocking)."""
         network = Network()
         network.NOTIFIER_CYCLE = 0.1  # how long disconnect() waits for the receive thread
         watch = _LinkWatch(network)
@@ -226,11 +312,11 @@ class CanopenBus(Fieldbus):
             network.connect(interface=self.interface, channel=self.channel)
             if network.notifier is not None:
                 network.notifier.add_listener(watch)
-            network.nmt.send_command(NMT_START)
         except (can.CanError, OSError, ValueError) as exc:
             _shutdown(network)
             raise FieldbusConnectionError(f"cannot open the CAN bus: {exc}") from exc
         self._network, self._watch = network, watch
+        self._sampler = SyncSampler(network)
 
     def _socketcand(self) -> can.BusABC:
         where = f"socketcand at {self.host}:{self.port}"
@@ -246,8 +332,9 @@ class CanopenBus(Fieldbus):
             raise FieldbusConnectionError(f"{where}: {exc}") from exc
 
     def _add_node(self, network: Network, node_id: int) -> RemoteNode:
-        objects = IO_OBJECTS if node_id == self.io_node else DRIVE_OBJECTS
-        node = RemoteNode(node_id, dictionary(objects))
+        cells = self.machine.rows * self.machine.cols
+        od = io_dictionary(cells) if node_id == self.io_node else drive_dictionary(node_id)
+        node = RemoteNode(node_id, od)
         node.sdo.RESPONSE_TIMEOUT = self.settings.io_timeout
         network.add_node(node)
         network.subscribe(0x700 + node_id, self._on_heartbeat)
@@ -332,10 +419,33 @@ class CanopenBus(Fieldbus):
         self._sdo(node_id, index, value)
 
     def _init_node(self, node_id: int) -> None:
+        """Heartbeat, the PDO mapping (written only where it differs: another master's
+        PDOs go on undisturbed), NMT start; a drive: profile position, operation enabled."""
         self._set(node_id, HEARTBEAT, self.heartbeat_ms)
-        if node_id != self.io_node:
+        drive = node_id != self.io_node
+        for pdo in drive_pdos(node_id) if drive else self._io_pdos:
+            self._map_pdo(node_id, pdo)
+        self._nodes[node_id].nmt.send_command(NMT_START)
+        if drive:
             self._set(node_id, MODE, MODE_PROFILE_POSITION)
             self._enable(node_id, reset=False)
+
+    def _map_pdo(self, node_id: int, pdo: Pdo) -> None:
+        node = self._nodes[node_id]
+        pdo_map = (node.rpdo if pdo.receive else node.tpdo)[pdo.number]
+        try:
+            with self._locks[node_id]:
+                pdo_map.read()
+                if layout(pdo_map) != wanted_layout(pdo):
+                    configure(pdo_map, pdo)
+        except SdoCommunicationError as exc:
+            raise FieldbusTimeout(f"{self._name(node_id)}: no answer while mapping its "
+                                  f"PDOs ({exc})") from exc  # fmt: skip
+        except SdoAbortedError as exc:
+            raise FieldbusError(f"{self._name(node_id)}: its PDO mapping was refused: "
+                                f"{exc}") from exc  # fmt: skip
+        if not pdo.receive and self._sampler is not None:
+            self._sampler.listen(node_id, pdo.number, pdo_map)
 
     def _enable(self, node_id: int, reset: bool) -> None:
         """Walk a drive to "operation enabled"; a faulted drive is left alone unless ``reset``."""
@@ -343,31 +453,13 @@ class CanopenBus(Fieldbus):
             statusword = self._get(node_id, STATUSWORD)
             state = Cia402.of(statusword)
             if state is Cia402.OPERATION_ENABLED or (state is Cia402.FAULT and not reset):
+                self._statusword[node_id] = statusword
                 return
             if state is Cia402.FAULT:
                 self._set(node_id, CONTROLWORD, CW_DISABLE_VOLTAGE)  # bit 7 acts on its rise
             self._set(node_id, CONTROLWORD, WALK[state])
         axis = self.axes[self.drive_ids.index(node_id)]
         raise DriveFault(axis, FAULT_DRIVE, f"stays at statusword 0x{statusword:04X}, not enabled")
-
-    def _setpoint(self, axis: Axis, target: int, seq: int) -> None:
-        node = self.drive_ids[axis.index]
-        self._enable(node, reset=False)
-        self._set(node, TARGET, target)
-        self._set(node, SETPOINT_SEQ, seq)
-        self._set(node, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT | (CW_RELATIVE * axis.relative))
-        limit = time.monotonic() + self.settings.io_timeout
-        while True:
-            statusword = self._get(node, STATUSWORD)
-            enabled = Cia402.of(statusword) is Cia402.OPERATION_ENABLED
-            if statusword & SW_SETPOINT_ACK or not enabled:
-                break  # taken, or refused by a fault that wait() reports
-            if time.monotonic() > limit:
-                self._set(node, CONTROLWORD, CW_ENABLE)  # bit 4 low: the next set-point rises
-                if self._get(self.io_node, ESTOP):
-                    raise EStopError("emergency stop is pressed: no move started")
-                raise FieldbusTimeout(f"axis {axis.name}: set-point {seq} not acknowledged")
-        self._set(node, CONTROLWORD, CW_ENABLE)
 
     def _claim_io(self, ident: int, pid: int) -> tuple[int, int] | None:
         """The claim on the I/O node: its pid, then its id (refused by SDO abort)."""
@@ -382,34 +474,33 @@ class CanopenBus(Fieldbus):
 
     def _home_drive(self, node_id: int) -> None:
         self._enable(node_id, reset=False)
+        self._set(node_id, CONTROLWORD, CW_ENABLE)  # bit 4 low (a set-point's RPDO left it high)
         self._set(node_id, MODE, MODE_HOMING)
         self._set(node_id, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT)  # bit 4 starts homing
         self._set(node_id, CONTROLWORD, CW_ENABLE)
         self._set(node_id, MODE, MODE_PROFILE_POSITION)
 
-    def _read_axis(self, index: int) -> AxisState:
-        node = self.drive_ids[index]
-        statusword = self._get(node, STATUSWORD)
-        fault = self._get(node, FAULT_CODE)
+    # ----- decoding a SYNC's sample -----
+    def _axis_state(self, values: dict[Entry, int]) -> AxisState:
+        statusword = values[(STATUSWORD, 0)]
+        fault = values[(FAULT_CODE, 0)]
         if not fault and Cia402.of(statusword) is Cia402.FAULT:
             fault = FAULT_DRIVE  # faulted for a reason of the drive's own
         return AxisState(
-            position=self._get(node, POSITION),
+            position=values[(POSITION, 0)],
             busy=not statusword & SW_TARGET_REACHED,
-            done_seq=self._get(node, DONE_SEQ),
+            done_seq=values[(DONE_SEQ, 0)],
             fault=fault,
-            last_stroke=self._get(node, LAST_STROKE),
-            strokes=self._get(node, STROKES),
+            last_stroke=values[(LAST_STROKE, 0)],
+            strokes=values[(STROKES, 0)],
         )
 
-    def _read_io(self) -> tuple[np.ndarray[Any, np.dtype[np.bool_]], bool]:
+    def _occupancy(self, io: dict[Entry, int]) -> np.ndarray[Any, np.dtype[np.bool_]]:
         rows, cols = self.machine.rows, self.machine.cols
-        data = self._sdo(self.io_node, OCCUPANCY)
-        if not isinstance(data, bytes | bytearray) or len(data) != (rows * cols + 7) // 8:
-            raise FieldbusError(f"I/O node: occupancy of {len(data)} bytes, {rows}x{cols} cells")
-        bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8), bitorder="little")
-        grid = bits[: rows * cols].astype(np.bool_).reshape(rows, cols)
-        return grid, bool(self._get(self.io_node, ESTOP))
+        words = [io[k] for k in sorted(k for k in io if k[0] == OCCUPANCY_WORDS)]
+        data = b"".join(w.to_bytes(4, "little") for w in words)
+        bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8), bitorder="little")
+        return bits[: rows * cols].astype(np.bool_).reshape(rows, cols)
 
     def _name(self, node_id: int) -> str:
         if node_id == self.io_node:
