@@ -58,6 +58,7 @@ from bwsd.fieldbus.canopen_pdo import (
     STATUSWORD,
     STROKES,
     SYNC_EVERY,
+    SYNC_ON_CHANGE,
     TARGET,
     TPDO_COM,
     TPDO_MAP,
@@ -272,6 +273,7 @@ class CanopenLoom:
         self.drives: list[_Drive] = []
         self._stopping = threading.Event()
         self._pid = 0  # the pid of the claim being made
+        self._sent: dict[tuple[int, int], bytes] = {}  # (node, COB-ID): the last PDO sent
         self._beater: threading.Thread | None = None
 
     def start(self) -> None:
@@ -322,7 +324,7 @@ class CanopenLoom:
     def _node(self, node_id: int, od: ObjectDictionary) -> LocalNode:
         node = LocalNode(node_id, od)
         self.network.add_node(node)
-        node.add_write_callback(partial(_follow_mapping, node))  # type: ignore[no-untyped-call]
+        node.add_write_callback(partial(self._follow_mapping, node))  # type: ignore[no-untyped-call]
         return node
 
     # ----- PDOs -----
@@ -335,12 +337,27 @@ class CanopenLoom:
             return
         samples = self.call(self._sample, {node.id or 0 for node in live})
         for node in live:
-            for pdo_map in node.tpdo.values():
-                if pdo_map.enabled and pdo_map.trans_type == SYNC_EVERY:
-                    for var in pdo_map.map:
-                        if var.length:
-                            var.raw = _value(node, (var.index, var.subindex), samples[node.id or 0])
+            maps = sorted(node.tpdo.values(), key=lambda m: m.trans_type != SYNC_ON_CHANGE)
+            for pdo_map in maps:  # on-change PDOs first: they belong to this sample
+                if not pdo_map.enabled or pdo_map.trans_type not in (SYNC_EVERY, SYNC_ON_CHANGE):
+                    continue
+                for var in pdo_map.map:
+                    if var.length:
+                        var.raw = _value(node, (var.index, var.subindex), samples[node.id or 0])
+                key, sent = (node.id or 0, pdo_map.cob_id or 0), bytes(pdo_map.data)
+                if pdo_map.trans_type == SYNC_EVERY or self._sent.get(key) != sent:
                     pdo_map.transmit()
+                    self._sent[key] = sent
+
+    def _follow_mapping(self, node: LocalNode, index: int, subindex: int, od: ODVariable,
+                        data: bytes) -> None:  # fmt: skip
+        """A PDO's COB-ID written by a master makes its mapping (written before) take effect;
+        an on-change PDO is sent at the next SYNC whatever it holds."""
+        if subindex != 1 or not (RPDO_COM <= index < TPDO_COM or TPDO_COM <= index < TPDO_MAP):
+            return
+        node.data_store.setdefault(index, {})[subindex] = bytes(data)  # read() below must see it
+        (node.rpdo if index < TPDO_COM else node.tpdo).read()  # type: ignore[no-untyped-call]
+        self._sent = {k: v for k, v in self._sent.items() if k[0] != node.id}
 
     def _sample(self, ids: set[int]) -> dict[int, dict[Entry, int]]:
         now = time.monotonic()
@@ -374,15 +391,6 @@ class CanopenLoom:
     def _beat(self) -> None:
         while not self._stopping.wait(self.network.beat(time.monotonic())):
             pass
-
-
-def _follow_mapping(node: LocalNode, index: int, subindex: int, od: ODVariable,
-                    data: bytes) -> None:  # fmt: skip
-    """A PDO's COB-ID written by a master makes its mapping (written before) take effect."""
-    if subindex != 1 or not (RPDO_COM <= index < RPDO_COM + 0x200 or TPDO_COM <= index < TPDO_MAP):
-        return
-    node.data_store.setdefault(index, {})[subindex] = bytes(data)  # read() below must see it
-    (node.rpdo if index < TPDO_COM else node.tpdo).read()  # type: ignore[no-untyped-call]
 
 
 def _value(node: LocalNode, key: Entry, sample: dict[Entry, int]) -> int:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import select
 import socket
 import struct
@@ -61,6 +62,7 @@ from bwsd.fieldbus.canopen_pdo import (
     SETPOINT_SEQ,
     STATUSWORD,
     STROKES,
+    SYNC_ON_CHANGE,
     TARGET,
     Entry,
     Pdo,
@@ -259,10 +261,11 @@ class CanopenBus(Fieldbus):
         sampler = self._sampler
         assert sampler is not None
         wanted = list(range(len(self.axes))) if axes is None else sorted(set(axes))
-        keys = [(self.drive_ids[i], n) for i in wanted for n in (1, 2)]
-        keys += [(self.io_node, pdo.number) for pdo in self._io_pdos]
+        every = [(self.drive_ids[i], 2) for i in wanted]
+        every += [(self.io_node, pdo.number) for pdo in self._io_pdos]
+        kept = [(self.drive_ids[i], 1) for i in wanted]
         try:
-            got = await asyncio.to_thread(sampler.sample, keys, self.settings.io_timeout)
+            got = await sampler.sample(every, kept, self.settings.io_timeout)
         except FieldbusTimeout as exc:
             problem = self._link_problem()
             if problem:
@@ -446,6 +449,9 @@ class CanopenBus(Fieldbus):
                                 f"{exc}") from exc  # fmt: skip
         if not pdo.receive and self._sampler is not None:
             self._sampler.listen(node_id, pdo.number, pdo_map)
+            if pdo.trans_type == SYNC_ON_CHANGE:  # no PDO until it changes: read it now
+                values = {(i, s): self._get(node_id, i) for i, s in pdo.entries}
+                self._sampler.seed((node_id, pdo.number), values)
 
     def _enable(self, node_id: int, reset: bool) -> None:
         """Walk a drive to "operation enabled"; a faulted drive is left alone unless ``reset``."""
@@ -506,6 +512,17 @@ class CanopenBus(Fieldbus):
         if node_id == self.io_node:
             return f"I/O node (node {node_id})"
         return f"axis {self.axes[self.drive_ids.index(node_id)].name} (node {node_id})"
+
+
+class _QuietPartials(logging.Filter):
+    """python-can's socketcand client warns whenever one read ends inside a frame, which a
+    SYNC's burst of PDOs does all the time: the frame is read whole at the next read."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith("Got incomplete message")
+
+
+logging.getLogger(SocketCanDaemonBus.__module__).addFilter(_QuietPartials())
 
 
 class _Socketcand(SocketCanDaemonBus):

@@ -1,20 +1,23 @@
 """The PDOs of the CANopen map (docs/fieldbus-canopen.md): which objects travel in which
 PDO, the dictionaries' PDO records, and the master's SYNC sampler.
 
-SYNC-driven: every transmit PDO is of transmission type 1 (sent on every SYNC), so one
-SYNC gives a sample of the whole machine taken at one instant: the occupancy and the
-drives' done sequences never come from two moments (an event-driven occupancy could
-arrive after the drive's "done" and make a finished stroke look like a mismatch). The
-receive PDO of a drive (controlword, target, set-point sequence) is event-driven (type
-255): a drive acts on it when it arrives. bwsd writes the mapping by SDO when it connects
-(docs/fieldbus-canopen.md, "PDOs"); the dictionaries here are the only copy of it in code,
-used by bwsd and by the mock loom's drives alike.
+SYNC-driven: a SYNC makes every node sample at one instant and send its transmit PDOs,
+so the occupancy and the drives' done sequences never come from two moments (an
+event-driven occupancy could arrive after the drive's "done" and make a finished stroke
+look like a mismatch). What changes at every stroke (statusword, position, done sequence,
+the occupancy, the e-stop) is of transmission type 1, sent on every SYNC; what changes
+once a stroke (fault code, last stroke, stroke count) is of type 0, sent at a SYNC only
+when it changed, ahead of the node's type-1 PDO. The receive PDO of a drive (controlword,
+target, set-point sequence) is event-driven (type 255): a drive acts on it when it
+arrives. bwsd writes the mapping by SDO when it connects (docs/fieldbus-canopen.md,
+"PDOs"); the dictionaries here are the only copy of it in code, used by bwsd and by the
+mock loom's drives alike.
 """
 
 from __future__ import annotations
 
+import asyncio
 import threading
-import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -34,6 +37,7 @@ OCCUPANCY_WORDS = 0x2100  # I/O node: the occupancy bits, 32 a sub-index (cell 0
 RPDO_COM, RPDO_MAP, TPDO_COM, TPDO_MAP = 0x1400, 0x1600, 0x1800, 0x1A00
 COB_INVALID = 0x80000000  # bit 31 of a COB-ID: the PDO is off
 SYNC_EVERY = 1  # transmission type: on every SYNC
+SYNC_ON_CHANGE = 0  # transmission type: at a SYNC, when a mapped object changed
 ON_ARRIVAL = 255  # transmission type of a receive PDO: acted on when it arrives
 BITS = {CONTROLWORD: 16, STATUSWORD: 16, TARGET: 32, POSITION: 32, DONE_SEQ: 16,
         SETPOINT_SEQ: 16, FAULT_CODE: 8, LAST_STROKE: 32, STROKES: 16, ESTOP: 8,
@@ -64,15 +68,16 @@ def occupancy_words(cells: int) -> int:
 
 
 def drive_pdos(node_id: int) -> tuple[Pdo, ...]:
-    """RPDO1 in; TPDO1 (statusword, position, done sequence) and TPDO2 (fault code, last
-    stroke, stroke count) out, both on every SYNC."""
+    """RPDO1 in; TPDO1 (fault code, last stroke, stroke count: on change) and TPDO2
+    (statusword, position, done sequence: every SYNC) out. TPDO1's lower COB-ID wins the
+    bus first, so a change always arrives before the sample it belongs to ends."""
     return (
         Pdo(True, 1, 0x200 + node_id, ON_ARRIVAL,
             ((CONTROLWORD, 0), (TARGET, 0), (SETPOINT_SEQ, 0))),
-        Pdo(False, 1, 0x180 + node_id, SYNC_EVERY,
-            ((STATUSWORD, 0), (POSITION, 0), (DONE_SEQ, 0))),
-        Pdo(False, 2, 0x280 + node_id, SYNC_EVERY,
+        Pdo(False, 1, 0x180 + node_id, SYNC_ON_CHANGE,
             ((FAULT_CODE, 0), (LAST_STROKE, 0), (STROKES, 0))),
+        Pdo(False, 2, 0x280 + node_id, SYNC_EVERY,
+            ((STATUSWORD, 0), (POSITION, 0), (DONE_SEQ, 0))),
     )  # fmt: skip
 
 
@@ -148,39 +153,78 @@ Key = tuple[int, int]  # node id, TPDO number
 
 class SyncSampler:
     """The master's side of the transmit PDOs: sends SYNC, keeps each TPDO's last values,
-    and tells apart those that answered a given SYNC."""
+    and tells apart those that answered a given SYNC. The PDOs arrive in canopen's receive
+    thread; a sample is awaited on the event loop."""
 
     def __init__(self, network: Network) -> None:
         self.network = network
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()
         self._count = 0
         self._seen: dict[Key, tuple[int, dict[Entry, int]]] = {}
+        self._waiters: list[_Waiter] = []
 
     def listen(self, node_id: int, number: int, pdo_map: PdoMap) -> None:
         pdo_map.add_callback(lambda m: self._arrived((node_id, number), m))
 
+    def seed(self, key: Key, values: dict[Entry, int]) -> None:
+        """Values of an on-change TPDO read by SDO, until the TPDO itself comes."""
+        with self._lock:
+            self._seen.setdefault(key, (0, values))
+
     def _arrived(self, key: Key, pdo_map: PdoMap) -> None:
         values = {(v.index, v.subindex): _int(v.raw) for v in pdo_map.map if v.length}
-        with self._cond:
+        with self._lock:
             self._seen[key] = (self._count, values)
-            self._cond.notify_all()
+            done = [w for w in self._waiters if w.complete(self._seen)]
+            for waiter in done:
+                self._waiters.remove(waiter)
+        for waiter in done:
+            waiter.loop.call_soon_threadsafe(_resolve, waiter.future)
 
-    def sample(self, keys: Sequence[Key], timeout: float) -> dict[Key, dict[Entry, int]]:
-        """Send one SYNC and wait for the TPDOs ``keys`` it makes the nodes send (blocking)."""
-        with self._cond:
+    async def sample(self, every: Sequence[Key], kept: Sequence[Key],
+                     timeout: float) -> dict[Key, dict[Entry, int]]:  # fmt: skip
+        """Send one SYNC; wait for the TPDOs ``every`` it makes the nodes send; with them
+        the last values of the on-change TPDOs ``kept``."""
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+        with self._lock:
             self._count += 1
-            count = self._count
-        self.network.sync.transmit()
-        limit = time.monotonic() + timeout
-        with self._cond:
-            while missing := [k for k in keys if self._seen.get(k, (0, {}))[0] < count]:
-                left = limit - time.monotonic()
-                if left <= 0:
-                    nodes = sorted({node for node, _ in missing})
-                    raise FieldbusTimeout(f"no answer to SYNC within {timeout:g} s: no PDO "
-                                          f"from nodes {', '.join(map(str, nodes))}")  # fmt: skip
-                self._cond.wait(left)
-            return {k: self._seen[k][1] for k in keys}
+            waiter = _Waiter(self._count, tuple(every), loop, future)
+            self._waiters.append(waiter)
+        try:
+            self.network.sync.transmit()
+            await asyncio.wait_for(future, timeout)
+        except TimeoutError:
+            with self._lock:
+                late = [k for k in every if self._seen.get(k, (0, {}))[0] < waiter.count]
+            missing = sorted({node for node, _ in late})
+            raise FieldbusTimeout(f"no answer to SYNC within {timeout:g} s: no PDO from nodes "
+                                  f"{', '.join(map(str, missing))}") from None  # fmt: skip
+        finally:
+            with self._lock:
+                if waiter in self._waiters:
+                    self._waiters.remove(waiter)
+        with self._lock:
+            lacking = [k for k in kept if k not in self._seen]
+            if lacking:
+                raise FieldbusTimeout(f"no values yet of the PDOs {lacking}")
+            return {k: self._seen[k][1] for k in (*every, *kept)}
+
+
+@dataclass(eq=False)
+class _Waiter:
+    count: int
+    keys: tuple[Key, ...]
+    loop: asyncio.AbstractEventLoop
+    future: asyncio.Future[None]
+
+    def complete(self, seen: dict[Key, tuple[int, dict[Entry, int]]]) -> bool:
+        return all(seen.get(k, (0, {}))[0] >= self.count for k in self.keys)
+
+
+def _resolve(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 def _int(value: Any) -> int:

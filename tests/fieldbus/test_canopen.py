@@ -322,8 +322,9 @@ def test_a_shift_and_its_read_back_go_by_pdo_not_sdo():
             assert ids.count(0x200 + 3 + ROW0) == 2  # RPDO1: bit 4 low, then high
             syncs = ids.count(0x80)
             assert syncs >= 1
-            assert ids.count(0x180 + 3 + ROW0) == ids.count(0x280 + 3 + ROW0) == syncs
-            assert ids.count(0x381) == syncs  # the I/O node's e-stop and occupancy
+            assert ids.count(0x280 + 3 + ROW0) == ids.count(0x381) == syncs  # every SYNC
+            assert ids.count(0x180 + 3 + ROW0) == 1  # on change: the stroke counted once
+            assert ids.count(0x180 + 3 + ROW1) == 0  # row 1 did not move
 
     run(scenario)
 
@@ -348,6 +349,6 @@ def test_the_mapping_is_written_at_start_and_the_drives_send_what_it_says():
                 sniffer.bus.shutdown()
             assert len(sent[0x180 + 3 + ROW0]) == 2  # the statusword alone, as mapped
             assert int.from_bytes(sent[0x180 + 3 + ROW0], "little") & 0x6F == 0x27
-            assert len(sent[0x180 + 3 + ROW1]) == 8  # the others keep bwsd's mapping
+            assert len(sent[0x280 + 3 + ROW1]) == 8  # the others keep bwsd's mapping
 
     run(scenario)
