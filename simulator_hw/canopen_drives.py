@@ -143,9 +143,20 @@ class _Drive:
         values = {var.index: int(var.raw) for var in pdo_map.map if var.length}
         self.target = values.get(TARGET, self.target)
         self.seq = values.get(SETPOINT_SEQ, self.seq)
-        if CONTROLWORD in values:
-            with contextlib.suppress(SdoAbortedError):  # refused: no acknowledgement comes
-                self.owner.call(self._controlword, values[CONTROLWORD])
+        word = values.get(CONTROLWORD)
+        if word is None:
+            return
+        if self._drops_setpoint_bit(word):
+            self.controlword, self.ack = word, False  # nothing else changes: no loom access
+            return
+        with contextlib.suppress(SdoAbortedError):  # refused: no acknowledgement comes
+            self.owner.call(self._controlword, word)
+
+    def _drops_setpoint_bit(self, word: int) -> bool:
+        """``word`` only lowers bit 4 (and 6) of the controlword in "operation enabled"."""
+        bits = CW_NEW_SETPOINT | CW_RELATIVE
+        return (self.state is S.OPERATION_ENABLED and not word & CW_NEW_SETPOINT
+                and word | bits == self.controlword | bits)  # fmt: skip
 
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = int(od.decode_raw(data))

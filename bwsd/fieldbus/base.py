@@ -249,11 +249,19 @@ class Fieldbus(ABC):
         if not self._seeded:
             await self.connect()  # the sequence numbers go on from the axes' own
         await self.claim()
+        setpoints = []
         for move in moves:
             axis = self.axes[move.axis]
             self._seq[move.axis] = (self._seq[move.axis] + 1) % 0x8000 or 1
             self._expected[move.axis] = 0 if axis.relative else move.target
-            await self._write_setpoint(axis, move.target, self._seq[move.axis])
+            setpoints.append((axis, move.target, self._seq[move.axis]))
+        await self._write_setpoints(setpoints)
+
+    async def _write_setpoints(self, setpoints: Sequence[tuple[Axis, int, int]]) -> None:
+        """Send the set-points (axis, target, sequence) one after the other; a backend may
+        send them together."""
+        for axis, target, seq in setpoints:
+            await self._write_setpoint(axis, target, seq)
 
     async def wait(self, axes: Sequence[int], timeout: float | None = None) -> MachineState:
         """Wait until every axis in ``axes`` completed its last set-point; check the read-back."""

@@ -236,6 +236,15 @@ class ModbusBus(Fieldbus):
             lambda c: c.write_registers(address, [high, low, seq], device_id=self.device_id),
         )
 
+    async def _write_setpoints(self, setpoints: Sequence[tuple[Axis, int, int]]) -> None:
+        """Every set-point's request sent at once (one round trip for a whole shift); the
+        first error is raised once all are answered."""
+        done = await asyncio.gather(*(self._write_setpoint(*sp) for sp in setpoints),
+                                    return_exceptions=True)  # fmt: skip
+        for result in done:
+            if isinstance(result, BaseException):
+                raise result
+
     async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
         if self.map_version >= 3:
             return await self._read_image(axes)
