@@ -24,7 +24,26 @@ from canopen.network import PeriodicMessageTask
 from canopen.objectdictionary import ODVariable
 from canopen.pdo import PdoMap
 
-from bwsd.fieldbus.canopen import (
+from bwsd.fieldbus.canopen_pdo import (
+    CONTROLWORD,
+    DONE_SEQ,
+    ESTOP,
+    FAULT_CODE,
+    LAST_STROKE,
+    OCCUPANCY_WORDS,
+    POSITION,
+    RPDO_COM,
+    SETPOINT_SEQ,
+    STATUSWORD,
+    STROKES,
+    SYNC_EVERY,
+    SYNC_ON_CHANGE,
+    TARGET,
+    TPDO_COM,
+    TPDO_MAP,
+    Entry,
+)
+from bwsd.fieldbus.cia402 import (
     CW_FAULT_RESET,
     CW_NEW_SETPOINT,
     CW_RELATIVE,
@@ -44,25 +63,6 @@ from bwsd.fieldbus.canopen import (
     io_dictionary,
     occupancy_bytes,
     occupancy_word_values,
-)
-from bwsd.fieldbus.canopen_pdo import (
-    CONTROLWORD,
-    DONE_SEQ,
-    ESTOP,
-    FAULT_CODE,
-    LAST_STROKE,
-    OCCUPANCY_WORDS,
-    POSITION,
-    RPDO_COM,
-    SETPOINT_SEQ,
-    STATUSWORD,
-    STROKES,
-    SYNC_EVERY,
-    SYNC_ON_CHANGE,
-    TARGET,
-    TPDO_COM,
-    TPDO_MAP,
-    Entry,
 )
 from simulator_hw.loom import AxisSim, Faults, Loom
 

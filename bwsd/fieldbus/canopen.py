@@ -1,7 +1,7 @@
 """CANopen backend: CiA 402 drives in profile position mode and an I/O node.
 
-The object map is docs/fieldbus-canopen.md; the dictionaries built here are the only copy
-of it in code (the mock loom's drives use them too). Motion and the read-back go by PDO
+The object map is docs/fieldbus-canopen.md; its objects and dictionaries are in
+bwsd.fieldbus.cia402 (the mock loom's drives use them too). Motion and the read-back go by PDO
 (bwsd.fieldbus.canopen_pdo: a set-point is one receive PDO pair, a read-back one SYNC);
 SDO is left to configuration (heartbeat, mode, the PDO mapping), the CiA 402 state walk,
 homing, quick stop, fault reset and the claim. canopen is synchronous: SDO exchanges and
@@ -11,31 +11,17 @@ the wait for a SYNC's answers run in worker threads, so the event loop never blo
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import logging
-import select
 import socket
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from enum import IntEnum
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import Any
 
 import can
 import numpy as np
-from can.interfaces.socketcand import SocketCanDaemonBus
-from canopen import Network, ObjectDictionary, RemoteNode, SdoAbortedError, SdoCommunicationError
-from canopen.objectdictionary import ODVariable
-from canopen.objectdictionary.datatypes import (
-    DOMAIN,
-    INTEGER8,
-    INTEGER32,
-    UNSIGNED8,
-    UNSIGNED16,
-    UNSIGNED32,
-)
+from canopen import Network, RemoteNode, SdoAbortedError, SdoCommunicationError
 
 from bwsd.config import Config
 from bwsd.fieldbus import settings_from_config
@@ -51,6 +37,7 @@ from bwsd.fieldbus.base import (
     FieldbusTimeout,
     MachineState,
 )
+from bwsd.fieldbus.canlink import LinkWatch, Socketcand, shutdown
 from bwsd.fieldbus.canopen_pdo import (
     CONTROLWORD,
     DONE_SEQ,
@@ -67,121 +54,39 @@ from bwsd.fieldbus.canopen_pdo import (
     Entry,
     Pdo,
     SyncSampler,
-    add_occupancy_words,
-    add_pdo_records,
     configure,
     drive_pdos,
     io_pdos,
     layout,
     wanted_layout,
 )
+from bwsd.fieldbus.cia402 import (
+    CW_DISABLE_VOLTAGE,
+    CW_ENABLE,
+    CW_NEW_SETPOINT,
+    CW_QUICK_STOP,
+    CW_RELATIVE,
+    DRIVE_OBJECTS,
+    HEARTBEAT,
+    IO_OBJECTS,
+    MODE,
+    MODE_HOMING,
+    MODE_PROFILE_POSITION,
+    NMT_START,
+    OWNER,
+    OWNER_PID,
+    SW_TARGET_REACHED,
+    WALK,
+    Cia402,
+    dictionary,
+    drive_dictionary,
+    io_dictionary,
+    occupancy_bytes,
+)
 from bwsd.twin.machine import Machine
 
-MODE, MODE_DISPLAY, ERROR_CODE, HEARTBEAT = 0x6060, 0x6061, 0x603F, 0x1017
-OCCUPANCY = 0x2000  # I/O node: the occupancy as one DOMAIN (by SDO; PDOs carry 0x2100)
-OWNER, OWNER_PID = 0x2010, 0x2011  # I/O node: the claim (id, pid) of docs/fieldbus-canopen.md
-
-DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
-    CONTROLWORD: ("controlword", UNSIGNED16, "rw"),
-    STATUSWORD: ("statusword", UNSIGNED16, "ro"),
-    MODE: ("modes of operation", INTEGER8, "rw"),
-    MODE_DISPLAY: ("modes of operation display", INTEGER8, "ro"),
-    TARGET: ("target position", INTEGER32, "rw"),
-    POSITION: ("position actual value", INTEGER32, "ro"),
-    ERROR_CODE: ("error code", UNSIGNED16, "ro"),
-    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
-    LAST_STROKE: ("last stroke", INTEGER32, "ro"),
-    DONE_SEQ: ("done sequence", UNSIGNED16, "ro"),
-    SETPOINT_SEQ: ("set-point sequence", UNSIGNED16, "rw"),
-    FAULT_CODE: ("fault code", UNSIGNED8, "ro"),
-    STROKES: ("stroke count", UNSIGNED16, "ro"),
-}
-IO_OBJECTS: dict[int, tuple[str, int, str]] = {
-    OCCUPANCY: ("occupancy", DOMAIN, "ro"),
-    ESTOP: ("emergency stop", UNSIGNED8, "ro"),
-    OWNER: ("owner", UNSIGNED32, "rw"),
-    OWNER_PID: ("owner pid", UNSIGNED32, "rw"),
-    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
-}
-
-CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, CW_SWITCH_ON = 0x00, 0x02, 0x06, 0x07
-CW_ENABLE, CW_NEW_SETPOINT, CW_RELATIVE, CW_FAULT_RESET = 0x0F, 0x10, 0x40, 0x80
-SW_TARGET_REACHED, SW_SETPOINT_ACK = 0x0400, 0x1000
-MODE_PROFILE_POSITION, MODE_HOMING = 1, 6
-NMT_START = 0x01
-# CiA 402 error codes (0x603F) of the bus-independent fault codes (0x2004)
-ERROR_CODES = {1: 0x7500, 2: 0x8611, 3: 0x5530, 4: 0x8612, 5: 0x5441}
-
-
-class Cia402(IntEnum):
-    """The drive states, each as the value its statusword shows under the state's mask."""
-
-    SWITCH_ON_DISABLED = 0x40
-    READY_TO_SWITCH_ON = 0x21
-    SWITCHED_ON = 0x23
-    OPERATION_ENABLED = 0x27
-    QUICK_STOP_ACTIVE = 0x07
-    FAULT = 0x08
-
-    @property
-    def mask(self) -> int:
-        return 0x4F if self in (Cia402.SWITCH_ON_DISABLED, Cia402.FAULT) else 0x6F
-
-    @classmethod
-    def of(cls, statusword: int) -> Cia402 | None:
-        """The state a statusword shows (None: a transient state)."""
-        return next((s for s in cls if statusword & s.mask == s.value), None)
-
-
-# the controlword that moves a drive one step towards "operation enabled"
-WALK = {
-    Cia402.FAULT: CW_FAULT_RESET,
-    Cia402.SWITCH_ON_DISABLED: CW_SHUTDOWN,
-    Cia402.READY_TO_SWITCH_ON: CW_SWITCH_ON,
-    Cia402.SWITCHED_ON: CW_ENABLE,
-    Cia402.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,
-    None: CW_DISABLE_VOLTAGE,
-}
-
-
-def dictionary(objects: Mapping[int, tuple[str, int, str]], heartbeat: int = 0) -> ObjectDictionary:
-    """An object dictionary of ``objects`` (index: name, data type, access); defaults 0."""
-    od = ObjectDictionary()  # type: ignore[no-untyped-call]
-    for index, (name, data_type, access) in objects.items():
-        var = ODVariable(name, index, 0)
-        var.data_type, var.access_type = data_type, access
-        if data_type != DOMAIN:
-            var.default = heartbeat if index == HEARTBEAT else 0
-        od.add_object(var)
-    return od
-
-
-def drive_dictionary(node_id: int, heartbeat: int = 0) -> ObjectDictionary:
-    """A drive's dictionary: its objects and the records of its PDOs."""
-    od = dictionary(DRIVE_OBJECTS, heartbeat)
-    add_pdo_records(od, drive_pdos(node_id))
-    return od
-
-
-def io_dictionary(cells: int, heartbeat: int = 0) -> ObjectDictionary:
-    """The I/O node's dictionary for ``cells`` occupancy sensors, with its PDO records."""
-    od = dictionary(IO_OBJECTS, heartbeat)
-    add_occupancy_words(od, cells)
-    add_pdo_records(od, io_pdos(cells))
-    return od
-
-
-def occupancy_bytes(occupied: Iterable[Iterable[bool]]) -> bytes:
-    """The occupancy bitmap of 0x2000: row-major, least significant bit first."""
-    bits = np.array([bool(v) for row in occupied for v in row], dtype=np.bool_)
-    return np.packbits(bits, bitorder="little").tobytes()
-
-
-def occupancy_word_values(occupied: Iterable[Iterable[bool]]) -> list[int]:
-    """The occupancy as the words of 0x2100 (sub-index 1 first; cell 0 is bit 0)."""
-    data = occupancy_bytes(occupied)
-    data += bytes(-len(data) % 4)
-    return [int.from_bytes(data[i : i + 4], "little") for i in range(0, len(data), 4)] or [0]
+# the map's tables, as the tests and tools have always imported them from here
+__all__ = ["DRIVE_OBJECTS", "IO_OBJECTS", "CanopenBus", "Cia402", "dictionary", "occupancy_bytes"]
 
 
 class CanopenBus(Fieldbus):
@@ -209,7 +114,7 @@ class CanopenBus(Fieldbus):
         self._nodes: dict[int, RemoteNode] = {}
         self._locks = {i: threading.Lock() for i in [*self.drive_ids, io_node]}
         self._seen: dict[int, float] = {}
-        self._watch: _LinkWatch | None = None
+        self._watch: LinkWatch | None = None
         self._io_pdos = io_pdos(machine.rows * machine.cols)
         self._statusword: dict[int, int] = {}  # each drive's, at the last SYNC
 
@@ -308,7 +213,7 @@ class CanopenBus(Fieldbus):
         """Open python-can and add the nodes (blocking)."""
         network = Network()
         network.NOTIFIER_CYCLE = 0.1  # how long disconnect() waits for the receive thread
-        watch = _LinkWatch(network)
+        watch = LinkWatch(network)
         self._nodes = {i: self._add_node(network, i) for i in self._locks}
         try:
             network.bus = self._socketcand() if self.interface == "socketcand" else None
@@ -316,7 +221,7 @@ class CanopenBus(Fieldbus):
             if network.notifier is not None:
                 network.notifier.add_listener(watch)
         except (can.CanError, OSError, ValueError) as exc:
-            _shutdown(network)
+            shutdown(network)
             raise FieldbusConnectionError(f"cannot open the CAN bus: {exc}") from exc
         self._network, self._watch = network, watch
         self._sampler = SyncSampler(network)
@@ -328,7 +233,7 @@ class CanopenBus(Fieldbus):
         except OSError as exc:
             raise FieldbusConnectionError(f"cannot reach {where}: {exc}") from exc
         try:
-            return _Socketcand(  # type: ignore[no-untyped-call]
+            return Socketcand(  # type: ignore[no-untyped-call]
                 channel=self.channel, host=self.host, port=self.port, tcp_tune=True
             )
         except (can.CanError, OSError) as exc:
@@ -373,7 +278,7 @@ class CanopenBus(Fieldbus):
     async def _teardown(self) -> None:
         network, self._network = self._network, None
         if network is not None:
-            await asyncio.to_thread(_shutdown, network)
+            await asyncio.to_thread(shutdown, network)
 
     # ----- running SDO work off the event loop -----
     async def _each(self, fn: Callable[[int], object], items: Iterable[int]) -> None:
@@ -512,62 +417,3 @@ class CanopenBus(Fieldbus):
         if node_id == self.io_node:
             return f"I/O node (node {node_id})"
         return f"axis {self.axes[self.drive_ids.index(node_id)].name} (node {node_id})"
-
-
-class _QuietPartials(logging.Filter):
-    """python-can's socketcand client warns whenever one read ends inside a frame, which a
-    SYNC's burst of PDOs does all the time: the frame is read whole at the next read."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith("Got incomplete message")
-
-
-logging.getLogger(SocketCanDaemonBus.__module__).addFilter(_QuietPartials())
-
-
-class _Socketcand(SocketCanDaemonBus):
-    """python-can's socketcand client, raising when the server closes the connection.
-
-    python-can 4.6 reads an empty string at the end of the stream and returns no message,
-    so its receive thread would spin at full speed on a closed connection.
-    """
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        msg, filtered = super()._recv_internal(timeout)  # type: ignore[no-untyped-call]
-        sock = getattr(self, "_SocketCanDaemonBus__socket", None)  # its private socket
-        if msg is None and isinstance(sock, socket.socket) and _at_end(sock):
-            raise can.CanOperationError("socketcand closed the connection")
-        return msg, filtered
-
-
-def _at_end(sock: socket.socket) -> bool:
-    """True when the peer has closed ``sock`` (readable, yet nothing to read)."""
-    try:
-        readable, _, _ = select.select([sock], [], [], 0)
-        return bool(readable) and not sock.recv(1, socket.MSG_PEEK)
-    except OSError:
-        return True
-
-
-class _LinkWatch(can.Listener):
-    """Keeps a receive error of the bus (a lost TCP link) and stops the receive thread."""
-
-    def __init__(self, network: Network) -> None:
-        self.network = network
-        self.error: Exception | None = None
-
-    def on_message_received(self, msg: can.Message) -> None:
-        pass
-
-    def on_error(self, exc: Exception) -> None:
-        self.error = exc
-        notifier = self.network.notifier
-        if notifier is not None:
-            # a thread cannot join itself; left running, it would spin on the dead socket
-            threading.Thread(target=notifier.stop, args=(1.0,), daemon=True).start()
-
-
-def _shutdown(network: Network) -> None:
-    """Disconnect; never raises (disconnect re-raises the receive thread's error last)."""
-    with contextlib.suppress(Exception):
-        network.disconnect()
