@@ -84,6 +84,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "host": Text("127.0.0.1"),
         "port": Num(int, 1, 65535, 15020),
         "device_id": Num(int, 0, 247, 1),
+        "map": Num(int, 2, 3, 3),
     },
     "fieldbus.canopen": {
         "interface": Text("socketcand", ("socketcan", "socketcand", "virtual")),

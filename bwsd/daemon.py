@@ -30,6 +30,7 @@ from bwsd.controller.plan import Limits
 from bwsd.controller.runner import Controller, Settings
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
+from bwsd.fieldbus.owner import BusLock, daemon_owner_id
 from bwsd.journal import Journal
 from bwsd.notify import notify, watchdog_interval
 from bwsd.paths import journal_file, tokens_file
@@ -45,6 +46,7 @@ class Daemon:
     state_dir: Path
     controller: Controller
     journal: Journal
+    bus_lock: BusLock | None = None
     urls: dict[str, str] = field(default_factory=dict)
     _tasks: list[asyncio.Task[Any]] = field(default_factory=list)
     _closers: list[Callable[[], Any]] = field(default_factory=list)
@@ -55,15 +57,22 @@ async def start(config: Config, state_dir: Path) -> Daemon:
     journal = Journal.open(journal_file(config, state_dir))
     try:
         await asyncio.to_thread(journal.check)
+        lock = BusLock.take(state_dir, config.path)  # `bwsd hw` refuses to move meanwhile
     except BaseException:
         journal.close()
         raise
-    bus = open_bus(config)
+    try:
+        bus = open_bus(config)
+    except BaseException:
+        lock.release()
+        journal.close()
+        raise
+    bus.owner_id, bus.holds = daemon_owner_id(state_dir), True
     table = config.table("controller")
     limits = Limits(table["max_contacts"], table["tensioner_stroke"])
     settings = Settings(table["max_instructions"], table["snapshot_every"])
     controller = Controller(config.machine, bus, journal, limits, settings=settings)
-    daemon = Daemon(config, state_dir, controller, journal)
+    daemon = Daemon(config, state_dir, controller, journal, lock)
     try:
         log.info("%s", controller.begin_recovery())
         await _serve_api(daemon)
@@ -157,6 +166,8 @@ async def stop(daemon: Daemon) -> None:
             await task
     await ctl.close()
     await ctl.bus.close()
+    if daemon.bus_lock is not None:
+        daemon.bus_lock.release()
     daemon.journal.close()
 
 

@@ -62,8 +62,9 @@ class MockLoom:
         self.config = config
         self.loom = Loom(config.machine, fill, speeds)
         host = sim["host"]
-        unit = config.table("fieldbus.modbus")["device_id"]
-        self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], unit)
+        modbus = config.table("fieldbus.modbus")
+        self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], modbus["device_id"],
+                                       modbus["map"])  # fmt: skip
         ids = canopen_ids_problem(config)
         if canopen is None:
             canopen = canopen_installed() and not ids

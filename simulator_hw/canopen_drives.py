@@ -12,42 +12,57 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any, TypeVar
 
-from canopen import LocalNode, Network, SdoAbortedError
+from canopen import LocalNode, Network, ObjectDictionary, SdoAbortedError
 from canopen.network import PeriodicMessageTask
 from canopen.objectdictionary import ODVariable
+from canopen.pdo import PdoMap
 
-from bwsd.fieldbus.canopen import (
+from bwsd.fieldbus.canopen_pdo import (
     CONTROLWORD,
+    DONE_SEQ,
+    ESTOP,
+    FAULT_CODE,
+    LAST_STROKE,
+    OCCUPANCY_WORDS,
+    POSITION,
+    RPDO_COM,
+    SETPOINT_SEQ,
+    STATUSWORD,
+    STROKES,
+    SYNC_EVERY,
+    SYNC_ON_CHANGE,
+    TARGET,
+    TPDO_COM,
+    TPDO_MAP,
+    Entry,
+)
+from bwsd.fieldbus.cia402 import (
     CW_FAULT_RESET,
     CW_NEW_SETPOINT,
     CW_RELATIVE,
-    DONE_SEQ,
-    DRIVE_OBJECTS,
     ERROR_CODE,
     ERROR_CODES,
-    ESTOP,
-    FAULT_CODE,
-    IO_OBJECTS,
-    LAST_STROKE,
     MODE,
     MODE_DISPLAY,
     MODE_HOMING,
     MODE_PROFILE_POSITION,
     OCCUPANCY,
-    POSITION,
-    SETPOINT_SEQ,
-    STATUSWORD,
+    OWNER,
+    OWNER_PID,
     SW_SETPOINT_ACK,
     SW_TARGET_REACHED,
-    TARGET,
     Cia402,
-    dictionary,
+    drive_dictionary,
+    io_dictionary,
     occupancy_bytes,
+    occupancy_word_values,
 )
 from simulator_hw.loom import AxisSim, Faults, Loom
 
@@ -55,6 +70,7 @@ T = TypeVar("T")
 LOOM_CALL_TIMEOUT = 2.0  # s an access may wait for the loom's event loop
 ABORT_DEVICE_STATE = 0x08000022  # SDO abort: not possible in the present device state
 NMT_BOOT, NMT_PRE_OPERATIONAL = 0x81, 0x80  # reset node (sends boot-up), enter pre-operational
+SYNC = 0x80  # COB-ID of the SYNC message
 S = Cia402
 
 
@@ -115,10 +131,32 @@ class _Drive:
         self.ack = False
         node.add_read_callback(self.on_read)  # type: ignore[no-untyped-call]
         node.add_write_callback(self.on_write)  # type: ignore[no-untyped-call]
+        node.rpdo[1].add_callback(self.on_rpdo)
 
     def on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
-        live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE)
+        live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE,
+                STROKES)  # fmt: skip
         return self.owner.call(self._live, index) if index in live else None
+
+    def on_rpdo(self, pdo_map: PdoMap) -> None:
+        """A receive PDO: its objects as if written one by one, the controlword last."""
+        values = {var.index: int(var.raw) for var in pdo_map.map if var.length}
+        self.target = values.get(TARGET, self.target)
+        self.seq = values.get(SETPOINT_SEQ, self.seq)
+        word = values.get(CONTROLWORD)
+        if word is None:
+            return
+        if self._drops_setpoint_bit(word):
+            self.controlword, self.ack = word, False  # nothing else changes: no loom access
+            return
+        with contextlib.suppress(SdoAbortedError):  # refused: no acknowledgement comes
+            self.owner.call(self._controlword, word)
+
+    def _drops_setpoint_bit(self, word: int) -> bool:
+        """``word`` only lowers bit 4 (and 6) of the controlword in "operation enabled"."""
+        bits = CW_NEW_SETPOINT | CW_RELATIVE
+        return (self.state is S.OPERATION_ENABLED and not word & CW_NEW_SETPOINT
+                and word | bits == self.controlword | bits)  # fmt: skip
 
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = int(od.decode_raw(data))
@@ -132,7 +170,11 @@ class _Drive:
             self.owner.call(self._controlword, value)
 
     def _live(self, index: int) -> int:
-        sim = self._sync()
+        return self.values(time.monotonic())[(index, 0)]
+
+    def values(self, now: float) -> dict[Entry, int]:
+        """Every live object of the drive at time ``now`` (the loom advanced to it)."""
+        sim = self._sync(now)
         values = {
             STATUSWORD: self.statusword(),
             MODE_DISPLAY: self.mode,
@@ -141,12 +183,13 @@ class _Drive:
             LAST_STROKE: sim.last_stroke,
             DONE_SEQ: sim.done_seq,
             FAULT_CODE: sim.fault,
+            STROKES: sim.strokes,
         }
-        return values[index]
+        return {(index, 0): value for index, value in values.items()}
 
-    def _sync(self) -> AxisSim:
+    def _sync(self, now: float | None = None) -> AxisSim:
         """Advance the loom; the drive is in FAULT exactly while its axis is faulted."""
-        self.owner.loom.tick(time.monotonic())
+        self.owner.loom.tick(time.monotonic() if now is None else now)
         sim = self.owner.loom.axes[self.index]
         if sim.fault:
             self.state = S.FAULT
@@ -240,15 +283,23 @@ class CanopenLoom:
         self.network = _DriveNetwork(loom.faults)
         self.drives: list[_Drive] = []
         self._stopping = threading.Event()
+        self._pid = 0  # the pid of the claim being made
+        self._sent: dict[tuple[int, int], bytes] = {}  # (node, COB-ID): the last PDO sent
         self._beater: threading.Thread | None = None
 
     def start(self) -> None:
         """Connect the nodes, send their boot-up messages and start their heartbeats."""
         ids = [self.node_base + sim.axis.index for sim in self.loom.axes]
-        nodes = [self._node(node_id, DRIVE_OBJECTS) for node_id in ids]
+        nodes = [
+            self._node(node_id, drive_dictionary(node_id, self.heartbeat_ms)) for node_id in ids
+        ]
         self.drives = [_Drive(self, i, node) for i, node in enumerate(nodes)]
-        io = self._node(self.io_node, IO_OBJECTS)
+        cells = self.loom.machine.rows * self.loom.machine.cols
+        io = self._node(self.io_node, io_dictionary(cells, self.heartbeat_ms))
         io.add_read_callback(self._io_read)  # type: ignore[no-untyped-call]
+        io.add_write_callback(self._io_write)  # type: ignore[no-untyped-call]
+        self._io = io
+        self.network.subscribe(SYNC, self._on_sync)
         self.network.connect(interface=self.interface, channel=self.channel)
         for node in [*nodes, io]:
             node.nmt.send_command(NMT_BOOT)
@@ -281,21 +332,86 @@ class CanopenLoom:
         loop.call_soon_threadsafe(run)
         return result.result(timeout=LOOM_CALL_TIMEOUT)
 
-    def _node(self, node_id: int, objects: dict[int, tuple[str, int, str]]) -> LocalNode:
-        node = LocalNode(node_id, dictionary(objects, self.heartbeat_ms))
+    def _node(self, node_id: int, od: ObjectDictionary) -> LocalNode:
+        node = LocalNode(node_id, od)
         self.network.add_node(node)
+        node.add_write_callback(partial(self._follow_mapping, node))  # type: ignore[no-untyped-call]
         return node
+
+    # ----- PDOs -----
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """SYNC: every operational node sends its TPDOs of type 1, from one sample of the
+        loom (the occupancy and the drives' state of one instant)."""
+        nodes = [d.node for d in self.drives] + [self._io]
+        live = [node for node in nodes if node.nmt.state == "OPERATIONAL"]
+        if not live:
+            return
+        samples = self.call(self._sample, {node.id or 0 for node in live})
+        for node in live:
+            maps = sorted(node.tpdo.values(), key=lambda m: m.trans_type != SYNC_ON_CHANGE)
+            for pdo_map in maps:  # on-change PDOs first: they belong to this sample
+                if not pdo_map.enabled or pdo_map.trans_type not in (SYNC_EVERY, SYNC_ON_CHANGE):
+                    continue
+                for var in pdo_map.map:
+                    if var.length:
+                        var.raw = _value(node, (var.index, var.subindex), samples[node.id or 0])
+                key, sent = (node.id or 0, pdo_map.cob_id or 0), bytes(pdo_map.data)
+                if pdo_map.trans_type == SYNC_EVERY or self._sent.get(key) != sent:
+                    pdo_map.transmit()
+                    self._sent[key] = sent
+
+    def _follow_mapping(self, node: LocalNode, index: int, subindex: int, od: ODVariable,
+                        data: bytes) -> None:  # fmt: skip
+        """A PDO's COB-ID written by a master makes its mapping (written before) take effect;
+        an on-change PDO is sent at the next SYNC whatever it holds."""
+        if subindex != 1 or not (RPDO_COM <= index < TPDO_COM or TPDO_COM <= index < TPDO_MAP):
+            return
+        node.data_store.setdefault(index, {})[subindex] = bytes(data)  # read() below must see it
+        (node.rpdo if index < TPDO_COM else node.tpdo).read()  # type: ignore[no-untyped-call]
+        self._sent = {k: v for k, v in self._sent.items() if k[0] != node.id}
+
+    def _sample(self, ids: set[int]) -> dict[int, dict[Entry, int]]:
+        now = time.monotonic()
+        self.loom.tick(now)
+        samples = {d.node.id or 0: d.values(now) for d in self.drives if d.node.id in ids}
+        words = occupancy_word_values(self.loom.sensed())
+        io = {(OCCUPANCY_WORDS, sub): word for sub, word in enumerate(words, start=1)}
+        samples[self.io_node] = {(ESTOP, 0): int(self.loom.estop), **io}
+        return samples
 
     def _io_read(self, index: int, subindex: int, od: ODVariable) -> bytes | int | None:
         if index == OCCUPANCY:
             return self.call(lambda: occupancy_bytes(self.loom.sensed()))
         if index == ESTOP:
             return self.call(lambda: int(self.loom.estop))
+        if index in (OWNER, OWNER_PID):
+            owner = self.call(lambda: self.loom.owner)
+            return owner.ident if index == OWNER else owner.pid
         return None
+
+    def _io_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
+        """The claim: 0x2011 takes the claimer's pid, 0x2010 its id (refused: SDO abort)."""
+        value = int(od.decode_raw(data))
+        if index == OWNER_PID:
+            self._pid = value
+        elif index == OWNER:
+            held = self.call(self.loom.claim, value, self._pid, time.monotonic())
+            if held is not None or not value:
+                raise SdoAbortedError(ABORT_DEVICE_STATE)
 
     def _beat(self) -> None:
         while not self._stopping.wait(self.network.beat(time.monotonic())):
             pass
+
+
+def _value(node: LocalNode, key: Entry, sample: dict[Entry, int]) -> int:
+    """A mapped object's value: live from the sample, else what the node stores."""
+    if key in sample:
+        return sample[key]
+    od = node.object_dictionary[key[0]]
+    if not isinstance(od, ODVariable):
+        od = od[key[1]]
+    return int(od.decode_raw(node.get_data(*key)))
 
 
 def _running_in(loop: asyncio.AbstractEventLoop) -> bool:

@@ -10,7 +10,8 @@ One JSON object a line in, one a line out. Requests (``axis`` is an axis name su
   opposite of the truth (a dirty or broken sensor)
 - ``{"cmd": "estop", "pressed": true | false}``
 - ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
-- ``{"cmd": "state"}``: occupancy, e-stop, and each axis's position, busy flag and fault
+- ``{"cmd": "state"}``: occupancy, e-stop, and each axis's position, busy flag, fault and
+  stroke count
 
 Answers are ``{"ok": true, ...}`` or ``{"ok": false, "error": "..."}``.
 """
@@ -92,7 +93,12 @@ def state(loom: Loom) -> dict[str, Any]:
         "estop": loom.estop,
         "occupancy": [[int(v) for v in row] for row in loom.occupied],
         "axes": {
-            sim.axis.name: {"position": sim.position, "busy": sim.busy, "fault": sim.fault}
+            sim.axis.name: {
+                "position": sim.position,
+                "busy": sim.busy,
+                "fault": sim.fault,
+                "strokes": sim.strokes,
+            }
             for sim in loom.axes
         },
     }

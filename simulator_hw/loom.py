@@ -21,6 +21,17 @@ from bwsd.fieldbus.base import (
 from bwsd.twin.machine import Machine
 
 WRONG_POSITION_OFFSET = 500  # µm a drive with an injected position fault is off by
+STROKES_WRAP = 0x10000  # the stroke counter is 16 bits on every bus
+OWNER_LEASE = 2.0  # s a claim lasts after its holder's last claim (docs/fieldbus-modbus.md)
+
+
+@dataclass
+class Owner:
+    """The client that claimed the loom: its id, its pid, when it last claimed."""
+
+    ident: int = 0  # 0: nobody
+    pid: int = 0
+    claimed: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,7 @@ class AxisSim:
     done_seq: int = 0
     fault: int = FAULT_NONE
     last_stroke: int = 0
+    strokes: int = 0  # set-points completed since power-on (wraps at 65536; homing keeps it)
     # a running motion: legs of (start time, from, to); a stroke goes out then back home
     legs: list[tuple[float, int, int]] = field(default_factory=list)
     stroke: int = 0
@@ -74,6 +86,22 @@ class Loom:
             self.occupied[r][c] = True
         self.estop = False
         self.faults = Faults()
+        self.owner = Owner()
+
+    # ----- the owner -----
+    def claim(self, ident: int, pid: int, now: float) -> Owner | None:
+        """Give the loom to client ``ident`` (pid 0: its holder lets it go); the live owner
+        who refuses it, or None.
+
+        A claim is granted when nobody holds the loom, when ``ident`` already does, or when
+        the holder has not claimed for ``OWNER_LEASE`` seconds (a claim is renewed by
+        claiming again).
+        """
+        held = self.owner
+        if held.ident and held.ident != ident and now - held.claimed < OWNER_LEASE:
+            return held
+        self.owner = Owner(ident, pid, now) if pid else Owner()
+        return None
 
     # ----- commands -----
     def command(self, index: int, target: int, seq: int, now: float) -> None:
@@ -166,6 +194,7 @@ class Loom:
         sim.busy = False
         sim.done_seq = sim.seq
         sim.last_stroke = sim.stroke if sim.axis.relative else 0
+        sim.strokes = (sim.strokes + 1) % STROKES_WRAP
 
     def _stop(self, sim: AxisSim, code: int) -> None:
         sim.legs.clear()

@@ -35,17 +35,22 @@ from bwsd.fieldbus.modbus import (
     MACHINE_ESTOP,
     MACHINE_FAULTED,
     MAP_VERSION,
+    MAP_VERSIONS,
     OFF_LAST,
     OFF_SEQ,
     OFF_SHAPE,
     OFF_STATUS,
+    OFF_STROKES,
     OFF_TARGET,
+    OWNER_WORDS,
     REG_COMMAND,
+    REG_OWNER,
     REG_STATUS,
     SEQ_MAX,
     SHAPE_WORDS,
     axis_address,
     axis_shape,
+    image_words,
     int32_words,
     map_problem,
     words_int32,
@@ -53,6 +58,7 @@ from bwsd.fieldbus.modbus import (
 from simulator_hw.loom import AxisSim, Loom
 
 READ_INPUTS = 2  # function code: read discrete inputs
+READ_IMAGE = 4  # function code: read input registers (the status image of map 3)
 COIL_FUNCTIONS = (1, 5, 15)  # the loom has no coils
 DROP_POLL = 0.01  # s between looks at the drop counter
 
@@ -66,6 +72,16 @@ def axis_words(sim: AxisSim) -> list[int]:
     )
     return [status, *int32_words(sim.position), sim.done_seq, sim.fault,
             *int32_words(sim.last_stroke)]  # fmt: skip
+
+
+def status_image(loom: Loom) -> list[int]:
+    """The whole status image (map 3): machine status, occupancy bits (16 a register, cell 0
+    in bit 0, bits past the last cell 0), then each axis's record."""
+    cells = [v for row in loom.sensed() for v in row]
+    occupancy = [sum(1 << j for j, v in enumerate(cells[at : at + 16]) if v)
+                 for at in range(0, len(cells), 16)]  # fmt: skip
+    return [machine_status(loom), *occupancy,
+            *(w for sim in loom.axes for w in (*axis_words(sim), sim.strokes))]  # fmt: skip
 
 
 def machine_status(loom: Loom) -> int:
@@ -89,14 +105,18 @@ def input_words(loom: Loom, first: int, count: int) -> list[int]:
     ]
 
 
-def build_device(loom: Loom, device_id: int, action: SimAction) -> SimDevice:
-    """The map as a SimDevice: read-only registers marked, gaps left invalid."""
+def build_device(loom: Loom, device_id: int, action: SimAction,
+                 version: int = MAP_VERSION) -> SimDevice:  # fmt: skip
+    """The map (``version`` 2 or 3) as a SimDevice: read-only registers marked, gaps left
+    invalid."""
     m = loom.machine
     holding = [
-        SimData(0, values=[MAP_VERSION, len(loom.axes), m.rows, m.cols, 0],
+        SimData(0, values=[version, len(loom.axes), m.rows, m.cols, 0],
                 datatype=DataType.REGISTERS, readonly=True),
         SimData(REG_COMMAND, values=CMD_NONE, datatype=DataType.REGISTERS),
     ]  # fmt: skip
+    if version >= 3:
+        holding.append(SimData(REG_OWNER, count=OWNER_WORDS, datatype=DataType.REGISTERS))
     for i, sim in enumerate(loom.axes):
         base = axis_address(i)
         # status .. last stroke are refreshed on every read; the shape never changes
@@ -107,10 +127,11 @@ def build_device(loom: Loom, device_id: int, action: SimAction) -> SimDevice:
                                readonly=True))  # fmt: skip
     inputs = [SimData(0, count=m.rows * m.cols + 1, values=False, datatype=DataType.BITS)]
     coils = [SimData(0, values=False, datatype=DataType.BITS, readonly=True)]
-    no_input_registers = [SimData(0, datatype=DataType.INVALID)]
-    return SimDevice(
-        id=device_id, simdata=(coils, inputs, holding, no_input_registers), action=action
-    )
+    image = [SimData(0, count=image_words(m.rows * m.cols, len(loom.axes)),
+                     datatype=DataType.REGISTERS)]  # fmt: skip
+    if version < 3:
+        image = [SimData(0, datatype=DataType.INVALID)]  # map 2 has no input registers
+    return SimDevice(id=device_id, simdata=(coils, inputs, holding, image), action=action)
 
 
 class ModbusLoomServer:
@@ -119,12 +140,14 @@ class ModbusLoomServer:
     A machine the map cannot address (too many cells or axes) is a FieldbusError.
     """
 
-    def __init__(
-        self, loom: Loom, host: str = "127.0.0.1", port: int = 15020, device_id: int = 1
-    ) -> None:
+    def __init__(self, loom: Loom, host: str = "127.0.0.1", port: int = 15020,
+                 device_id: int = 1, version: int = MAP_VERSION) -> None:  # fmt: skip
         problem = map_problem(loom.machine)
+        if version not in MAP_VERSIONS:
+            problem = f"Modbus map {version}: the mock loom serves maps 2 and 3"
         if problem:
             raise FieldbusError(problem)
+        self.version = version
         self.loom = loom
         self.host = host
         self.port = port
@@ -137,7 +160,7 @@ class ModbusLoomServer:
         """Listen (the actual port is in ``port`` afterwards) and watch the drop counter."""
         if self._server is not None:
             raise RuntimeError(f"the Modbus server on port {self.port} is already running")
-        device = build_device(self.loom, self.device_id, self._action)
+        device = build_device(self.loom, self.device_id, self._action, self.version)
         trace = cast(Callable[[bool, ModbusPDU], ModbusPDU], self._trace_pdu)
         server = ModbusTcpServer(device, address=(self.host, self.port), trace_pdu=trace)
         try:
@@ -202,7 +225,9 @@ class ModbusLoomServer:
         if values is not None:
             return self._write(start, address, registers, cast(list[int], values), now)
         self.loom.tick(now)
-        if func_code == READ_INPUTS:  # bit addresses; count is in registers here
+        if func_code == READ_IMAGE:
+            registers[:] = status_image(self.loom)
+        elif func_code == READ_INPUTS:  # bit addresses; count is in registers here
             registers[address // 16 - start : address // 16 - start + count] = input_words(
                 self.loom, address // 16, count
             )
@@ -217,6 +242,8 @@ class ModbusLoomServer:
         for i in self._axes_in(address, address + count):
             at = axis_address(i) + OFF_STATUS - start
             registers[at : at + OFF_LAST + 2 - OFF_STATUS] = axis_words(self.loom.axes[i])
+            if self.version >= 3:
+                registers[at + OFF_STROKES - OFF_STATUS] = self.loom.axes[i].strokes
 
     def _write(
         self, start: int, address: int, registers: list[int], values: list[int], now: float
@@ -236,12 +263,27 @@ class ModbusLoomServer:
                     return ExcCodes.ILLEGAL_VALUE
                 target = words_int32(word(base + OFF_TARGET), word(base + OFF_TARGET + 1))
                 starts.append((i, target, seq))
+        if address <= REG_OWNER < end or (REG_OWNER < address < REG_OWNER + OWNER_WORDS):
+            return self._claim(address, values, now)
         if address <= REG_COMMAND < end:
             if not self._machine_command(values[REG_COMMAND - address], now):
                 return ExcCodes.ILLEGAL_VALUE
             values[REG_COMMAND - address] = CMD_NONE  # acted: reads back 0
         for i, target, seq in starts:
             self.loom.command(i, target, seq, now)
+        return None
+
+    def _claim(self, address: int, values: list[int], now: float) -> ExcCodes | None:
+        """A claim is the four registers written at once: claim id, pid (0: let go)."""
+        if address != REG_OWNER or len(values) != OWNER_WORDS:
+            return ExcCodes.ILLEGAL_VALUE
+        ident, pid = (values[0] << 16) | values[1], (values[2] << 16) | values[3]
+        if not ident:
+            return ExcCodes.ILLEGAL_VALUE
+        if self.loom.claim(ident, pid, now) is not None:
+            return ExcCodes.DEVICE_BUSY  # the claim registers keep the holder's
+        if not pid:
+            values[:] = [0] * OWNER_WORDS  # let go: they read 0 again
         return None
 
     def _machine_command(self, code: int, now: float) -> bool:

@@ -7,6 +7,10 @@ the state before the instruction and with its prediction:
 - it shows the state before: the move never started, **rerun** it;
 - a shift shows some of its lines moved and the rest as before, nothing else moved:
   **finish** the other lines;
+- a weft leaves no trace in the occupancy or the take-up: its insert axis's stroke counter,
+  journaled before the move, says whether the insert ran (one stroke more: commit if the
+  rest shows the prediction) or not (the same count: rerun); anything else, or no counter,
+  is blocked;
 - anything else is **blocked**, with the difference, for the operator (Abort ends it).
 
 Nothing here reads the bus or the journal: the caller brings the read-back.
@@ -14,6 +18,7 @@ Nothing here reads the bus or the journal: the caller brings the read-back.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
@@ -21,7 +26,7 @@ import numpy as np
 
 from bwsd.controller.plan import Mismatch, verify
 from bwsd.fieldbus.base import BoolGrid, MachineState
-from bwsd.twin import Prediction, Shift
+from bwsd.twin import Prediction, Shift, Weft
 from bwsd.twin.instructions import Instruction
 
 Kind = Literal["commit", "rerun", "finish", "blocked"]
@@ -45,10 +50,25 @@ class Before:
     takeup_um: int
 
 
+STROKES_WRAP = 0x10000  # the stroke counters are 16 bits on every bus
+
+
 def settle(instruction: Instruction, pred: Prediction, machine: MachineState, takeup_um: int,
-           before: Before, origin_um: int, tolerance: int) -> Settle:  # fmt: skip
-    """Decide from the read-back ``machine`` (its take-up axis at ``takeup_um``)."""
+           before: Before, origin_um: int, tolerance: int,
+           strokes: Mapping[int, int] | None = None) -> Settle:  # fmt: skip
+    """Decide from the read-back ``machine`` (its take-up axis at ``takeup_um``);
+    ``strokes``: the stroke counters of a weft's insert axes before it started (axis: count)."""
     index = pred.index
+    if isinstance(instruction, Weft):
+        ran = inserted(machine, strokes)
+        if isinstance(ran, str):
+            return Settle("blocked", index, f"instruction {index} started and not done: {ran}")
+        if not ran:
+            if _shows(machine, takeup_um, before.occupancy, before.takeup_um, tolerance):
+                return Settle("rerun", index, f"instruction {index} started, the weft was not "
+                              "inserted (the insert's stroke count is unchanged)")  # fmt: skip
+            return Settle("blocked", index, f"instruction {index} started and not done: the "
+                          "weft was not inserted and the machine moved")  # fmt: skip
     try:
         verify(pred, machine, takeup_um - origin_um, tolerance)
     except Mismatch as exc:
@@ -63,6 +83,29 @@ def settle(instruction: Instruction, pred: Prediction, machine: MachineState, ta
         return Settle("finish", index, f"instruction {index} started, some of its lines moved",
                       rest)  # fmt: skip
     return Settle("blocked", index, f"instruction {index} started and not done: {difference}")
+
+
+def inserted(machine: MachineState, strokes: Mapping[int, int] | None) -> bool | str:
+    """Whether the insert ran, from its stroke counters before and now: True (one stroke
+    more), False (the same count), or why it cannot be told."""
+    if not strokes:
+        return ("no stroke count of the insert was journaled before it started: whether the "
+                "weft was inserted cannot be told")  # fmt: skip
+    counts = set()
+    for axis, was in strokes.items():
+        now = machine.axes[axis]
+        if now.strokes is None:
+            return ("the bus reports no stroke counter (Modbus map 2): whether the weft was "
+                    "inserted cannot be told")  # fmt: skip
+        if now.fault:
+            return f"the insert axis reports fault {now.fault}: the stroke may be cut"
+        counts.add((now.strokes - was) % STROKES_WRAP)
+    if counts == {0}:
+        return False
+    if counts == {1}:
+        return True
+    return (f"the insert counted {', '.join(map(str, sorted(counts)))} strokes since it "
+            "started, not 0 or 1")  # fmt: skip
 
 
 def _shows(machine: MachineState, takeup_um: int, occupancy: BoolGrid, want_um: int,

@@ -60,7 +60,7 @@ from bwsd.fieldbus.base import (
 from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, Journal
 from bwsd.journal.writer import JournalWriter
 from bwsd.program import parse_program
-from bwsd.twin import Machine, Prediction, Program, Shift, Twin
+from bwsd.twin import Machine, Prediction, Program, Shift, Twin, Weft
 from bwsd.twin.instructions import Instruction
 
 log = logging.getLogger("bwsd.controller")
@@ -121,6 +121,7 @@ class Progress:
     journaled: int | None = None  # an instruction journaled as started and not done
     pending: Prediction | None = None  # its prediction
     rest: Shift | None = None  # the lines of it still to move (a cut shift)
+    strokes: dict[int, int] | None = None  # a weft's insert stroke count before it (journaled)
     blocked: str = ""  # why it cannot be settled (Unhold is refused)
     unjournaled: tuple[int, dict[str, Any]] | None = None  # the last "done", not yet written
     snapped: int = 0  # instructions done at the last snapshot
@@ -468,6 +469,9 @@ class Controller:
             if self._p.journaled != index:
                 payload = {"setpoints": [[[m.axis, m.target] for m in s] for s in steps],
                            "takeup_origin": origin}  # fmt: skip
+                self._p.strokes = self._stroke_trace(doing)
+                if self._p.strokes is not None:
+                    payload["strokes"] = {str(k): v for k, v in self._p.strokes.items()}
                 await self._writer.run(self.journal.started, self.program_id, index, payload,
                                        self._p.unjournaled)  # fmt: skip
                 self._p.journaled, self._p.unjournaled = index, None
@@ -500,6 +504,16 @@ class Controller:
         self._p.timing["step_s"] = time.perf_counter() - begun
         await self._commit(pred, index)
         return Done(index)
+
+    def _stroke_trace(self, instruction: Instruction) -> dict[int, int] | None:
+        """A weft's insert stroke count before it moves, as last read (the daemon owns the
+        bus: nothing else strokes the insert); None for other instructions or without a
+        counter."""
+        if not isinstance(instruction, Weft):
+            return None
+        insert = axis_by_name(self.machine, "weft_insert").index
+        count = self.bus.known(insert).strokes
+        return None if count is None else {insert: count}
 
     async def _takeup_origin(self) -> int:
         """Where the take-up stood when this program started (read once, journaled)."""
@@ -658,7 +672,8 @@ class Controller:
         before = Before(self.twin.occupancy >= 0,
                         (self._p.origin or 0) + round(self.twin.takeup * UM_PER_MM))  # fmt: skip
         decision = settle(instruction, pred, state, self._takeup(state), before,
-                          self._p.origin or 0, self.bus.settings.position_tolerance)  # fmt: skip
+                          self._p.origin or 0, self.bus.settings.position_tolerance,
+                          self._p.strokes)  # fmt: skip
         self._p.blocked, self._p.rest = "", None
         then = "resume with Unhold"
         if decision.kind == "commit":
@@ -725,6 +740,7 @@ class Controller:
         self.twin, self._p.snapped = twin, snap[0] if snap else 0
         self._p.origin = int(first[0].started_payload.get("takeup_origin", 0)) if first else None
         self._p.journaled = pending.index if pending is not None else None
+        self._p.strokes = _strokes_of(pending.payload) if pending is not None else None
         if pending is None:
             self._recovering = ""
             self.packml.reason = f"restarted at instruction {record.done}: resume with Unhold"
@@ -780,6 +796,14 @@ def _commit_twin(twin: Twin, pred: Prediction) -> dict[str, Any]:
     """Commit ``pred`` and describe the skeleton's change (in a worker thread)."""
     twin.commit(pred)
     return delta_from(pred, *committed_parts(twin, pred))
+
+
+def _strokes_of(payload: dict[str, Any]) -> dict[int, int] | None:
+    """The insert stroke counts a started payload holds (None: none journaled)."""
+    strokes = payload.get("strokes")
+    if not isinstance(strokes, dict):
+        return None
+    return {int(axis): int(count) for axis, count in strokes.items()}
 
 
 def _cells(cells: tuple[tuple[int, int], ...]) -> str:

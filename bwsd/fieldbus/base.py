@@ -9,7 +9,11 @@ read-back, and raising errors by phase (connection, timeout, drive fault, e-stop
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
+import socket
 import time
+import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -66,6 +70,26 @@ class EStopError(FieldbusError):
     """The emergency stop is pressed."""
 
 
+class BusHeld(FieldbusError):
+    """Another client owns the bus: nothing is moved."""
+
+
+# The loom's claim (docs/fieldbus-modbus.md, docs/fieldbus-canopen.md): a client claims the
+# loom before it moves it; the claim lasts OWNER_LEASE seconds after the holder's last one.
+OWNER_LEASE = 2.0  # s, the loom's
+CLAIM_RENEW = 0.5  # s: a claim older than this is renewed before the next command
+
+
+def owner_id(name: str) -> int:
+    """The 32-bit claim id of a client called ``name`` (never 0)."""
+    return zlib.crc32(name.encode()) or 1
+
+
+def process_owner_id() -> int:
+    """The claim id of this process alone (``bwsd hw``, a test, a benchmark)."""
+    return owner_id(f"{socket.gethostname()}:pid {os.getpid()}")
+
+
 @dataclass(frozen=True)
 class AxisMove:
     """A set-point for one axis, in wire units.
@@ -87,6 +111,7 @@ class AxisState:
     done_seq: int  # sequence number of the last completed set-point
     fault: int  # FAULT_* code
     last_stroke: int  # micrometres of the last completed stroke (relative axes)
+    strokes: int | None = None  # set-points completed, mod 65536 (None: the bus has no counter)
 
 
 @dataclass(frozen=True)
@@ -122,6 +147,9 @@ class Fieldbus(ABC):
         self._connected = False
         self._seeded = False
         self._known = [AxisState(0, False, 0, 0, 0)] * len(self.axes)
+        self.owner_id = process_owner_id()  # the daemon sets its own (one per state folder)
+        self.holds = False  # claim the loom on connecting, not only before moving (the daemon)
+        self._claimed_at: float | None = None
 
     # ----- hooks for a backend -----
     @abstractmethod
@@ -155,6 +183,11 @@ class Fieldbus(ABC):
     async def _home(self) -> None:
         """Start homing every axis."""
 
+    @abstractmethod
+    async def _claim(self, ident: int, pid: int) -> tuple[int, int] | None:
+        """Claim the loom for ``ident`` (pid 0: let it go); the holder's (id, pid) when the
+        loom refuses, None when granted (or when the bus has no claim)."""
+
     # ----- shared behaviour -----
     async def connect(self) -> None:
         """Connect, retrying with exponential backoff.
@@ -174,10 +207,13 @@ class Fieldbus(ABC):
                 await asyncio.sleep(delay)
                 delay = min(2 * delay, self.settings.reconnect_delay_max)
         self._connected = True
+        self._claimed_at = None  # a restarted loom has forgotten it
         if not self._seeded:
             state = await self._read_state()
             self._seq = [axis.done_seq for axis in state.axes]
             self._seeded = True
+        if self.holds:
+            await self.claim()
 
     @property
     def connected(self) -> bool:
@@ -185,8 +221,25 @@ class Fieldbus(ABC):
         return self._connected
 
     async def close(self) -> None:
+        """Let the claim go (when the loom still answers) and close."""
+        claimed, self._claimed_at = self._claimed_at, None
+        if claimed is not None and self._connected:
+            with contextlib.suppress(FieldbusError, OSError, asyncio.TimeoutError):
+                await asyncio.wait_for(self._claim(self.owner_id, 0), self.settings.io_timeout)
         self._connected = False
         await self._close()
+
+    async def claim(self) -> None:
+        """Hold the loom for this client before a command that moves it (renewed when older
+        than CLAIM_RENEW); BusHeld names the holder when another client has it."""
+        if self._claimed_at is not None and time.monotonic() - self._claimed_at < CLAIM_RENEW:
+            return
+        held = await self._claim(self.owner_id, os.getpid())
+        if held is not None:
+            raise BusHeld(f"the loom is held by another client: pid {held[1]} (claim id "
+                          f"{held[0]:08x}; a claim lapses {OWNER_LEASE:g} s after its holder's "
+                          "last); nothing was moved")  # fmt: skip
+        self._claimed_at = time.monotonic()
 
     async def move(self, moves: Sequence[AxisMove]) -> None:
         """Start every move at once.
@@ -195,11 +248,20 @@ class Fieldbus(ABC):
         """
         if not self._seeded:
             await self.connect()  # the sequence numbers go on from the axes' own
+        await self.claim()
+        setpoints = []
         for move in moves:
             axis = self.axes[move.axis]
             self._seq[move.axis] = (self._seq[move.axis] + 1) % 0x8000 or 1
             self._expected[move.axis] = 0 if axis.relative else move.target
-            await self._write_setpoint(axis, move.target, self._seq[move.axis])
+            setpoints.append((axis, move.target, self._seq[move.axis]))
+        await self._write_setpoints(setpoints)
+
+    async def _write_setpoints(self, setpoints: Sequence[tuple[Axis, int, int]]) -> None:
+        """Send the set-points (axis, target, sequence) one after the other; a backend may
+        send them together."""
+        for axis, target, seq in setpoints:
+            await self._write_setpoint(axis, target, seq)
 
     async def wait(self, axes: Sequence[int], timeout: float | None = None) -> MachineState:
         """Wait until every axis in ``axes`` completed its last set-point; check the read-back."""
@@ -223,18 +285,27 @@ class Fieldbus(ABC):
         await self.move(moves)
         return await self.wait([m.axis for m in moves], timeout)
 
+    def known(self, axis: int) -> AxisState:
+        """What axis ``axis`` reported at the last read (nothing is read now)."""
+        return self._known[axis]
+
     async def state(self) -> MachineState:
-        """The machine as the bus reports it now."""
+        """The machine as the bus reports it now (a held claim is renewed when due)."""
+        if self._claimed_at is not None:
+            await self.claim()
         return await self._read_state()
 
     async def quick_stop(self) -> None:
+        """Stop every axis; never refused for want of the claim."""
         await self._quick_stop()
 
     async def reset_faults(self) -> None:
+        await self.claim()
         await self._reset_faults()
 
     async def home(self, timeout: float | None = None) -> MachineState:
         """Home the shift and weft axes and wait for them (the take-up keeps its position)."""
+        await self.claim()
         await self._home()
         homed = [axis.index for axis in self.axes if axis.kind != "takeup"]
         for i in homed:

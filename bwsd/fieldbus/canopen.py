@@ -1,30 +1,27 @@
-"""CANopen backend: CiA 402 drives in profile position mode and an I/O node, by SDO.
+"""CANopen backend: CiA 402 drives in profile position mode and an I/O node.
 
-The object map is docs/fieldbus-canopen.md; the dictionaries built here are the only copy
-of it in code (the mock loom's drives use them too). canopen is synchronous: every SDO
-exchange runs in a worker thread, the nodes of one request in parallel, so the event loop
-never blocks.
+The object map is docs/fieldbus-canopen.md; its objects and dictionaries are in
+bwsd.fieldbus.cia402 (the mock loom's drives use them too). Motion and the read-back go by PDO
+(bwsd.fieldbus.canopen_pdo: a set-point is one receive PDO pair, a read-back one SYNC);
+SDO is left to configuration (heartbeat, mode, the PDO mapping), the CiA 402 state walk,
+homing, quick stop, fault reset and the claim. canopen is synchronous: SDO exchanges and
+the wait for a SYNC's answers run in worker threads, so the event loop never blocks.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import select
 import socket
+import struct
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from enum import IntEnum
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import Any
 
 import can
 import numpy as np
-from can.interfaces.socketcand import SocketCanDaemonBus
-from canopen import Network, ObjectDictionary, RemoteNode, SdoAbortedError, SdoCommunicationError
-from canopen.objectdictionary import ODVariable
-from canopen.objectdictionary.datatypes import DOMAIN, INTEGER8, INTEGER32, UNSIGNED8, UNSIGNED16
+from canopen import Network, RemoteNode, SdoAbortedError, SdoCommunicationError
 
 from bwsd.config import Config
 from bwsd.fieldbus import settings_from_config
@@ -34,95 +31,62 @@ from bwsd.fieldbus.base import (
     AxisState,
     BusSettings,
     DriveFault,
-    EStopError,
     Fieldbus,
     FieldbusConnectionError,
     FieldbusError,
     FieldbusTimeout,
     MachineState,
 )
+from bwsd.fieldbus.canlink import LinkWatch, Socketcand, shutdown
+from bwsd.fieldbus.canopen_pdo import (
+    CONTROLWORD,
+    DONE_SEQ,
+    ESTOP,
+    FAULT_CODE,
+    LAST_STROKE,
+    OCCUPANCY_WORDS,
+    POSITION,
+    SETPOINT_SEQ,
+    STATUSWORD,
+    STROKES,
+    SYNC_ON_CHANGE,
+    TARGET,
+    Entry,
+    Pdo,
+    SyncSampler,
+    configure,
+    drive_pdos,
+    io_pdos,
+    layout,
+    wanted_layout,
+)
+from bwsd.fieldbus.cia402 import (
+    CW_DISABLE_VOLTAGE,
+    CW_ENABLE,
+    CW_NEW_SETPOINT,
+    CW_QUICK_STOP,
+    CW_RELATIVE,
+    DRIVE_OBJECTS,
+    HEARTBEAT,
+    IO_OBJECTS,
+    MODE,
+    MODE_HOMING,
+    MODE_PROFILE_POSITION,
+    NMT_START,
+    OWNER,
+    OWNER_PID,
+    SW_TARGET_REACHED,
+    WALK,
+    Cia402,
+    dictionary,
+    drive_dictionary,
+    io_dictionary,
+    occupancy_bytes,
+)
 from bwsd.twin.machine import Machine
 
-CONTROLWORD, STATUSWORD, MODE, MODE_DISPLAY = 0x6040, 0x6041, 0x6060, 0x6061
-TARGET, POSITION, ERROR_CODE, HEARTBEAT = 0x607A, 0x6064, 0x603F, 0x1017
-OCCUPANCY, LAST_STROKE, DONE_SEQ, SETPOINT_SEQ, FAULT_CODE, ESTOP = range(0x2000, 0x2006)
-
-DRIVE_OBJECTS: dict[int, tuple[str, int, str]] = {
-    CONTROLWORD: ("controlword", UNSIGNED16, "rw"),
-    STATUSWORD: ("statusword", UNSIGNED16, "ro"),
-    MODE: ("modes of operation", INTEGER8, "rw"),
-    MODE_DISPLAY: ("modes of operation display", INTEGER8, "ro"),
-    TARGET: ("target position", INTEGER32, "rw"),
-    POSITION: ("position actual value", INTEGER32, "ro"),
-    ERROR_CODE: ("error code", UNSIGNED16, "ro"),
-    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
-    LAST_STROKE: ("last stroke", INTEGER32, "ro"),
-    DONE_SEQ: ("done sequence", UNSIGNED16, "ro"),
-    SETPOINT_SEQ: ("set-point sequence", UNSIGNED16, "rw"),
-    FAULT_CODE: ("fault code", UNSIGNED8, "ro"),
-}
-IO_OBJECTS: dict[int, tuple[str, int, str]] = {
-    OCCUPANCY: ("occupancy", DOMAIN, "ro"),
-    ESTOP: ("emergency stop", UNSIGNED8, "ro"),
-    HEARTBEAT: ("producer heartbeat time", UNSIGNED16, "rw"),
-}
-
-CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, CW_SWITCH_ON = 0x00, 0x02, 0x06, 0x07
-CW_ENABLE, CW_NEW_SETPOINT, CW_RELATIVE, CW_FAULT_RESET = 0x0F, 0x10, 0x40, 0x80
-SW_TARGET_REACHED, SW_SETPOINT_ACK = 0x0400, 0x1000
-MODE_PROFILE_POSITION, MODE_HOMING = 1, 6
-NMT_START = 0x01
-# CiA 402 error codes (0x603F) of the bus-independent fault codes (0x2004)
-ERROR_CODES = {1: 0x7500, 2: 0x8611, 3: 0x5530, 4: 0x8612, 5: 0x5441}
-
-
-class Cia402(IntEnum):
-    """The drive states, each as the value its statusword shows under the state's mask."""
-
-    SWITCH_ON_DISABLED = 0x40
-    READY_TO_SWITCH_ON = 0x21
-    SWITCHED_ON = 0x23
-    OPERATION_ENABLED = 0x27
-    QUICK_STOP_ACTIVE = 0x07
-    FAULT = 0x08
-
-    @property
-    def mask(self) -> int:
-        return 0x4F if self in (Cia402.SWITCH_ON_DISABLED, Cia402.FAULT) else 0x6F
-
-    @classmethod
-    def of(cls, statusword: int) -> Cia402 | None:
-        """The state a statusword shows (None: a transient state)."""
-        return next((s for s in cls if statusword & s.mask == s.value), None)
-
-
-# the controlword that moves a drive one step towards "operation enabled"
-WALK = {
-    Cia402.FAULT: CW_FAULT_RESET,
-    Cia402.SWITCH_ON_DISABLED: CW_SHUTDOWN,
-    Cia402.READY_TO_SWITCH_ON: CW_SWITCH_ON,
-    Cia402.SWITCHED_ON: CW_ENABLE,
-    Cia402.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,
-    None: CW_DISABLE_VOLTAGE,
-}
-
-
-def dictionary(objects: Mapping[int, tuple[str, int, str]], heartbeat: int = 0) -> ObjectDictionary:
-    """An object dictionary of ``objects`` (index: name, data type, access); defaults 0."""
-    od = ObjectDictionary()  # type: ignore[no-untyped-call]
-    for index, (name, data_type, access) in objects.items():
-        var = ODVariable(name, index, 0)
-        var.data_type, var.access_type = data_type, access
-        if data_type != DOMAIN:
-            var.default = heartbeat if index == HEARTBEAT else 0
-        od.add_object(var)
-    return od
-
-
-def occupancy_bytes(occupied: Iterable[Iterable[bool]]) -> bytes:
-    """The occupancy bitmap of 0x2000: row-major, least significant bit first."""
-    bits = np.array([bool(v) for row in occupied for v in row], dtype=np.bool_)
-    return np.packbits(bits, bitorder="little").tobytes()
+# the map's tables, as the tests and tools have always imported them from here
+__all__ = ["DRIVE_OBJECTS", "IO_OBJECTS", "CanopenBus", "Cia402", "dictionary", "occupancy_bytes"]
 
 
 class CanopenBus(Fieldbus):
@@ -146,10 +110,13 @@ class CanopenBus(Fieldbus):
         self.io_node = io_node
         self.heartbeat_ms = heartbeat_ms
         self._network: Network | None = None
+        self._sampler: SyncSampler | None = None
         self._nodes: dict[int, RemoteNode] = {}
         self._locks = {i: threading.Lock() for i in [*self.drive_ids, io_node]}
         self._seen: dict[int, float] = {}
-        self._watch: _LinkWatch | None = None
+        self._watch: LinkWatch | None = None
+        self._io_pdos = io_pdos(machine.rows * machine.cols)
+        self._statusword: dict[int, int] = {}  # each drive's, at the last SYNC
 
     @classmethod
     def from_config(cls, config: Config) -> CanopenBus:
@@ -174,15 +141,54 @@ class CanopenBus(Fieldbus):
         await self._teardown()
 
     async def _write_setpoint(self, axis: Axis, target: int, seq: int) -> None:
+        """A set-point by RPDO: controlword 0x0F, then 0x1F (0x5F relative) with the target
+        and sequence, so bit 4 rises; ``wait`` sees it taken (or refused) at the next SYNC."""
         await self._ready()
-        await self._gather([partial(self._setpoint, axis, target, seq)])
+        node = self.drive_ids[axis.index]
+        state = Cia402.of(self._statusword.get(node, 0))
+        if state is not Cia402.OPERATION_ENABLED and state is not Cia402.FAULT:
+            await self._gather([partial(self._enable, node, False)])
+        rpdo = self._nodes[node].rpdo[1]
+        start = CW_ENABLE | CW_NEW_SETPOINT | (CW_RELATIVE * axis.relative)
+        try:
+            for word in (CW_ENABLE, start):
+                rpdo[CONTROLWORD].raw, rpdo[TARGET].raw, rpdo[SETPOINT_SEQ].raw = word, target, seq
+                rpdo.transmit()
+        except (can.CanError, OSError) as exc:
+            await self._teardown()
+            raise FieldbusConnectionError(f"{self._name(node)}: CAN bus lost: {exc}") from exc
+        except (ValueError, struct.error) as exc:
+            raise FieldbusError(f"axis {axis.name}: target {target} does not fit: {exc}") from None
 
     async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
+        """One SYNC: the TPDOs of the axes asked for and of the I/O node, sampled together."""
         await self._ready()
+        sampler = self._sampler
+        assert sampler is not None
         wanted = list(range(len(self.axes))) if axes is None else sorted(set(axes))
-        calls = [partial(self._read_axis, i) for i in wanted]
-        *states, (occupancy, estop) = await self._gather([*calls, self._read_io])
-        return self._merge(dict(zip(wanted, states, strict=True)), occupancy, estop)
+        every = [(self.drive_ids[i], 2) for i in wanted]
+        every += [(self.io_node, pdo.number) for pdo in self._io_pdos]
+        kept = [(self.drive_ids[i], 1) for i in wanted]
+        try:
+            got = await sampler.sample(every, kept, self.settings.io_timeout)
+        except FieldbusTimeout as exc:
+            problem = self._link_problem()
+            if problem:
+                await self._teardown()
+                raise FieldbusConnectionError(f"{problem} ({exc})") from exc
+            raise
+        except (can.CanError, OSError) as exc:
+            await self._teardown()
+            raise FieldbusConnectionError(f"CAN bus lost: {exc}") from exc
+        read = {}
+        for i in wanted:
+            values = got[(self.drive_ids[i], 1)] | got[(self.drive_ids[i], 2)]
+            self._statusword[self.drive_ids[i]] = values[(STATUSWORD, 0)]
+            read[i] = self._axis_state(values)
+        io: dict[Entry, int] = {}
+        for pdo in self._io_pdos:
+            io |= got[(self.io_node, pdo.number)]
+        return self._merge(read, self._occupancy(io), bool(io[(ESTOP, 0)]))
 
     async def _quick_stop(self) -> None:
         await self._ready()
@@ -192,6 +198,11 @@ class CanopenBus(Fieldbus):
         await self._ready()
         await self._each(lambda node: self._enable(node, reset=True), self.drive_ids)
 
+    async def _claim(self, ident: int, pid: int) -> tuple[int, int] | None:
+        await self._ready()
+        result: tuple[int, int] | None = await asyncio.to_thread(self._claim_io, ident, pid)
+        return result
+
     async def _home(self) -> None:
         await self._ready()
         homed = [self.drive_ids[a.index] for a in self.axes if a.kind != "takeup"]
@@ -199,21 +210,21 @@ class CanopenBus(Fieldbus):
 
     # ----- connection -----
     def _connect_network(self) -> None:
-        """Open python-can, add the nodes and start them (blocking)."""
+        """Open python-can and add the nodes (blocking)."""
         network = Network()
         network.NOTIFIER_CYCLE = 0.1  # how long disconnect() waits for the receive thread
-        watch = _LinkWatch(network)
+        watch = LinkWatch(network)
         self._nodes = {i: self._add_node(network, i) for i in self._locks}
         try:
             network.bus = self._socketcand() if self.interface == "socketcand" else None
             network.connect(interface=self.interface, channel=self.channel)
             if network.notifier is not None:
                 network.notifier.add_listener(watch)
-            network.nmt.send_command(NMT_START)
         except (can.CanError, OSError, ValueError) as exc:
-            _shutdown(network)
+            shutdown(network)
             raise FieldbusConnectionError(f"cannot open the CAN bus: {exc}") from exc
         self._network, self._watch = network, watch
+        self._sampler = SyncSampler(network)
 
     def _socketcand(self) -> can.BusABC:
         where = f"socketcand at {self.host}:{self.port}"
@@ -222,15 +233,16 @@ class CanopenBus(Fieldbus):
         except OSError as exc:
             raise FieldbusConnectionError(f"cannot reach {where}: {exc}") from exc
         try:
-            return _Socketcand(  # type: ignore[no-untyped-call]
+            return Socketcand(  # type: ignore[no-untyped-call]
                 channel=self.channel, host=self.host, port=self.port, tcp_tune=True
             )
         except (can.CanError, OSError) as exc:
             raise FieldbusConnectionError(f"{where}: {exc}") from exc
 
     def _add_node(self, network: Network, node_id: int) -> RemoteNode:
-        objects = IO_OBJECTS if node_id == self.io_node else DRIVE_OBJECTS
-        node = RemoteNode(node_id, dictionary(objects))
+        cells = self.machine.rows * self.machine.cols
+        od = io_dictionary(cells) if node_id == self.io_node else drive_dictionary(node_id)
+        node = RemoteNode(node_id, od)
         node.sdo.RESPONSE_TIMEOUT = self.settings.io_timeout
         network.add_node(node)
         network.subscribe(0x700 + node_id, self._on_heartbeat)
@@ -266,7 +278,7 @@ class CanopenBus(Fieldbus):
     async def _teardown(self) -> None:
         network, self._network = self._network, None
         if network is not None:
-            await asyncio.to_thread(_shutdown, network)
+            await asyncio.to_thread(shutdown, network)
 
     # ----- running SDO work off the event loop -----
     async def _each(self, fn: Callable[[int], object], items: Iterable[int]) -> None:
@@ -315,10 +327,36 @@ class CanopenBus(Fieldbus):
         self._sdo(node_id, index, value)
 
     def _init_node(self, node_id: int) -> None:
+        """Heartbeat, the PDO mapping (written only where it differs: another master's
+        PDOs go on undisturbed), NMT start; a drive: profile position, operation enabled."""
         self._set(node_id, HEARTBEAT, self.heartbeat_ms)
-        if node_id != self.io_node:
+        drive = node_id != self.io_node
+        for pdo in drive_pdos(node_id) if drive else self._io_pdos:
+            self._map_pdo(node_id, pdo)
+        self._nodes[node_id].nmt.send_command(NMT_START)
+        if drive:
             self._set(node_id, MODE, MODE_PROFILE_POSITION)
             self._enable(node_id, reset=False)
+
+    def _map_pdo(self, node_id: int, pdo: Pdo) -> None:
+        node = self._nodes[node_id]
+        pdo_map = (node.rpdo if pdo.receive else node.tpdo)[pdo.number]
+        try:
+            with self._locks[node_id]:
+                pdo_map.read()
+                if layout(pdo_map) != wanted_layout(pdo):
+                    configure(pdo_map, pdo)
+        except SdoCommunicationError as exc:
+            raise FieldbusTimeout(f"{self._name(node_id)}: no answer while mapping its "
+                                  f"PDOs ({exc})") from exc  # fmt: skip
+        except SdoAbortedError as exc:
+            raise FieldbusError(f"{self._name(node_id)}: its PDO mapping was refused: "
+                                f"{exc}") from exc  # fmt: skip
+        if not pdo.receive and self._sampler is not None:
+            self._sampler.listen(node_id, pdo.number, pdo_map)
+            if pdo.trans_type == SYNC_ON_CHANGE:  # no PDO until it changes: read it now
+                values = {(i, s): self._get(node_id, i) for i, s in pdo.entries}
+                self._sampler.seed((node_id, pdo.number), values)
 
     def _enable(self, node_id: int, reset: bool) -> None:
         """Walk a drive to "operation enabled"; a faulted drive is left alone unless ``reset``."""
@@ -326,6 +364,7 @@ class CanopenBus(Fieldbus):
             statusword = self._get(node_id, STATUSWORD)
             state = Cia402.of(statusword)
             if state is Cia402.OPERATION_ENABLED or (state is Cia402.FAULT and not reset):
+                self._statusword[node_id] = statusword
                 return
             if state is Cia402.FAULT:
                 self._set(node_id, CONTROLWORD, CW_DISABLE_VOLTAGE)  # bit 7 acts on its rise
@@ -333,104 +372,48 @@ class CanopenBus(Fieldbus):
         axis = self.axes[self.drive_ids.index(node_id)]
         raise DriveFault(axis, FAULT_DRIVE, f"stays at statusword 0x{statusword:04X}, not enabled")
 
-    def _setpoint(self, axis: Axis, target: int, seq: int) -> None:
-        node = self.drive_ids[axis.index]
-        self._enable(node, reset=False)
-        self._set(node, TARGET, target)
-        self._set(node, SETPOINT_SEQ, seq)
-        self._set(node, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT | (CW_RELATIVE * axis.relative))
-        limit = time.monotonic() + self.settings.io_timeout
-        while True:
-            statusword = self._get(node, STATUSWORD)
-            enabled = Cia402.of(statusword) is Cia402.OPERATION_ENABLED
-            if statusword & SW_SETPOINT_ACK or not enabled:
-                break  # taken, or refused by a fault that wait() reports
-            if time.monotonic() > limit:
-                self._set(node, CONTROLWORD, CW_ENABLE)  # bit 4 low: the next set-point rises
-                if self._get(self.io_node, ESTOP):
-                    raise EStopError("emergency stop is pressed: no move started")
-                raise FieldbusTimeout(f"axis {axis.name}: set-point {seq} not acknowledged")
-        self._set(node, CONTROLWORD, CW_ENABLE)
+    def _claim_io(self, ident: int, pid: int) -> tuple[int, int] | None:
+        """The claim on the I/O node: its pid, then its id (refused by SDO abort)."""
+        self._set(self.io_node, OWNER_PID, pid)
+        try:
+            self._set(self.io_node, OWNER, ident)
+        except FieldbusError as exc:
+            if not isinstance(exc.__cause__, SdoAbortedError):
+                raise
+            return self._get(self.io_node, OWNER), self._get(self.io_node, OWNER_PID)
+        return None
 
     def _home_drive(self, node_id: int) -> None:
         self._enable(node_id, reset=False)
+        self._set(node_id, CONTROLWORD, CW_ENABLE)  # bit 4 low (a set-point's RPDO left it high)
         self._set(node_id, MODE, MODE_HOMING)
         self._set(node_id, CONTROLWORD, CW_ENABLE | CW_NEW_SETPOINT)  # bit 4 starts homing
         self._set(node_id, CONTROLWORD, CW_ENABLE)
         self._set(node_id, MODE, MODE_PROFILE_POSITION)
 
-    def _read_axis(self, index: int) -> AxisState:
-        node = self.drive_ids[index]
-        statusword = self._get(node, STATUSWORD)
-        fault = self._get(node, FAULT_CODE)
+    # ----- decoding a SYNC's sample -----
+    def _axis_state(self, values: dict[Entry, int]) -> AxisState:
+        statusword = values[(STATUSWORD, 0)]
+        fault = values[(FAULT_CODE, 0)]
         if not fault and Cia402.of(statusword) is Cia402.FAULT:
             fault = FAULT_DRIVE  # faulted for a reason of the drive's own
         return AxisState(
-            position=self._get(node, POSITION),
+            position=values[(POSITION, 0)],
             busy=not statusword & SW_TARGET_REACHED,
-            done_seq=self._get(node, DONE_SEQ),
+            done_seq=values[(DONE_SEQ, 0)],
             fault=fault,
-            last_stroke=self._get(node, LAST_STROKE),
+            last_stroke=values[(LAST_STROKE, 0)],
+            strokes=values[(STROKES, 0)],
         )
 
-    def _read_io(self) -> tuple[np.ndarray[Any, np.dtype[np.bool_]], bool]:
+    def _occupancy(self, io: dict[Entry, int]) -> np.ndarray[Any, np.dtype[np.bool_]]:
         rows, cols = self.machine.rows, self.machine.cols
-        data = self._sdo(self.io_node, OCCUPANCY)
-        if not isinstance(data, bytes | bytearray) or len(data) != (rows * cols + 7) // 8:
-            raise FieldbusError(f"I/O node: occupancy of {len(data)} bytes, {rows}x{cols} cells")
-        bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8), bitorder="little")
-        grid = bits[: rows * cols].astype(np.bool_).reshape(rows, cols)
-        return grid, bool(self._get(self.io_node, ESTOP))
+        words = [io[k] for k in sorted(k for k in io if k[0] == OCCUPANCY_WORDS)]
+        data = b"".join(w.to_bytes(4, "little") for w in words)
+        bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8), bitorder="little")
+        return bits[: rows * cols].astype(np.bool_).reshape(rows, cols)
 
     def _name(self, node_id: int) -> str:
         if node_id == self.io_node:
             return f"I/O node (node {node_id})"
         return f"axis {self.axes[self.drive_ids.index(node_id)].name} (node {node_id})"
-
-
-class _Socketcand(SocketCanDaemonBus):
-    """python-can's socketcand client, raising when the server closes the connection.
-
-    python-can 4.6 reads an empty string at the end of the stream and returns no message,
-    so its receive thread would spin at full speed on a closed connection.
-    """
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        msg, filtered = super()._recv_internal(timeout)  # type: ignore[no-untyped-call]
-        sock = getattr(self, "_SocketCanDaemonBus__socket", None)  # its private socket
-        if msg is None and isinstance(sock, socket.socket) and _at_end(sock):
-            raise can.CanOperationError("socketcand closed the connection")
-        return msg, filtered
-
-
-def _at_end(sock: socket.socket) -> bool:
-    """True when the peer has closed ``sock`` (readable, yet nothing to read)."""
-    try:
-        readable, _, _ = select.select([sock], [], [], 0)
-        return bool(readable) and not sock.recv(1, socket.MSG_PEEK)
-    except OSError:
-        return True
-
-
-class _LinkWatch(can.Listener):
-    """Keeps a receive error of the bus (a lost TCP link) and stops the receive thread."""
-
-    def __init__(self, network: Network) -> None:
-        self.network = network
-        self.error: Exception | None = None
-
-    def on_message_received(self, msg: can.Message) -> None:
-        pass
-
-    def on_error(self, exc: Exception) -> None:
-        self.error = exc
-        notifier = self.network.notifier
-        if notifier is not None:
-            # a thread cannot join itself; left running, it would spin on the dead socket
-            threading.Thread(target=notifier.stop, args=(1.0,), daemon=True).start()
-
-
-def _shutdown(network: Network) -> None:
-    """Disconnect; never raises (disconnect re-raises the receive thread's error last)."""
-    with contextlib.suppress(Exception):
-        network.disconnect()

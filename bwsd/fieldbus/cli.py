@@ -7,7 +7,9 @@
     bwsd hw reset --config C           clear faults and home the shift and weft axes
 
 Each exits non-zero with a clear message on any fault (status too, when an axis is faulted
-or the e-stop is pressed).
+or the e-stop is pressed). The commands that move (shift, takeup, reset) refuse while a
+`bwsd serve` holds the bus, naming it: its lock in the state folder (``--state-dir``, found
+as `bwsd serve` finds it), and its claim on the loom. ``status`` only reads and stays allowed.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ from bwsd.fieldbus.axes import (
     shift_stroke_um,
 )
 from bwsd.fieldbus.base import FAULT_NAMES
+from bwsd.fieldbus.owner import refuse_if_held
+from bwsd.paths import state_folder
 from bwsd.twin.machine import Machine
 
 Action = Callable[[Fieldbus, argparse.Namespace], Awaitable[MachineState]]
@@ -69,11 +73,15 @@ def configure(sub: Any) -> None:
     reset = cmds.add_parser("reset", help="clear faults and home the shift and weft axes")
     for parser, action in ((status, _status), (shift, _shift), (takeup, _takeup), (reset, _reset)):
         parser.add_argument("--config", required=True, help="machine config (TOML)")
+        parser.add_argument("--state-dir", help="the daemon's state folder, whose bus lock is "
+                            "checked (default: $STATE_DIRECTORY, else ./state)")  # fmt: skip
         parser.set_defaults(handler=lambda args, act=action: _run(args, act))
 
 
 def _run(args: argparse.Namespace, action: Action) -> int:
     config = load_config(args.config)
+    if action is not _status:
+        refuse_if_held(state_folder(args.state_dir, create=False))
     state = asyncio.run(_session(config, args, action))
     _print(config.machine, state, Console())
     faulted = [i for i, axis in enumerate(state.axes) if axis.fault]

@@ -10,10 +10,13 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import fields
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ModbusPDU
 
@@ -40,14 +43,20 @@ if TYPE_CHECKING:
     from bwsd.config import Config
 
 # ----- the register map (docs/fieldbus-modbus.md) -----
-MAP_VERSION = 2  # 2: registers +10 .. +13 of a shift axis's block say which cells it moves
+# 2: registers +10 .. +13 of a shift axis's block say which cells it moves;
+# 3: the claim (6 .. 9), the stroke counter (+14) and the status image after the axis blocks
+MAP_VERSION = 3
+MAP_VERSIONS = (2, 3)
 REG_VERSION, REG_AXES, REG_ROWS, REG_COLS, REG_STATUS, REG_COMMAND = range(6)
+REG_OWNER, OWNER_WORDS = 6, 4  # claim id (2 words), pid (2 words); map 3
 MACHINE_ESTOP, MACHINE_FAULTED, MACHINE_BUSY = 1, 2, 4  # bits of REG_STATUS
 CMD_NONE, CMD_RESET, CMD_QUICK_STOP, CMD_HOME = 0, 1, 2, 3
 AXIS_BASE, AXIS_STRIDE = MODBUS_AXIS_BASE, MODBUS_AXIS_STRIDE
 OFF_TARGET, OFF_SEQ, OFF_STATUS, OFF_POSITION, OFF_DONE, OFF_FAULT, OFF_LAST = 0, 2, 3, 4, 6, 7, 8
 OFF_SHAPE = 10  # +10 kind, +11 line, +12 first cell, +13 last cell (shift axes)
 SHAPE_WORDS = 4
+OFF_STROKES = 14  # map 3: set-points completed, mod 65536
+IMAGE_AXIS_WORDS = 8  # status, position (2), done, fault, last stroke (2), strokes
 SHAPE_KINDS = {"row": 1, "col": 2}  # other axes read 0 in all four
 AXIS_BUSY, AXIS_FAULTED, AXIS_HOMED = 1, 2, 4  # bits of OFF_STATUS
 SEQ_MAX = 0x7FFF
@@ -62,8 +71,19 @@ def axis_address(index: int) -> int:
     return AXIS_BASE + AXIS_STRIDE * index
 
 
+def image_words(cells: int, axes: int) -> int:
+    """Registers of the status image: machine status, occupancy, a record per axis."""
+    return 1 + occupancy_words(cells) + IMAGE_AXIS_WORDS * axes
+
+
+def occupancy_words(cells: int) -> int:
+    """Registers of the occupancy bits in the image, 16 a register, cell 0 in bit 0."""
+    return -(-cells // 16)
+
+
 def map_problem(machine: Machine) -> str:
-    """Why ``machine`` does not fit this map ("" when it does)."""
+    """Why ``machine`` does not fit this map ("" when it does); the status image of map 3
+    (input registers) always fits where the axis blocks do."""
     cells, axes = machine.rows * machine.cols, len(machine_axes(machine))
     if cells > MAX_CELLS:
         return (f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
@@ -113,6 +133,24 @@ def decode_axis(words: Sequence[int]) -> AxisState:
     )
 
 
+def decode_image(words: Sequence[int], rows: int, cols: int
+                 ) -> tuple[int, npt.NDArray[np.bool_], list[AxisState]]:  # fmt: skip
+    """The status image (or its first part: the axes it covers) as machine status, the
+    occupancy grid and the axes' states."""
+    n = occupancy_words(rows * cols)
+    packed = np.array(words[1 : 1 + n], dtype="<u2").view(np.uint8)
+    bits = np.unpackbits(packed, bitorder="little")[: rows * cols].astype(np.bool_)
+    axes = []
+    for at in range(1 + n, len(words) - IMAGE_AXIS_WORDS + 1, IMAGE_AXIS_WORDS):
+        record = words[at : at + IMAGE_AXIS_WORDS]
+        axes.append(AxisState(
+            position=words_int32(record[1], record[2]), busy=bool(record[0] & AXIS_BUSY),
+            done_seq=record[3], fault=record[4], last_stroke=words_int32(record[5], record[6]),
+            strokes=record[7],
+        ))  # fmt: skip
+    return words[0], bits.reshape(rows, cols), axes
+
+
 def read_spans(start: int, count: int, limit: int) -> list[tuple[int, int]]:
     """(address, count) requests covering ``count`` items from ``start``, ``limit`` each."""
     return [(a, min(limit, start + count - a)) for a in range(start, start + count, limit)]
@@ -136,9 +174,10 @@ Send = Callable[[AsyncModbusTcpClient], Awaitable[ModbusPDU]]
 class ModbusBus(Fieldbus):
     """The machine's actuators behind one Modbus TCP server (unit ``device_id``)."""
 
-    def __init__(
-        self, machine: Machine, settings: BusSettings, host: str, port: int, device_id: int
-    ) -> None:
+    def __init__(self, machine: Machine, settings: BusSettings, host: str, port: int,
+                 device_id: int, map_version: int = MAP_VERSION) -> None:  # fmt: skip
+        if map_version not in MAP_VERSIONS:
+            raise FieldbusError(f"Modbus map {map_version}: bwsd reads maps 2 and 3")
         problem = map_problem(machine)
         if problem:
             raise FieldbusError(problem)
@@ -146,18 +185,20 @@ class ModbusBus(Fieldbus):
         self.host = host
         self.port = port
         self.device_id = device_id
+        self.map_version = map_version
         self._client: AsyncModbusTcpClient | None = None
         self._lost = False  # the server closed the connection; not yet reported
 
     @classmethod
     def from_config(cls, config: Config) -> ModbusBus:
         """Build the bus from the tables [fieldbus] and [fieldbus.modbus]."""
+        bus, modbus = config.table("fieldbus"), config.table("fieldbus.modbus")
         problem = map_problem(config.machine)
         if problem:  # its cells are checked at load: more axes than the map has blocks
             raise ConfigError(problem, path=config.path, table="machine", key="segments")
-        bus, modbus = config.table("fieldbus"), config.table("fieldbus.modbus")
         settings = BusSettings(**{f.name: bus[f.name] for f in fields(BusSettings)})
-        return cls(config.machine, settings, modbus["host"], modbus["port"], modbus["device_id"])
+        return cls(config.machine, settings, modbus["host"], modbus["port"], modbus["device_id"],
+                   modbus["map"])  # fmt: skip
 
     @property
     def where(self) -> str:
@@ -195,7 +236,18 @@ class ModbusBus(Fieldbus):
             lambda c: c.write_registers(address, [high, low, seq], device_id=self.device_id),
         )
 
+    async def _write_setpoints(self, setpoints: Sequence[tuple[Axis, int, int]]) -> None:
+        """Every set-point's request sent at once (one round trip for a whole shift); the
+        first error is raised once all are answered."""
+        done = await asyncio.gather(*(self._write_setpoint(*sp) for sp in setpoints),
+                                    return_exceptions=True)  # fmt: skip
+        for result in done:
+            if isinstance(result, BaseException):
+                raise result
+
     async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
+        if self.map_version >= 3:
+            return await self._read_image(axes)
         wanted = range(len(self.axes)) if axes is None else sorted(set(axes))
         groups = _runs(wanted)
         cells = self.machine.rows * self.machine.cols
@@ -213,6 +265,30 @@ class ModbusBus(Fieldbus):
         }
         grid = np.array(bits[:cells], dtype=np.bool_).reshape(self.machine.rows, self.machine.cols)
         return self._merge(read, grid, bool(bits[cells]))
+
+    async def _read_image(self, axes: Sequence[int] | None) -> MachineState:
+        """Map 3: the status image (input registers from 0) up to the last axis asked for, in
+        one request where the protocol's 125 registers allow it (more, sent at once, where
+        not)."""
+        last = len(self.axes) - 1 if axes is None else max(axes, default=-1)
+        count = image_words(self.machine.rows * self.machine.cols, last + 1)
+        spans = read_spans(0, count, MAX_READ_REGISTERS)
+        done = await asyncio.gather(*(self._request(a, self._image(a, n)) for a, n in spans))
+        words = [w for response, (_, n) in zip(done, spans, strict=True)
+                 for w in response.registers[:n]]  # fmt: skip
+        status, grid, read = decode_image(words, self.machine.rows, self.machine.cols)
+        return self._merge(dict(enumerate(read)), grid, bool(status & MACHINE_ESTOP))
+
+    async def _claim(self, ident: int, pid: int) -> tuple[int, int] | None:
+        if self.map_version < 3:
+            return None  # map 2 has no claim: the state folder's lock is the only check
+        words = [*divmod(ident, 0x10000), *divmod(pid, 0x10000)]
+        claim = partial(self._write, REG_OWNER, words)
+        response = await self._request(REG_OWNER, claim, refusals=(ExcCodes.DEVICE_BUSY,))
+        if not response.isError():
+            return None
+        held = await self._read_registers(REG_OWNER, OWNER_WORDS)
+        return (held[0] << 16) | held[1], (held[2] << 16) | held[3]
 
     async def _quick_stop(self) -> None:
         await self._machine_command(CMD_QUICK_STOP)
@@ -254,11 +330,20 @@ class ModbusBus(Fieldbus):
     def _holding(self, address: int, count: int) -> Send:
         return lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id)
 
+    def _write(self, address: int, words: list[int], client: AsyncModbusTcpClient
+               ) -> Awaitable[ModbusPDU]:  # fmt: skip
+        return client.write_registers(address, words, device_id=self.device_id)
+
+    def _image(self, address: int, count: int) -> Send:
+        return lambda c: c.read_input_registers(address, count=count, device_id=self.device_id)
+
     def _inputs(self, address: int, count: int) -> Send:
         return lambda c: c.read_discrete_inputs(address, count=count, device_id=self.device_id)
 
-    async def _request(self, address: int, send: Send) -> ModbusPDU:
-        """One request, its failures mapped to our errors by phase."""
+    async def _request(self, address: int, send: Send,
+                       refusals: tuple[int, ...] = ()) -> ModbusPDU:  # fmt: skip
+        """One request, its failures mapped to our errors by phase; an exception response
+        with a code of ``refusals`` is returned to the caller."""
         client = await self._ready()
         try:
             response = await send(client)
@@ -279,7 +364,7 @@ class ModbusBus(Fieldbus):
         except asyncio.CancelledError:
             self._drop()
             raise
-        if response.isError():
+        if response.isError() and response.exception_code not in refusals:
             raise FieldbusError(
                 f"{self.where}: address {address} refused "
                 f"(exception code {response.exception_code})"
@@ -308,7 +393,7 @@ class ModbusBus(Fieldbus):
     async def _check_map(self) -> None:
         """Refuse a server whose map or machine differs from ours, segments included."""
         words = await self._read_registers(REG_VERSION, REG_COLS + 1)
-        want = [MAP_VERSION, len(self.axes), self.machine.rows, self.machine.cols]
+        want = [self.map_version, len(self.axes), self.machine.rows, self.machine.cols]
         if words != want:
             self._drop()
             raise FieldbusError(

@@ -9,6 +9,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 
+import can
 import numpy as np
 import pytest
 
@@ -26,6 +27,7 @@ from bwsd.fieldbus.base import (
     FieldbusTimeout,
 )
 from bwsd.fieldbus.canopen import CanopenBus, occupancy_bytes
+from bwsd.fieldbus.canopen_pdo import Pdo, configure, drive_pdos, layout, wanted_layout
 from bwsd.twin import Machine
 from simulator_hw.canopen_drives import CanopenLoom
 from simulator_hw.loom import Loom, Speeds
@@ -145,11 +147,12 @@ def test_estop_refuses_moves_and_cuts_a_running_one():
     async def scenario() -> None:
         async with rig(speeds=Speeds(stroke=20)) as r:
             await r.bus.move([AxisMove(ROW0, 10_000)])
+            assert (await r.bus.state()).axes[ROW0].busy  # the RPDO went before this SYNC
             r.loom.press_estop(True, time.monotonic())
             with pytest.raises(EStopError):
                 await r.bus.wait([ROW0])
-            with pytest.raises(EStopError):
-                await r.bus.move([AxisMove(ROW1, -10_000)])
+            with pytest.raises(EStopError):  # the set-point goes out; the next SYNC tells
+                await r.bus.execute([AxisMove(ROW1, -10_000)])
             assert (await r.bus.state()).axes[ROW0].fault == 5
             r.loom.press_estop(False, time.monotonic())
             await r.bus.reset_faults()
@@ -286,3 +289,66 @@ def test_from_config_takes_both_tables():
 def test_occupancy_bitmap_is_row_major_lsb_first():
     grid = [[True, False, False], [False, False, True]] * 2  # cells 0, 5, 6, 11
     assert occupancy_bytes(grid) == bytes([0b01100001, 0b00001000])
+
+
+class Sniffer:
+    """Every frame on the mock loom's side of the hub, by a plain python-can bus."""
+
+    def __init__(self, channel: str) -> None:
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.frames: list[can.Message] = []
+
+    def drain(self) -> list[can.Message]:
+        while (msg := self.bus.recv(0)) is not None:
+            self.frames.append(msg)
+        frames, self.frames = self.frames, []
+        return frames
+
+
+def test_a_shift_and_its_read_back_go_by_pdo_not_sdo():
+    async def scenario() -> None:
+        async with rig() as r:
+            sniffer = Sniffer(r.hub.local_channel)
+            try:
+                await r.bus.claim()  # by SDO, renewed at most every 0.5 s: not per move
+                sniffer.drain()
+                state = await r.bus.execute([AxisMove(ROW0, 10_000)])
+                assert occupied(state) == {(0, 1), (1, 2)}
+                await asyncio.sleep(0.05)  # let the last frames reach the sniffer
+                ids = [m.arbitration_id for m in sniffer.drain()]
+            finally:
+                sniffer.bus.shutdown()
+            assert [i for i in ids if 0x580 <= i < 0x680] == []  # no SDO either way
+            assert ids.count(0x200 + 3 + ROW0) == 2  # RPDO1: bit 4 low, then high
+            syncs = ids.count(0x80)
+            assert syncs >= 1
+            assert ids.count(0x280 + 3 + ROW0) == ids.count(0x381) == syncs  # every SYNC
+            assert ids.count(0x180 + 3 + ROW0) == 1  # on change: the stroke counted once
+            assert ids.count(0x180 + 3 + ROW1) == 0  # row 1 did not move
+
+    run(scenario)
+
+
+def test_the_mapping_is_written_at_start_and_the_drives_send_what_it_says():
+    async def scenario() -> None:
+        async with rig() as r:
+            drive = r.drives.drives[ROW0].node
+            for pdo in drive_pdos(3 + ROW0):
+                pdo_map = (drive.rpdo if pdo.receive else drive.tpdo)[pdo.number]
+                assert layout(pdo_map) == wanted_layout(pdo)
+            master = r.bus._nodes[3 + ROW0]  # remapped as another master could
+            statusword_only = Pdo(False, 1, 0x180 + 3 + ROW0, 1, ((0x6041, 0),))
+            await asyncio.to_thread(configure, master.tpdo[1], statusword_only)
+            sniffer = Sniffer(r.hub.local_channel)
+            try:
+                sniffer.drain()
+                master.network.sync.transmit()
+                await asyncio.sleep(0.1)
+                sent = {m.arbitration_id: bytes(m.data) for m in sniffer.drain()}
+            finally:
+                sniffer.bus.shutdown()
+            assert len(sent[0x180 + 3 + ROW0]) == 2  # the statusword alone, as mapped
+            assert int.from_bytes(sent[0x180 + 3 + ROW0], "little") & 0x6F == 0x27
+            assert len(sent[0x280 + 3 + ROW1]) == 8  # the others keep bwsd's mapping
+
+    run(scenario)

@@ -95,3 +95,38 @@ def test_a_segment_is_shifted_by_its_own_axis(tmp_path, backend):
         assert bad.returncode == 2 and "'1[0..]' is not a line (3) or a segment" in bad.stderr
     finally:
         mock.stop()
+
+
+def test_moves_are_refused_while_a_daemon_runs_a_program_and_status_is_not(tmp_path, mock):
+    from bwsd.api.auth import TokenStore
+    from tests.test_daemon import TEXT, Served, daemon_config
+
+    state = tmp_path / "state"
+    state.mkdir()
+    token = TokenStore.load(state / "tokens.json").add("tester", "operator")
+    daemon = daemon_config(tmp_path, mock)
+    served = Served(daemon, state, token)
+    config = hw_config(tmp_path, mock, "modbus")
+    try:
+        served.http.post("/programs", json={"name": "b.bws", "text": TEXT}).raise_for_status()
+        served.command("reset")
+        served.command("start")
+        pid = served.proc.pid
+        shift = hw(config, "shift", "row", "1", "1", "--state-dir", str(state))
+        assert shift.returncode == 2, shift.stdout
+        assert f"held by bwsd serve (pid {pid}, config {daemon.resolve()}" in shift.stderr
+        for args in (("takeup", "1"), ("reset",)):
+            refused = hw(config, *args, "--state-dir", str(state))
+            assert refused.returncode == 2 and f"pid {pid}" in refused.stderr
+        assert hw(config, "status", "--state-dir", str(state)).returncode in (0, 1)
+        elsewhere = hw(config, "shift", "row", "1", "1", "--state-dir", str(tmp_path / "other"))
+        assert elsewhere.returncode == 2  # another folder: the loom itself refuses
+        assert f"the loom is held by another client: pid {pid}" in elsewhere.stderr
+        final = served.wait_for({"Complete", "Held", "Aborted"})
+        assert final["name"] == "Complete", final["reason"]  # nothing moved under it
+    finally:
+        served.stop()
+    done = hw(config, "status", "--state-dir", str(state))
+    assert done.returncode == 0 and "held" not in done.stderr
+    moved = hw(config, "takeup", "1", "--state-dir", str(state))  # free again once it stops
+    assert moved.returncode == 0, moved.stderr

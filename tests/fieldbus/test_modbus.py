@@ -52,11 +52,11 @@ def stroke(name: str, cells: int, machine: Machine = MACHINE) -> AxisMove:
 
 @asynccontextmanager
 async def rig(
-    loom: Loom, settings: BusSettings = SETTINGS, device_id: int = 1
+    loom: Loom, settings: BusSettings = SETTINGS, device_id: int = 1, version: int = 3
 ) -> AsyncIterator[tuple[ModbusBus, ModbusLoomServer]]:
-    server = ModbusLoomServer(loom, HOST, 0, device_id)
+    server = ModbusLoomServer(loom, HOST, 0, device_id, version)
     await server.start()
-    bus = ModbusBus(loom.machine, settings, HOST, server.port, device_id)
+    bus = ModbusBus(loom.machine, settings, HOST, server.port, device_id, version)
     try:
         yield bus, server
     finally:
@@ -295,7 +295,7 @@ def test_a_loom_of_another_machine_is_refused():
     async def scenario() -> None:
         async with rig(Loom(other, [], Speeds())) as (_, server):
             bus = ModbusBus(MACHINE, SETTINGS, HOST, server.port, 1)
-            with pytest.raises(FieldbusError, match=r"expected \[2, 9, 3, 3\]"):
+            with pytest.raises(FieldbusError, match=r"expected \[3, 9, 3, 3\]"):
                 await bus.connect()
 
     asyncio.run(scenario())
@@ -355,3 +355,86 @@ def test_a_loom_whose_segments_differ_is_refused():
             await bus.close()
 
     asyncio.run(scenario())
+
+
+class RequestCounter:
+    """A TCP relay between a client and the server that counts the Modbus requests."""
+
+    def __init__(self, port: int) -> None:
+        self.port, self.requests = port, 0
+        self.server: asyncio.Server | None = None
+
+    async def start(self) -> int:
+        self.server = await asyncio.start_server(self._relay, HOST, 0)
+        return int(self.server.sockets[0].getsockname()[1])
+
+    async def _relay(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        up_reader, up_writer = await asyncio.open_connection(HOST, self.port)
+
+        async def upstream() -> None:
+            while header := await reader.readexactly(6):  # MBAP: length in bytes 4, 5
+                body = await reader.readexactly(int.from_bytes(header[4:6], "big"))
+                self.requests += 1
+                up_writer.write(header + body)
+
+        async def downstream() -> None:
+            while data := await up_reader.read(4096):
+                writer.write(data)
+
+        try:
+            await asyncio.gather(upstream(), downstream())
+        except (asyncio.IncompleteReadError, ConnectionError):
+            pass
+        finally:
+            writer.close()
+            up_writer.close()
+
+
+@pytest.mark.parametrize(
+    ("version", "requests"), [(3, 1), (2, 3)]
+)  # 2: 144 registers and the inputs
+def test_map_3_reads_the_axes_occupancy_and_estop_in_one_request(version, requests):
+    loom = Loom(MACHINE, [(0, 0), (1, 1)], Speeds())
+
+    async def scenario() -> None:
+        server = ModbusLoomServer(loom, HOST, 0, 1, version)
+        await server.start()
+        counter = RequestCounter(server.port)
+        bus = ModbusBus(MACHINE, SETTINGS, HOST, await counter.start(), 1, version)
+        try:
+            await bus.connect()
+            await bus.execute([stroke("row0", 1)])
+            before = counter.requests
+            state = await bus.state()
+            assert counter.requests - before == requests
+            assert state.occupancy.tolist() == [[0, 1, 0], [0, 1, 0], [0, 0, 0]]
+            assert not state.estop and state.axes[ROW0].done_seq == 1
+            assert state.axes[ROW0].strokes == (1 if version == 3 else None)
+            loom.press_estop(True, time.monotonic())
+            assert (await bus.state()).estop
+        finally:
+            await bus.close()
+            await server.stop()
+
+    asyncio.run(scenario())
+
+
+def test_a_map_2_loom_is_read_when_the_config_asks_for_map_2():
+    async def scenario() -> None:
+        async with rig(Loom(MACHINE, [(0, 0)], Speeds()), version=2) as (bus, server):
+            await bus.connect()
+            state = await bus.execute([stroke("row0", 2)])
+            assert state.occupancy[0].tolist() == [False, False, True]
+            newer = ModbusBus(MACHINE, SETTINGS, HOST, server.port, 1)  # map 3 by default
+            with pytest.raises(FieldbusError, match=r"are \[2, 9, 3, 3\], expected \[3, 9, 3, 3\]"):
+                await newer.connect()
+
+    asyncio.run(scenario())
+
+
+def test_the_map_key_is_checked_at_load():
+    machine = {"rows": 3, "cols": 3, "pitch_x": 10, "pitch_y": 12, "d_mat": 100, "c_mat": 0.5}
+    config = parse_config({"machine": machine, "fieldbus": {"modbus": {"map": 2}}})
+    assert ModbusBus.from_config(config).map_version == 2
+    with pytest.raises(Exception, match=r"\[fieldbus\.modbus\.map\]"):
+        parse_config({"machine": machine, "fieldbus": {"modbus": {"map": 1}}})

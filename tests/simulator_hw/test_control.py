@@ -44,7 +44,12 @@ def test_server_answers_json_lines():
         try:
             answer = await request("127.0.0.1", server.port, {"cmd": "state"})
             assert answer["ok"] and answer["occupancy"] == [[0, 0], [0, 1]]
-            assert answer["axes"]["takeup"] == {"position": 0, "busy": False, "fault": 0}
+            assert answer["axes"]["takeup"] == {
+                "position": 0,
+                "busy": False,
+                "fault": 0,
+                "strokes": 0,
+            }
             reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
             writer.write(b"{not json\n")
             await writer.drain()

@@ -12,7 +12,14 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusIOException
 
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_STALL, FieldbusError
-from bwsd.fieldbus.modbus import MAP_VERSION, axis_address, int32_words, words_int32
+from bwsd.fieldbus.modbus import (
+    MAP_VERSION,
+    axis_address,
+    decode_image,
+    image_words,
+    int32_words,
+    words_int32,
+)
 from bwsd.twin import Machine
 from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
@@ -27,8 +34,9 @@ LIMIT = 3.0  # s: a bound for waiting, never an expected duration
 
 
 @asynccontextmanager
-async def serving(loom: Loom, device_id: int = 1) -> AsyncIterator[ModbusLoomServer]:
-    server = ModbusLoomServer(loom, "127.0.0.1", 0, device_id)
+async def serving(loom: Loom, device_id: int = 1,
+                  version: int = MAP_VERSION) -> AsyncIterator[ModbusLoomServer]:  # fmt: skip
+    server = ModbusLoomServer(loom, "127.0.0.1", 0, device_id, version)
     await server.start()
     try:
         yield server
@@ -206,10 +214,12 @@ def test_bad_requests_get_exception_responses():
             await client.write_registers(axis_address(ROW0), [0, CELL_UM, 0], device_id=1),
             await client.write_register(axis_address(ROW0) + 3, 1, device_id=1),  # read-only
             await client.write_register(0, 2, device_id=1),  # read-only
-            await client.read_holding_registers(6, count=1, device_id=1),  # between blocks
+            await client.read_holding_registers(10, count=1, device_id=1),  # between blocks
             await client.read_holding_registers(axis_address(N), count=1, device_id=1),
             await client.read_coils(0, count=1, device_id=1),
-            await client.read_input_registers(0, count=1, device_id=1),
+            await client.read_input_registers(image_words(16, N), count=1, device_id=1),  # past
+            await client.write_registers(6, [0, 0, 0, 7], device_id=1),  # a claim without id
+            await client.write_registers(6, [0, 1], device_id=1),  # half a claim
         ]
         assert [r.isError() for r in refused] == [True] * len(refused)
         assert [r.exception_code for r in refused[:2]] == [3, 3]  # illegal value
@@ -308,3 +318,75 @@ def test_inputs_read_one_at_a_time_are_current():
         assert await bits(client, 23, 1) == [True]
 
     on_loom(loom, test)
+
+
+async def image(client: AsyncModbusTcpClient) -> list[int]:
+    response = await client.read_input_registers(0, count=image_words(6, N), device_id=1)
+    assert not response.isError(), response
+    return list(response.registers)
+
+
+def test_map_3_reads_axes_occupancy_and_estop_in_one_request():
+    loom = Loom(MACHINE, [(0, 0), (1, 2)], Speeds())
+
+    async def test(client: AsyncModbusTcpClient) -> None:
+        assert image_words(6, N) == 1 + 1 + 8 * N  # 6 cells fit in one register
+        await set_point(client, ROW0, CELL_UM, 1)
+        await set_point(client, TAKEUP, 2_500, 1)
+        status, grid, axes = decode_image(await image(client), 2, 3)
+        assert grid.tolist() == [[False, True, False], [False, False, True]]
+        assert status & 1 == 0 and len(axes) == N
+        assert (axes[ROW0].done_seq, axes[ROW0].last_stroke, axes[ROW0].strokes) == (1, CELL_UM, 1)
+        assert (axes[TAKEUP].position, axes[TAKEUP].strokes, axes[ROW1].strokes) == (2_500, 1, 0)
+        block = await axis(client, ROW0)
+        assert block[14] == 1  # the stroke counter in the axis block too
+        loom.press_estop(True, time.monotonic())
+        status, _, _ = decode_image(await image(client), 2, 3)
+        assert status & 1 == 1
+
+    on_loom(loom, test)
+
+
+def test_homing_keeps_the_stroke_counter():
+    loom = Loom(MACHINE, [(0, 0)], Speeds())
+
+    async def test(client: AsyncModbusTcpClient) -> None:
+        await set_point(client, WEFT_ANGLE + 1, 60_000, 1)  # the insert
+        assert (await client.write_register(5, 3, device_id=1)).isError() is False  # home
+        _, _, axes = decode_image(await image(client), 2, 3)
+        assert (axes[WEFT_ANGLE + 1].done_seq, axes[WEFT_ANGLE + 1].strokes) == (0, 1)
+
+    on_loom(loom, test)
+
+
+def test_a_claim_is_refused_while_another_client_holds_the_loom():
+    loom = Loom(MACHINE, [], Speeds())
+
+    async def test(client: AsyncModbusTcpClient) -> None:
+        mine, theirs = [0, 0x1234, 0, 4242], [0, 0x9999, 0, 777]
+        assert not (await client.write_registers(6, mine, device_id=1)).isError()
+        refused = await client.write_registers(6, theirs, device_id=1)
+        assert refused.isError() and refused.exception_code == 6  # device busy
+        assert await regs(client, 6, 4) == mine  # names the holder
+        assert not (await client.write_registers(6, mine, device_id=1)).isError()  # renewed
+        assert not (await client.write_registers(6, [0, 0x1234, 0, 0], device_id=1)).isError()
+        assert await regs(client, 6, 4) == [0, 0, 0, 0]  # let go
+        assert not (await client.write_registers(6, theirs, device_id=1)).isError()
+        loom.owner.claimed -= 10  # the holder went silent longer than the lease
+        assert not (await client.write_registers(6, mine, device_id=1)).isError()
+
+    on_loom(loom, test)
+
+
+def test_map_2_is_still_served_when_asked_for():
+    async def scenario() -> None:
+        async with serving(Loom(MACHINE, [(0, 0)], Speeds()), version=2) as server, \
+                client_of(server) as client:  # fmt: skip
+            assert (await regs(client, 0, 4)) == [2, N, 2, 3]
+            assert (await client.read_input_registers(0, count=1, device_id=1)).isError()
+            assert (await client.read_holding_registers(6, count=1, device_id=1)).isError()
+            await set_point(client, ROW0, CELL_UM, 1)
+            assert (await axis(client, ROW0))[14] == 0  # reserved in map 2
+            assert (await inputs(client))[:3] == [False, True, False]
+
+    asyncio.run(scenario())
