@@ -17,6 +17,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bwsd.export.cli import configure as configure_export
     from bwsd.fieldbus.cli import configure as configure_hw
     from bwsd.journal.cli import configure as configure_journal
+    from bwsd.opcua.cli import configure as configure_opcua
     from bwsd.program.cli import configure as configure_program
     from bwsd.sweep.cli import configure as configure_sweep
 
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     configure_hw(sub)
     configure_journal(sub)
     configure_sweep(sub)
+    configure_opcua(sub)
     return parser
 
 

@@ -123,6 +123,18 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "allow": Text("127.0.0.1 ::1"),
         "read_only": Flag(False),
     },
+    "opcua": {
+        "enabled": Flag(False),
+        "host": Text("127.0.0.1"),
+        "port": Num(int, 0, 65535, 4840),
+        "policy": Text(
+            "Basic256Sha256", ("Basic256Sha256", "Aes128Sha256RsaOaep", "Aes256Sha256RsaPss")
+        ),
+        "mode": Text("SignAndEncrypt", ("SignAndEncrypt", "Sign")),
+        "allow_none": Flag(False),
+        "anonymous": Flag(False),
+        "folder": Text("opcua"),
+    },
     "simulator": {
         "host": Text("127.0.0.1"),
         "modbus_port": Num(int, 0, 65535, 15020),

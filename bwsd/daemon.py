@@ -77,6 +77,7 @@ async def start(config: Config, state_dir: Path) -> Daemon:
         log.info("%s", controller.begin_recovery())
         await _serve_api(daemon)
         await _serve_plc(daemon)
+        await _serve_opcua(daemon)
         watch = asyncio.create_task(controller.watch(), name="bwsd-watch")
         daemon._tasks.append(watch)
         daemon._closers.append(watch.cancel)
@@ -138,6 +139,17 @@ async def _serve_plc(daemon: Daemon) -> None:
     await tags.start()
     daemon.urls["plc"] = f"modbus-tcp://{table['host']}:{tags.port}"
     daemon._closers.append(tags.stop)
+
+
+async def _serve_opcua(daemon: Daemon) -> None:
+    from bwsd.opcua import opcua_server
+
+    server = opcua_server(daemon.controller, daemon.config, daemon.state_dir)
+    if server is None:
+        return
+    daemon._closers.append(server.stop)  # a start that fails half way is stopped too
+    await server.start()
+    daemon.urls["opcua"] = server.url
 
 
 async def stop(daemon: Daemon) -> None:

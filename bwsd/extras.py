@@ -3,7 +3,8 @@
 The core (the twin, the daemon, its API, the Modbus backend) needs none of them. The
 extras of the package bring them: ``export`` (VTK, TexGen's pytexgen, matplotlib) for the
 .vtp, .vtu and .tg3 exports and ``bwsd slice``; ``canopen`` (canopen, python-can) for the
-CANopen backend and the mock loom's CANopen drives.
+CANopen backend and the mock loom's CANopen drives; ``opcua`` (asyncua) for the OPC UA
+server.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 
 from bwsd.errors import BwsdError, ExtraMissingError
 
-__all__ = ["CANOPEN", "MATPLOTLIB", "TEXGEN", "VTK", "Library", "missing_message", "needs"]
+__all__ = ["CANOPEN", "MATPLOTLIB", "OPCUA", "TEXGEN", "VTK", "Library", "missing_message", "needs"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,7 @@ VTK = Library("VTK", ("vtkmodules", "vtk"), "export")
 TEXGEN = Library("TexGen (pytexgen)", ("pytexgen",), "export")
 MATPLOTLIB = Library("matplotlib", ("matplotlib",), "export")
 CANOPEN = Library("canopen and python-can", ("canopen", "can"), "canopen")
+OPCUA = Library("asyncua", ("asyncua",), "opcua")
 
 
 def missing_message(what: str, library: Library) -> str:

@@ -38,6 +38,11 @@ def tokens_file(config: Config, state_dir: Path) -> Path:
     return _within(state_dir, config.table("api")["tokens_file"])
 
 
+def opcua_folder(config: Config, state_dir: Path) -> Path:
+    """The OPC UA server's certificate, ``trusted/`` and ``rejected/`` (``[opcua] folder``)."""
+    return _within(state_dir, config.table("opcua")["folder"])
+
+
 def journal_file(config: Config, state_dir: Path) -> Path:
     """The journal (``[journal] path``); a relative path starts at ``state_dir``."""
     return _within(state_dir, config.table("journal")["path"])

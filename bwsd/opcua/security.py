@@ -1,0 +1,225 @@
+"""OPC UA security: the server's certificate, trusted clients, users and what each role may do.
+
+- The server certificate and key live in the state folder (``opcua/``), made on first start
+  (RSA 2048, self-signed, valid for a year, the application URI and host in its names).
+- A client's certificate must be in the trust folder; one that is not is refused
+  (Bad_CertificateUntrusted) and copied into ``rejected/``, where an integrator finds it to
+  move into ``trusted/``. The trust folder is read at every new session.
+- Users are the API's tokens: user name = the token's name, password = the token; the
+  token's role is the user's (viewer reads, operator commands, admin changes the mode).
+- Nobody edits the address space; a write or a call needs the role of every node it names.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import logging
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from asyncua import ua
+from asyncua.common.utils import Buffer, ServiceError
+from asyncua.crypto import cert_gen
+from asyncua.crypto.permission_rules import USER_TYPES, PermissionRuleset, User, UserRole
+from asyncua.crypto.security_policies import SecurityPolicyFactory, SecurityPolicyNone
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.ua.ua_binary import struct_from_binary
+from cryptography import x509
+from cryptography.hazmat.primitives.serialization import Encoding
+from cryptography.x509.oid import ExtendedKeyUsageOID
+
+from bwsd.api.auth import RANK, Role, TokenStore
+from bwsd.errors import BwsdError
+from bwsd.logs import Summary
+from bwsd.opcua.space import standard_id, status
+
+log = logging.getLogger(__name__)
+CERT_FILE = "server-cert.der"
+KEY_FILE = "server-key.pem"
+CERT_DAYS = 365
+REFUSED_LOGIN = Summary(log, "refused OPC UA logins")
+REFUSED_CERT = Summary(log, "refused OPC UA client certificates")
+
+_WRITE = standard_id(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
+_CALL = standard_id(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+_ALLOWED = frozenset(standard_id(t) for t in USER_TYPES)
+
+
+class OpcUaError(BwsdError):
+    """The OPC UA server cannot start, or its certificate cannot be made or read."""
+
+
+def application_uri(host: str | None = None) -> str:
+    """The server's application URI: in its certificate and in its endpoints."""
+    return f"urn:{host or socket.gethostname()}:bwsd"
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The server's certificate and key files, and what a client checks of them."""
+
+    cert: Path
+    key: Path
+
+    def load(self) -> x509.Certificate:
+        return x509.load_der_x509_certificate(self.cert.read_bytes())
+
+    def thumbprint(self) -> str:
+        """SHA-1 of the DER certificate, as OPC UA clients show it (hex, colon-separated)."""
+        digest = hashlib.sha1(self.cert.read_bytes(), usedforsecurity=False).hexdigest()
+        return ":".join(digest[i : i + 2] for i in range(0, len(digest), 2)).upper()
+
+    def describe(self) -> str:
+        cert = self.load()
+        return (f"certificate {self.cert}\n  thumbprint (SHA-1) {self.thumbprint()}\n"
+                f"  subject {cert.subject.rfc4514_string()}\n"
+                f"  valid {cert.not_valid_before_utc:%Y-%m-%d} to "
+                f"{cert.not_valid_after_utc:%Y-%m-%d}")  # fmt: skip
+
+
+def certificate(folder: Path, *, renew: bool = False) -> Certificate:
+    """The server certificate in ``folder``, made when missing (or when ``renew``)."""
+    found = Certificate(folder / CERT_FILE, folder / KEY_FILE)
+    if found.cert.exists() and found.key.exists() and not renew:
+        return found
+    try:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        key = cert_gen.generate_private_key()
+        host = socket.gethostname()
+        names = [x509.UniformResourceIdentifier(application_uri(host)), x509.DNSName(host),
+                 x509.DNSName("localhost")]  # fmt: skip
+        cert = cert_gen.generate_self_signed_app_certificate(
+            key, f"bwsd@{host}", {"organizationName": "bwsd"}, names,
+            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_DAYS,
+        )  # fmt: skip
+        _write_private(found.key, cert_gen.dump_private_key_as_pem(key))
+        found.cert.write_bytes(cert.public_bytes(Encoding.DER))
+    except OSError as exc:
+        raise OpcUaError(f"{folder}: cannot write the server certificate: {exc}") from exc
+    log.info("OPC UA server certificate made: %s", found.thumbprint())
+    return found
+
+
+def _write_private(path: Path, data: bytes) -> None:
+    path.unlink(missing_ok=True)
+    path.touch(mode=0o600)
+    path.write_bytes(data)
+
+
+# ----- users -----
+@dataclass
+class LoomUser(User):
+    """An asyncua user carrying the bwsd role (asyncua's own role stays User: no admin)."""
+
+    bwsd_role: Role = "viewer"
+
+
+class TokenUsers:
+    """asyncua's user manager on the API's token store."""
+
+    def __init__(self, tokens: TokenStore, anonymous: bool) -> None:
+        self.tokens = tokens
+        self.anonymous = anonymous
+
+    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
+                 certificate: Any = None) -> User | None:  # fmt: skip
+        if username is None:  # anonymous (X509 user tokens are not offered)
+            if self.anonymous:
+                return LoomUser(UserRole.User, "anonymous", "viewer")
+            REFUSED_LOGIN.note("OPC UA: refused an anonymous session")
+            return None
+        holder = self.tokens.check(password or "")
+        if holder is None or holder[0] != username:
+            REFUSED_LOGIN.note("OPC UA: refused user %r: unknown name or token", username)
+            return None
+        log.info("OPC UA: user %s (%s) logged in", holder[0], holder[1])
+        return LoomUser(UserRole.User, holder[0], holder[1])
+
+
+def role_of(user: Any) -> Role | None:
+    return user.bwsd_role if isinstance(user, LoomUser) else None
+
+
+class Ruleset(PermissionRuleset):
+    """Reads for every user; a write or a call needs the role of each node it names."""
+
+    def __init__(self, needs: dict[ua.NodeId, Role]) -> None:
+        self.needs = needs
+
+    def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
+        if action_type_id not in _ALLOWED:
+            return False  # the address space is never edited from outside
+        role = role_of(user)
+        if role is None:
+            return False
+        targets = self._targets(action_type_id, body)
+        return all(RANK[role] >= RANK[self.needs.get(t, "admin")] for t in targets)
+
+    @staticmethod
+    def _targets(action: ua.NodeId, body: Buffer) -> list[ua.NodeId]:
+        if action == _WRITE:
+            params = struct_from_binary(ua.WriteParameters, body.copy())
+            return [w.NodeId for w in params.NodesToWrite]
+        if action == _CALL:
+            calls = struct_from_binary(ua.CallParameters, body.copy())
+            return [m.MethodId for m in calls.MethodsToCall]
+        return []
+
+
+class DiscoveryOnly(PermissionRuleset):
+    """For a channel without security that the config does not offer: nothing but finding
+    the endpoints (which needs no session). asyncua 2.1 opens such a channel whatever the
+    policies, and would serve a session over it."""
+
+    def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
+        return False
+
+
+def close_unsecured(server: Any) -> None:
+    """Put ``DiscoveryOnly`` on channels without security (after ``server.start()``).
+
+    The listener picks a channel's policy from the server's policy list, which it shares;
+    asyncua has no public call for this, hence the private list.
+    """
+    none = SecurityPolicyFactory(  # type: ignore[no-untyped-call]
+        SecurityPolicyNone, ua.MessageSecurityMode.None_, permission_ruleset=DiscoveryOnly()
+    )
+    server._policies.append(none)
+
+
+# ----- client certificates -----
+class TrustFolder:
+    """Validates client certificates against ``trusted/``; keeps refused ones in ``rejected/``."""
+
+    def __init__(self, folder: Path) -> None:
+        self.trusted = folder / "trusted"
+        self.rejected = folder / "rejected"
+        for made in (self.trusted, self.rejected):
+            made.mkdir(mode=0o700, parents=True, exist_ok=True)
+
+    async def __call__(self, cert: x509.Certificate, app: ua.ApplicationDescription) -> None:
+        store = TrustStore([self.trusted], [])
+        await store.load()
+        options = (CertificateValidatorOptions.TRUSTED_VALIDATION
+                   | CertificateValidatorOptions.PEER_CLIENT)  # fmt: skip
+        try:
+            await CertificateValidator(options, store).validate(cert, app)
+        except ServiceError as exc:
+            name = status(exc.code).name
+            der = cert.public_bytes(Encoding.DER)
+            thumb = hashlib.sha1(der, usedforsecurity=False).hexdigest()
+            REFUSED_CERT.note("OPC UA: refused client %s (certificate %s): %s",
+                              app.ApplicationUri, thumb, name)  # fmt: skip
+            if exc.code == ua.StatusCodes.BadCertificateUntrusted:
+                await asyncio.to_thread(self._keep, thumb, der)
+            raise
+
+    def _keep(self, thumb: str, der: bytes) -> None:
+        try:
+            (self.rejected / f"{thumb}.der").write_bytes(der)
+        except OSError as exc:
+            log.warning("OPC UA: cannot keep a rejected certificate: %s", exc)

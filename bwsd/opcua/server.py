@@ -1,0 +1,367 @@
+"""The PackML object served over OPC UA (asyncua), secured: a door that translates only.
+
+Reads: every variable follows the controller's event stream. One task (the updater) takes
+the events in order: a state change writes its own new state first, so a subscriber sees
+every transition even when the next one follows at once, then every other variable from
+the status snapshot as it stands. A 1 s tick keeps the times and the speed current.
+
+Writes and calls: ``CmdChangeRequest = true`` (with ``CntrlCmd``, in the same write or
+before), ``UnitModeChangeRequest = true`` (with ``UnitMode``) and the methods go through
+the controller's ``command`` and ``set_mode``, as REST and the Modbus tags do. A refusal is
+a Bad status (Bad_InvalidState for a command the state or the machine refuses,
+Bad_OutOfRange for an unknown number) and its reason is in ``Status.CmdInvalidReason``;
+nothing of a refused write is kept. Roles are checked before (bwsd.opcua.security).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import time
+from collections.abc import Mapping
+from datetime import UTC
+from pathlib import Path
+from typing import Any
+
+from asyncua import Server, ua
+from asyncua.common.callback import CallbackType, ServerItemCallback
+from asyncua.common.utils import ServiceError
+
+from bwsd.api.auth import TokenStore
+from bwsd.controller.packml import Command, UnitMode
+from bwsd.controller.runner import Controller
+from bwsd.controller.status import Event, InstructionDone, ProgramLoaded, StateChanged
+from bwsd.errors import BwsdError
+from bwsd.logs import Summary
+from bwsd.opcua import space
+from bwsd.opcua.security import (
+    OpcUaError,
+    Ruleset,
+    TokenUsers,
+    TrustFolder,
+    application_uri,
+    close_unsecured,
+)
+from bwsd.opcua.security import certificate as server_certificate
+from bwsd.opcua.values import Tally, history_lines, status_values
+
+log = logging.getLogger(__name__)
+REFRESH = Summary(log, "failed refreshes of the OPC UA variables")
+WHO = "opcua"  # who gave a command, in the log (a write adds the user: asyncua 2.1 tells a
+# write's user, not a method call's)
+REASON = "by OPC UA"  # the reason given with Stop, Hold, Suspend and Abort
+TICK = 1.0  # s between updates of the times and the speed
+HISTORY = 10  # programs in Admin.ProgramHistory
+_POLICIES = {
+    ("Basic256Sha256", "SignAndEncrypt"): ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+    ("Basic256Sha256", "Sign"): ua.SecurityPolicyType.Basic256Sha256_Sign,
+    ("Aes128Sha256RsaOaep", "SignAndEncrypt"):
+        ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
+    ("Aes128Sha256RsaOaep", "Sign"): ua.SecurityPolicyType.Aes128Sha256RsaOaep_Sign,
+    ("Aes256Sha256RsaPss", "SignAndEncrypt"):
+        ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt,
+    ("Aes256Sha256RsaPss", "Sign"): ua.SecurityPolicyType.Aes256Sha256RsaPss_Sign,
+}  # fmt: skip
+
+
+class Refused(Exception):
+    """A request the controller refused: the Bad status and the reason."""
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+
+
+class OpcUaServer:
+    """Serve a controller's PackML object on ``opc.tcp://host:port/bwsd``; port 0: any."""
+
+    def __init__(self, controller: Controller, tokens: TokenStore, folder: Path,
+                 settings: Mapping[str, Any]) -> None:  # fmt: skip
+        self.controller = controller
+        self.tokens = tokens
+        self.folder = folder  # the certificate, trusted/ and rejected/
+        self.host = settings.get("host", "127.0.0.1")
+        self.port = int(settings.get("port", 4840))
+        self.policy = _POLICIES[(settings.get("policy", "Basic256Sha256"),
+                                 settings.get("mode", "SignAndEncrypt"))]  # fmt: skip
+        self.allow_none = bool(settings.get("allow_none", False))
+        self.anonymous = bool(settings.get("anonymous", False))
+        self.server: Server | None = None
+        self._space: space.Space | None = None
+        self._tally = Tally(time.monotonic())
+        self._events: asyncio.Queue[Event | None] = asyncio.Queue()
+        self._updater: asyncio.Task[None] | None = None
+        self._values: dict[str, Any] = {}  # as last written (and notified)
+        self._live: dict[ua.NodeId, str] = {}  # status variables: read from the controller
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"opc.tcp://{host}:{self.port}/bwsd"
+
+    # ----- lifecycle -----
+    async def start(self) -> None:
+        """Make or load the certificate, build the address space, listen, follow the events."""
+        if self.server is not None:
+            raise RuntimeError(f"the OPC UA server on {self.url} is already running")
+        cert = await asyncio.to_thread(server_certificate, self.folder)
+        trust = await asyncio.to_thread(TrustFolder, self.folder)
+        server = Server(user_manager=TokenUsers(self.tokens, self.anonymous))  # type: ignore[arg-type]
+        self.server = server  # from here on ``stop`` closes what a failed start left open
+        await server.init()
+        server.set_server_name("bwsd")
+        await server.set_application_uri(application_uri())
+        server.set_endpoint(self.url)
+        await server.load_certificate(str(cert.cert))
+        await server.load_private_key(str(cert.key))
+        server.set_certificate_validator(trust)
+        self._space = await space.build(server, self._method, self._set_mode_method)
+        policies = [self.policy] + ([ua.SecurityPolicyType.NoSecurity] if self.allow_none else [])
+        server.set_security_policy(policies, Ruleset(space.needs(self._space.idx)))  # type: ignore[arg-type]
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        server.set_identity_tokens(tokens + ([ua.AnonymousIdentityToken] if self.anonymous else []))
+        server.subscribe_server_callback(CallbackType.PreWrite, self._pre_write)
+        server.subscribe_server_callback(CallbackType.PostWrite, self._post_write)
+        await self._listen(server)
+        if not self.allow_none:
+            close_unsecured(server)
+        self._tally = Tally(time.monotonic(), self.controller.packml.state)
+        self._events = asyncio.Queue()
+        self._values["Command/UnitMode"] = int(self.controller.packml.mode)
+        await self._write_now("Command/UnitMode")
+        self._read_live(server)
+        await self._refresh()
+        self.controller.events.subscribe(self._on_event)
+        self._updater = asyncio.create_task(self._update_forever(), name="bwsd-opcua")
+        self._updater.add_done_callback(_ended)
+        log.info("OPC UA on %s (%s%s), certificate %s", self.url, self.policy.name,
+                 ", None too" if self.allow_none else "", cert.thumbprint())  # fmt: skip
+
+    def _read_live(self, server: Server) -> None:
+        """A read of a status variable answers from the controller as it is at that moment
+        (as REST and the Modbus tags do); the updater's writes only notify subscribers."""
+        assert self._space is not None
+        now = time.monotonic()
+        for path in status_values(self.controller.status(), self._tally, now):
+            nodeid = self._space.variables[path].nodeid
+            self._live[nodeid] = path
+            server.set_attribute_value_callback(nodeid, self._live_value)
+            server.set_attribute_value_setter(nodeid, _notify_only)
+
+    def _live_value(self, nodeid: ua.NodeId, attr: ua.AttributeIds) -> ua.DataValue:
+        now = time.monotonic()
+        path = self._live[nodeid]
+        value = status_values(self.controller.status(), self._tally, now)[path]
+        stamp = ua.DateTime.now(UTC)
+        return ua.DataValue(ua.Variant(value, _KINDS[path]), SourceTimestamp=stamp,
+                            ServerTimestamp=stamp)  # fmt: skip
+
+    async def _listen(self, server: Server) -> None:
+        try:
+            await server.start()
+        except OSError as exc:
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            raise OpcUaError(f"[opcua] cannot listen on {self.host}:{self.port}: {why}") from None
+        bound = server.bserver
+        if bound is not None and self.port == 0:
+            self.port = bound.port
+            for endpoint in server.iserver.endpoints:  # the URL clients see names the port
+                endpoint.EndpointUrl = self.url
+
+    async def stop(self) -> None:
+        """Stop following the events, close every session and the port."""
+        self.controller.events.unsubscribe(self._on_event)
+        updater, self._updater = self._updater, None
+        if updater is not None:
+            self._events.put_nowait(None)
+            with contextlib.suppress(asyncio.CancelledError):
+                await updater
+        server, self.server = self.server, None
+        if server is not None:
+            await server.stop()
+
+    # ----- following the controller -----
+    def _on_event(self, event: Event) -> None:
+        self._events.put_nowait(event)
+
+    async def _update_forever(self) -> None:
+        """The updater: the events in order, and a tick for the clocks."""
+        while True:
+            try:
+                event = await asyncio.wait_for(self._events.get(), TICK)
+            except TimeoutError:
+                await self._refresh_guarded(history=False)
+                continue
+            if event is None:
+                return
+            now = time.monotonic()
+            if isinstance(event, StateChanged):
+                self._tally.state_changed(event.new, now)
+                await self._write("Status/StateCurrent", int(event.new), event.at)
+            elif isinstance(event, InstructionDone):
+                self._tally.instruction_done(now)
+            if self._events.empty():  # a burst of events: the rest once, at its end
+                await self._refresh_guarded(isinstance(event, ProgramLoaded | StateChanged))
+
+    async def _refresh_guarded(self, history: bool) -> None:
+        """A refresh that fails (the journal unreadable a moment) is logged; the next one
+        tries again. Reads of the status variables do not depend on it."""
+        try:
+            await self._refresh(history)
+        except Exception as exc:
+            REFRESH.note("OPC UA: the variables could not be refreshed: %s", exc)
+
+    async def _refresh(self, history: bool = True) -> None:
+        """Write every variable that changed, from the controller as it stands now."""
+        now = time.monotonic()
+        values = status_values(self.controller.status(), self._tally, now)
+        values.update(await self._twin_values())
+        if history:
+            records = await asyncio.to_thread(self.controller.journal.history, HISTORY)
+            values["Admin/ProgramHistory"] = history_lines(records)
+        for path, value in values.items():
+            await self._write(path, value)
+
+    async def _twin_values(self) -> dict[str, Any]:
+        """The twin's occupancy, take-up and contacts (read in a worker: it takes a lock)."""
+        twin, machine = self.controller.twin, self.controller.machine
+        values: dict[str, Any] = {"Machine/Rows": machine.rows, "Machine/Cols": machine.cols}
+        if twin is None:
+            return {**values, "Machine/TwinOccupancy": [], "Machine/TakeUp": 0.0,
+                    "Machine/Contacts": 0}  # fmt: skip
+        occupancy = await asyncio.to_thread(lambda: twin.occupancy.ravel().tolist())
+        return {**values, "Machine/TwinOccupancy": occupancy, "Machine/TakeUp": twin.takeup,
+                "Machine/Contacts": twin.contact_count}  # fmt: skip
+
+    async def _write_now(self, path: str, at: float | None = None) -> None:
+        """Write (and notify) the value kept for ``path``; ``at``: when it became true."""
+        assert self.server is not None and self._space is not None
+        value = ua.Variant(self._values[path], _KINDS[path])
+        stamp = ua.DateTime.fromtimestamp(at, UTC) if at is not None else None
+        await self.server.write_attribute_value(
+            self._space.variables[path].nodeid, ua.DataValue(value, SourceTimestamp=stamp)
+        )
+
+    async def _write(self, path: str, value: Any, at: float | None = None) -> None:
+        if self._values.get(path, _UNSET) == value or self._space is None or not self.server:
+            return
+        self._values[path] = value
+        await self._write_now(path, at)
+
+    # ----- commands: methods -----
+    def _method(self, command: Command) -> space.MethodCall:
+        async def call(parent: ua.NodeId) -> ua.StatusCode | list[Any]:
+            return await self._answer(self._command(command))
+
+        return call
+
+    async def _set_mode_method(self, parent: ua.NodeId, mode: Any) -> ua.StatusCode | list[Any]:
+        return await self._answer(self._mode(mode.Value if isinstance(mode, ua.Variant) else mode))
+
+    async def _answer(self, request: Any) -> ua.StatusCode | list[Any]:
+        try:
+            await request
+        except Refused as exc:
+            return space.status(exc.code)
+        return []
+
+    async def _command(self, number: Any, who: str = WHO) -> None:
+        """Apply a PackML command through the controller; Refused when it refuses."""
+        try:
+            command = Command(_whole(number))
+        except ValueError:
+            await self._refused(_unknown(number, "command"))
+        await self._through(self.controller.command(command, REASON, who),
+                            command.label)  # fmt: skip
+
+    async def _mode(self, number: Any, who: str = WHO) -> None:
+        try:
+            mode = UnitMode(_whole(number))
+        except ValueError:
+            await self._refused(_unknown(number, "unit mode"))
+        await self._through(self.controller.set_mode(mode, who), f"mode {mode.label}")
+
+    async def _through(self, request: Any, what: str) -> None:
+        try:
+            await request
+        except BwsdError as exc:
+            await self._refused(Refused(ua.StatusCodes.BadInvalidState, str(exc)))
+        except Exception as exc:  # the client must still get an answer
+            log.exception("OPC UA: %s failed", what)
+            await self._refused(Refused(ua.StatusCodes.BadInternalError, f"{what} failed: {exc}"))
+        await self._write("Status/CmdInvalid", False)
+        await self._write("Status/CmdInvalidReason", "")
+
+    async def _refused(self, refusal: Refused) -> None:
+        log.warning("OPC UA: refused: %s", refusal)
+        await self._write("Status/CmdInvalid", True)
+        await self._write("Status/CmdInvalidReason", str(refusal))
+        raise refusal
+
+    # ----- commands: the PackTags handshake -----
+    async def _pre_write(self, event: ServerItemCallback, _: Any) -> None:
+        """A client's write: take a change request before anything of it is stored."""
+        if self._space is None or not event.is_external:
+            return
+        written = {
+            w.NodeId: w.Value.Value.Value
+            for w in event.request_params.NodesToWrite
+            if w.AttributeId == ua.AttributeIds.Value and w.Value.Value is not None
+        }
+        pairs = (("Command/CmdChangeRequest", "Command/CntrlCmd", self._command),
+                 ("Command/UnitModeChangeRequest", "Command/UnitMode", self._mode))  # fmt: skip
+        for request, number, apply in pairs:
+            if written.get(self._id(request)) is True:
+                wanted = written.get(self._id(number), self._values.get(number))
+                try:
+                    await apply(wanted, f"{WHO}:{getattr(event.user, 'name', '?')}")
+                except Refused as exc:
+                    raise ServiceError(exc.code) from exc
+
+    async def _post_write(self, event: ServerItemCallback, _: Any) -> None:
+        """A request taken reads false again (the handshake's answer)."""
+        if self._space is None or not event.is_external:
+            return
+        for w in event.request_params.NodesToWrite:
+            for path in ("Command/CmdChangeRequest", "Command/UnitModeChangeRequest",
+                         "Command/CntrlCmd", "Command/UnitMode"):  # fmt: skip
+                if w.NodeId == self._id(path) and w.Value.Value is not None:
+                    self._values[path] = w.Value.Value.Value
+        await self._write("Command/CmdChangeRequest", False)
+        await self._write("Command/UnitModeChangeRequest", False)
+
+    def _id(self, path: str) -> ua.NodeId:
+        assert self._space is not None
+        return self._space.variables[path].nodeid
+
+
+def _notify_only(node: Any, attr: ua.AttributeIds, value: ua.DataValue) -> None:
+    """A status variable keeps no value: its reads ask the controller."""
+
+
+def _whole(number: Any) -> int:
+    """An integer as written (a Boolean or a Double is no command number)."""
+    if isinstance(number, bool) or not isinstance(number, int):
+        raise ValueError(number)
+    return number
+
+
+def _unknown(number: Any, what: str) -> Refused:
+    return Refused(ua.StatusCodes.BadOutOfRange, f"{number!r} is not a PackML {what} number")
+
+
+_UNSET = object()
+_KINDS = {tag.path: tag.kind for tag in space.TAGS}
+
+
+def _ended(task: asyncio.Task[None]) -> None:
+    """The updater's owner: its end is logged, a failure loudly."""
+    if task.cancelled():
+        log.info("OPC UA updater cancelled")
+    elif (error := task.exception()) is not None:
+        log.error("OPC UA updater failed: %s (the variables no longer follow)", error,
+                  exc_info=error)  # fmt: skip
+    else:
+        log.info("OPC UA updater ended")
