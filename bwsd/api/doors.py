@@ -194,6 +194,8 @@ def guarded_protocol(doors: Doors) -> type[asyncio.Protocol]:
             super().connection_lost(exc)
 
         def _head_late(self) -> None:
+            if self.transport.get_protocol() is not self:
+                return  # upgraded to a WebSocket: its own protocol holds the connection now
             if self.cycle is None:  # no request has begun: a silent or slow client
                 SLOW.note("closed a connection from %s: no request head within %g s",
                           self.client[0] if self.client else "?", doors.body_timeout)  # fmt: skip

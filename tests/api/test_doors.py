@@ -4,6 +4,7 @@ logs under attack, and TLS."""
 
 from __future__ import annotations
 
+import json
 import logging
 import socket
 import ssl
@@ -18,7 +19,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from bwsd.api.doors import LOGINS, Doors
-from tests.api.conftest import Live, Mock, start_live
+from tests.api.conftest import BRAID, Live, Mock, start_live
 
 DOORS = Doors(max_connections=6, max_connections_per_client=3, body_timeout=0.5)
 
@@ -197,3 +198,18 @@ def test_the_api_serves_tls_with_the_configured_certificate(tls):
         plain.get(live.api.replace("https://", "http://") + "/state", headers=headers)
     with pytest.raises(httpx.ConnectError), httpx.Client(timeout=5) as untrusting:
         untrusting.get(live.api + "/state", headers=headers)  # a certificate it does not trust
+
+
+def test_a_websocket_outlives_the_head_deadline(guarded):
+    """The head deadline closed every WebSocket once it ran out: the request that upgraded
+    the connection never began an HTTP cycle, so the timer took it for a silent client."""
+    url = f"{guarded.ws}?token={guarded.tokens['viewer']}"
+    with connect(url, open_timeout=5) as ws:
+        time.sleep(3 * DOORS.body_timeout)
+        ws.ping().wait(5)  # answered: the connection is still open
+        operator = guarded.client("operator")
+        operator.post("/programs", json={"name": "b.bws", "text": BRAID}).raise_for_status()
+        while True:  # events still arrive on it
+            event = json.loads(ws.recv(timeout=5))
+            if event.get("event") == "program":
+                break
