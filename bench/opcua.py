@@ -11,9 +11,6 @@ process runs the program ``--cycles`` times (load, Reset, Start, to Complete: si
 changes a cycle). The lag of each state change is its receipt time minus the time the
 controller made it: the WebSocket event's ``at``, the OPC UA notification's source time
 stamp (the same ``at``, tests/opcua/test_server.py).
-
-`[api] body_timeout` is raised to an hour here: the API's head deadline closes a WebSocket
-that has been open for that long (10 s by default), as if it had sent no request.
 """
 
 from __future__ import annotations
@@ -124,7 +121,7 @@ def main() -> None:
         token = TokenStore.load(state / "tokens.json").add("bench", "operator")
         cert = client_cert(tmp / "client")
         trust(state / "opcua", cert)
-        config = served_config(tmp, mock.ports["modbus"], body_timeout=3600.0)
+        config = served_config(tmp, mock.ports["modbus"])
         served = Served(config, state, token)
         try:
             spawn = multiprocessing.get_context("spawn")

@@ -91,12 +91,10 @@ def serving(program: str, speed: float) -> Iterator[Served]:
         speeds = {"stroke_speed": speed, "takeup_speed": speed}
         mock = start_mock(tmp, speeds, machine=machine_table(), program=program)
         config = tmp / "bwsd.toml"
-        # body_timeout: the head deadline also closes an upgraded WebSocket after that many
-        # seconds (the page would reconnect and read the whole skeleton every 10 s)
         config.write_text(toml({
             "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
             "fieldbus.modbus": {"port": mock.ports["modbus"]},
-            "api": {"port": 0, "body_timeout": 3600.0}, "plc": {"port": 0},
+            "api": {"port": 0}, "plc": {"port": 0},
         }))  # fmt: skip
         state = state_folder(tmp / "state")
         token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
