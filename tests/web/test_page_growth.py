@@ -9,7 +9,6 @@ settled part of the yarns into an off-screen image and adds to it as the run goe
 from __future__ import annotations
 
 import io
-import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,13 +17,12 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from bwsd.api.auth import TokenStore
 from tests.api.skeletons import yarns_of
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.fieldbus.conftest import Mock
 from tests.test_daemon import Served
 from tests.web.conftest import Browsing
+from tests.web.serving import example, serve
 
-ROOT = Path(__file__).resolve().parents[2]
 CYCLES = 30
 
 DUMP = """() => Object.fromEntries(window.bwsd.dump().map(
@@ -34,19 +32,10 @@ DUMP = """() => Object.fromEntries(window.bwsd.dump().map(
 @pytest.fixture
 def braid(tmp_path: Path) -> Iterator[tuple[Served, Mock, str, str]]:
     """`bwsd serve` on the mock 26x26 loom with the 24x24 braid loaded for CYCLES cycles."""
-    text = (ROOT / "examples" / "braid-24x24.bws").read_text()
+    text, machine = example("braid-24x24")
     assert "REPEAT 10 " in text
     text = text.replace("REPEAT 10 ", f"REPEAT {CYCLES} ", 1)
-    machine = tomllib.loads((ROOT / "config" / "braid-24x24.toml").read_text())["machine"]
-    mock = start_mock(tmp_path, {}, machine=machine, program=text)
-    config = tmp_path / "bwsd.toml"
-    config.write_text(toml({"machine": machine, "fieldbus": {"backend": "modbus", **BUS},
-                            "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                            "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
-    state = tmp_path / "state"
-    state.mkdir()
-    token = TokenStore.load(state / "tokens.json").add("tester", "operator")
-    served = Served(config, state, token)
+    served, mock, token = serve(tmp_path, machine, text)
     try:
         loaded = served.http.post("/programs", json={"name": "braid.bws", "text": text},
                                   timeout=300)  # fmt: skip

@@ -10,7 +10,6 @@ from __future__ import annotations
 import itertools
 import math
 import os
-import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,15 +17,14 @@ from typing import Any
 
 import pytest
 
-from bwsd.api.auth import TokenStore
 from bwsd.export.crossings import crossings
 from bwsd.export.skeleton_json import skeleton_from_dict
 from bwsd.program.sections import parse_section
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.fieldbus.conftest import Mock
 from tests.test_daemon import Served
 from tests.web.conftest import Browsing
+from tests.web.serving import example, serve
 
-ROOT = Path(__file__).resolve().parents[2]
 SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-view-*.png there
 
 
@@ -61,17 +59,8 @@ class Runs:
     def _start(self, stem: str) -> Run:
         tmp = self.folder / stem
         tmp.mkdir()
-        text = (ROOT / "examples" / f"{stem}.bws").read_text()
-        machine = tomllib.loads((ROOT / "config" / f"{stem}.toml").read_text())["machine"]
-        mock = start_mock(tmp, {}, machine=machine, program=text)
-        config = tmp / "bwsd.toml"
-        config.write_text(toml({"machine": machine, "fieldbus": {"backend": "modbus", **BUS},
-                                "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                                "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
-        state = tmp / "state"
-        state.mkdir()
-        token = TokenStore.load(state / "tokens.json").add("tester", "operator")
-        served = Served(config, state, token)
+        text, machine = example(stem)
+        served, mock, token = serve(tmp, machine, text)
         run = Run(stem, served, mock, token, text)
         loaded = served.http.post("/programs", json={"name": f"{stem}.bws", "text": text})
         assert loaded.status_code == 201, loaded.text
