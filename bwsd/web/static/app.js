@@ -188,8 +188,8 @@ function frame(now) {
   }
   if ((gridDirty || statusDirty) && (!flowing || now - panelsDrawn >= PANEL_MS)) {
     panelsDrawn = now;
-    if (gridDirty) drawGrid();
-    if (statusDirty) drawStatus();
+    drawGrid(); // both, so that the matrix's next line and the job never disagree
+    drawStatus();
   }
   if (drawn) {
     const shown = Date.now();
@@ -208,6 +208,11 @@ function frame(now) {
     lastTick = 0;
     view.settleTails(); // the updates paused: draw the grown tails into the settled layer
   }
+}
+
+/** A change of state: the matrix, the status and the job are drawn at the next frame. */
+function panelsNow() {
+  panelsDrawn = -Infinity;
 }
 
 /** Apply the queued instruction events by the delta rule; the events applied. */
@@ -375,6 +380,7 @@ function showState(state) {
     live.eventNext = state.next ?? null;
   }
   if (!sameProgram) refreshHistory();
+  if (live.state?.name !== state.name || !RUNNING_STATES.has(state.name)) panelsNow();
   live.state = state;
   status.readFaultNames(state.bus?.faulted ?? [], () => {
     statusDirty = true;
@@ -547,6 +553,7 @@ function onEvent(event) {
     case 'state':
       if (live.state && event.to) {
         live.state = { ...live.state, name: event.to, allowed: [] }; // until the fetch says
+        panelsNow();
         statusDirty = true;
         scheduleFrame();
       }
