@@ -1,11 +1,19 @@
-"""`bwsd serve` on the mock loom for the page's tests: an example's machine and a program."""
+"""The daemon and the mock loom for the page's tests: `bwsd serve` on an example's machine,
+API clients, the loom's control channel."""
 
 from __future__ import annotations
 
+import asyncio
 import tomllib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
+
+import httpx
 
 from bwsd.api.auth import TokenStore
+from simulator_hw.control import request
+from tests.api.conftest import WAIT, Live
 from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 
@@ -31,3 +39,22 @@ def serve(tmp: Path, machine: dict[str, object], text: str) -> tuple[Served, Moc
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")
     return Served(config, state, token), mock, token
+
+
+_CLIENTS: dict[tuple[int, str], httpx.Client] = {}
+
+
+def api_client(live: Live, role: str) -> httpx.Client:
+    """One client per daemon and role (the daemon bounds the connections of one address)."""
+    key = (id(live), role)
+    if key not in _CLIENTS or _CLIENTS[key].is_closed:
+        _CLIENTS[key] = live.client(role)
+    return _CLIENTS[key]
+
+
+def loom_control(mock: Mock, message: dict[str, Any]) -> None:
+    """A request on the mock loom's control channel (in a thread: Playwright's loop runs)."""
+    with ThreadPoolExecutor(1) as pool:
+        answer = pool.submit(asyncio.run, request("127.0.0.1", mock.ports["control"],
+                                                  message)).result(timeout=WAIT)  # fmt: skip
+    assert answer["ok"], answer

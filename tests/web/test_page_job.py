@@ -14,19 +14,17 @@ import json
 import os
 import time
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 from playwright.sync_api import Browser, Page
 
 from bwsd.api.doors import Doors
-from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
 from tests.fieldbus.conftest import Mock
 from tests.web.conftest import MS, Browsing
+from tests.web.serving import api_client, loom_control
 
 ROOT = Path(__file__).resolve().parents[2]
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
@@ -40,39 +38,33 @@ MARKED = """() => {
 COUNT = "n => document.querySelectorAll('#history-programs li').length === n"
 
 
-def _client(live: Live, role: str, kept: dict[tuple[int, str], httpx.Client] = {}) -> httpx.Client:  # noqa: B006
-    """One client per daemon and role (the daemon bounds the connections of one address)."""
-    key = (id(live), role)
-    if key not in kept or kept[key].is_closed:
-        kept[key] = live.client(role)
-    return kept[key]
-
-
-def _control(mock: Mock, message: dict[str, Any]) -> None:
-    """A request on the mock loom's control channel (in a thread: Playwright's loop runs)."""
-    with ThreadPoolExecutor(1) as pool:
-        answer = pool.submit(asyncio.run, request("127.0.0.1", mock.ports["control"],
-                                                  message)).result(timeout=MS / 1000)  # fmt: skip
-    assert answer["ok"], answer
-
-
 def _load(live: Live, text: str = BRAID, name: str = "braid.bws") -> int:
-    answer = _client(live, "operator").post("/programs", json={"name": name, "text": text})
+    answer = api_client(live, "operator").post("/programs", json={"name": name, "text": text})
     assert answer.status_code == 201, answer.text
     pid: int = answer.json()["id"]
     return pid
 
 
 def _command(live: Live, name: str) -> dict[str, Any]:
-    answer = _client(live, "operator").post(f"/commands/{name}")
+    answer = api_client(live, "operator").post(f"/commands/{name}")
     assert answer.status_code == 200, answer.text
     body: dict[str, Any] = answer.json()
     return body
 
 
 def _state(live: Live) -> dict[str, Any]:
-    body: dict[str, Any] = _client(live, "viewer").get("/state").json()
+    body: dict[str, Any] = api_client(live, "viewer").get("/state").json()
     return body
+
+
+def _watch_a_long_run(live: Live, page: Browsing) -> None:
+    """The operator's page on ``live`` while LONG runs (Execute)."""
+    _load(live, LONG)
+    page.open(live, live.tokens["operator"])
+    page.ready()
+    _command(live, "reset")
+    _command(live, "start")
+    page.state("Execute")
 
 
 def test_the_program_text_marks_the_line_that_runs_next(slow_live: Live, page: Browsing):
@@ -103,12 +95,7 @@ def test_the_program_text_marks_the_line_that_runs_next(slow_live: Live, page: B
 
 def test_the_time_left_comes_from_the_recent_instruction_rate(slow_live: Live, page: Browsing):
     live = slow_live
-    _load(live, LONG)
-    page.open(live, live.tokens["operator"])
-    page.ready()
-    _command(live, "reset")
-    _command(live, "start")
-    page.state("Execute")
+    _watch_a_long_run(live, page)
     eta = page.page.locator("#eta")
     page.page.wait_for_function(
         "() => document.querySelector('#eta').textContent.startsWith('time left: about')",
@@ -147,7 +134,7 @@ def test_the_history_pages_programs_and_follows_states_and_events(live: Live, pa
     assert programs.last.get_attribute("data-program") == "1"
     assert page.page.locator("#history-older").is_hidden()
     _command(live, "reset")
-    _client(live, "operator").put("/mode", json={"mode": "maintenance"}).raise_for_status()
+    api_client(live, "operator").put("/mode", json={"mode": "maintenance"}).raise_for_status()
     log = page.page.locator("#history-log")
     page.page.wait_for_function(
         "() => document.querySelector('#history-log').textContent.includes('Maintenance')",
@@ -178,7 +165,7 @@ def test_a_download_arrives_with_the_daemons_content(live: Live, page: Browsing,
     download = got.value
     assert download.suggested_filename == f"braid-{BRAID_STEPS}.{fmt}"
     content = Path(download.path()).read_bytes()
-    daemon = _client(live, "viewer").get("/skeleton", params={"format": fmt})
+    daemon = api_client(live, "viewer").get("/skeleton", params={"format": fmt})
     assert daemon.status_code == 200
     if fmt == "json":
         assert json.loads(content) == daemon.json()
@@ -192,12 +179,7 @@ def test_abort_and_stop_ask_first(slow_live: Live, page: Browsing):
     """Dismissed (the cancel button or Escape): nothing is sent. Confirmed: it is, with the
     reason given in the question."""
     live = slow_live
-    _load(live, LONG)
-    page.open(live, live.tokens["operator"])
-    page.ready()
-    _command(live, "reset")
-    _command(live, "start")
-    page.state("Execute")
+    _watch_a_long_run(live, page)
     sent: list[str] = []
     page.page.on("request", lambda r: "/commands/" in r.url and sent.append(r.url))
     dialog = page.page.locator("#confirm")
@@ -401,7 +383,7 @@ def _views(live: Live, mock: Mock, pages: list[Page], stop: Any) -> list[Any]:
             for other in pages:
                 other.keyboard.press("Escape")  # the question before Stop: dismissed
             _command(live, "hold")
-            _control(mock, {"cmd": "estop", "pressed": True})
+            loom_control(mock, {"cmd": "estop", "pressed": True})
         tab.locator("#estop-banner").wait_for(state="visible", timeout=MS)
 
     def disconnected(tab: Page) -> None:

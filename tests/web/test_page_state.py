@@ -13,19 +13,17 @@ import asyncio
 import re
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 from playwright.sync_api import Browser
 
-from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
 from tests.fieldbus.conftest import Mock
 from tests.web.conftest import MS, Browsing
+from tests.web.serving import api_client, loom_control
 
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
 ENABLED = """() => [...document.querySelectorAll('button[data-command]')]
@@ -43,33 +41,16 @@ document.addEventListener('DOMContentLoaded', __note);
 """
 
 
-def _control(mock: Mock, message: dict[str, Any]) -> None:
-    """A request on the mock loom's control channel (in a thread: Playwright's loop runs)."""
-    with ThreadPoolExecutor(1) as pool:
-        answer = pool.submit(asyncio.run, request("127.0.0.1", mock.ports["control"],
-                                                  message)).result(timeout=MS / 1000)  # fmt: skip
-    assert answer["ok"], answer
-
-
-_CLIENTS: dict[tuple[int, str], httpx.Client] = {}
-
-
-def _client(live: Live, role: str) -> httpx.Client:
-    """One client per daemon and role (the daemon bounds the connections of one address)."""
-    key = (id(live), role)
-    if key not in _CLIENTS or _CLIENTS[key].is_closed:
-        _CLIENTS[key] = live.client(role)
-    return _CLIENTS[key]
-
-
 def _load(live: Live, text: str = BRAID) -> None:
-    answer = _client(live, "operator").post("/programs", json={"name": "braid.bws", "text": text})
+    answer = api_client(live, "operator").post(
+        "/programs", json={"name": "braid.bws", "text": text}
+    )
     assert answer.status_code == 201, answer.text
 
 
 def _in_step(page: Browsing, live: Live, name: str) -> list[str]:
     """Wait until the page shows state ``name`` with exactly the buttons /state allows."""
-    viewer = _client(live, "viewer")
+    viewer = api_client(live, "viewer")
     page.state(name)
     deadline = time.monotonic() + MS / 1000
     while True:
@@ -122,7 +103,7 @@ def test_no_button_is_enabled_that_the_daemon_would_refuse(slow_live: Live, page
 
 def test_a_viewer_never_sees_an_enabled_button(live: Live, page: Browsing):
     _load(live)
-    _client(live, "operator").post("/commands/reset").raise_for_status()
+    api_client(live, "operator").post("/commands/reset").raise_for_status()
     refused: list[str] = []
     page.page.on("response", lambda r: r.status == 403 and refused.append(r.url))
     page.page.add_init_script(WATCH_ENABLED)
@@ -168,7 +149,7 @@ def stoppable(mock: Mock, tmp_path: Path) -> Iterator[tuple[Live, Any]]:
 def test_a_daemon_that_is_gone_greys_everything_with_the_time_last_heard(stoppable, page):
     live, stop = stoppable
     _load(live)
-    _client(live, "operator").post("/commands/reset").raise_for_status()
+    api_client(live, "operator").post("/commands/reset").raise_for_status()
     page.open(live, live.tokens["operator"])
     page.ready()
     assert _in_step(page, live, "Idle") == ["start", "stop", "abort"]
@@ -197,7 +178,7 @@ def test_a_daemon_that_is_gone_greys_everything_with_the_time_last_heard(stoppab
 
 def test_log_out_clears_the_picture(live: Live, page: Browsing):
     _load(live)
-    operator = _client(live, "operator")
+    operator = api_client(live, "operator")
     operator.post("/commands/reset").raise_for_status()
     operator.post("/commands/start").raise_for_status()
     page.open(live, live.tokens["operator"])
@@ -251,7 +232,7 @@ def test_a_pressed_estop_shows_red_and_is_not_a_bus_error(watched: Live, mock: M
     page.open(live, live.tokens["operator"])
     page.ready()
     assert not page.page.locator("#estop-banner").is_visible()
-    _control(mock, {"cmd": "estop", "pressed": True})
+    loom_control(mock, {"cmd": "estop", "pressed": True})
     page.page.locator("#estop-banner").wait_for(state="visible", timeout=MS)
     assert page.page.locator("#estop-badge").is_visible()
     assert "Emergency stop pressed" in page.page.locator("#estop-banner").inner_text()
@@ -261,7 +242,7 @@ def test_a_pressed_estop_shows_red_and_is_not_a_bus_error(watched: Live, mock: M
     assert page.page.locator("#bus").inner_text() == "connected"
     assert page.page.locator("#bus-error").inner_text() == ""
     assert _in_step(page, live, "Stopped") == ["abort"]  # Reset is refused while pressed
-    _control(mock, {"cmd": "estop", "pressed": False})
+    loom_control(mock, {"cmd": "estop", "pressed": False})
     page.page.locator("#estop-banner").wait_for(state="hidden", timeout=MS)
     assert not page.page.locator("#estop-badge").is_visible()
     page.page.wait_for_function("() => document.querySelector('#machine').textContent === 'ok'",
@@ -278,10 +259,10 @@ def test_a_stall_shows_as_a_drive_fault_of_its_axis(slow_watched: Live, slow_moc
     page.ready()
     _click(page, "reset")
     assert _in_step(page, live, "Idle") == ["start", "stop", "abort"]
-    _control(slow_mock, {"cmd": "fault", "kind": "stall", "axis": "row1"})
+    loom_control(slow_mock, {"cmd": "fault", "kind": "stall", "axis": "row1"})
     _click(page, "start")
     assert _in_step(page, live, "Aborted") == ["clear"]
-    state = _client(live, "viewer").get("/state").json()
+    state = api_client(live, "viewer").get("/state").json()
     assert state["stop_cause"] == "drive_fault"
     page.page.wait_for_function(
         "() => document.querySelector('#machine').textContent.includes('row1: stall')",
@@ -335,13 +316,13 @@ def test_a_lost_bus_is_said_while_lost_and_gone_once_back(slow_watched: Live, sl
     assert _in_step(page, live, "Idle") == ["start", "stop", "abort"]
     _click(page, "start")
     page.until("() => window.bwsd.done >= 2")
-    _control(slow_mock, {"cmd": "fault", "kind": "mute"})
+    loom_control(slow_mock, {"cmd": "fault", "kind": "mute"})
     _in_step(page, live, "Held")
     page.page.wait_for_function("() => document.querySelector('#bus').textContent === 'lost'",
                                 timeout=MS)  # fmt: skip
     assert page.page.locator("#bus-error").inner_text() != ""
     assert page.page.locator("#reason").inner_text().startswith("bus lost or timed out")
-    _control(slow_mock, {"cmd": "clear"})
+    loom_control(slow_mock, {"cmd": "clear"})
     page.page.wait_for_function(
         "() => document.querySelector('#bus').textContent === 'connected'", timeout=MS
     )
@@ -369,7 +350,7 @@ def test_after_stop_progress_and_next_line_are_what_the_daemon_says(slow_live: L
     page.until("() => window.bwsd.done >= 3")
     _click(page, "stop")
     _in_step(page, live, "Stopped")
-    state = _client(live, "viewer").get("/state").json()
+    state = api_client(live, "viewer").get("/state").json()
     assert state["next"] is None and 3 <= state["index"] < state["count"]
     expected = f"{state['index']} / {state['count']}"
     page.page.wait_for_function("t => document.querySelector('#progress-text').textContent === t",
