@@ -63,7 +63,10 @@ def setup(level: int = logging.INFO) -> None:
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)
-    logging.getLogger("pymodbus").setLevel(logging.WARNING)
+    # Libraries that narrate their routine work at INFO (asyncua: a line for every node of
+    # the standard address space it builds at start): their warnings and errors only.
+    for name in ("pymodbus", "asyncua"):
+        logging.getLogger(name).setLevel(logging.WARNING)
 
 
 class Summary:

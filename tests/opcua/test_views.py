@@ -118,3 +118,22 @@ async def _agree(served: Served, cert: Any, token: str) -> None:
         while (agreed := await sample()) is None or agreed[0] != State.IDLE:
             await asyncio.sleep(0.01)
     plc.close()
+
+
+def test_the_daemons_log_says_where_opcua_listens_without_the_librarys_start_up(tmp_path):
+    """asyncua logs a line at INFO for every node of the standard address space it builds:
+    with OPC UA on, a start wrote over a thousand lines to the journal."""
+    mock = start_mock(tmp_path, {})
+    state = tmp_path / "state"
+    state.mkdir()
+    token = TokenStore.load(state / "tokens.json").add("line", "operator")
+    served = Served(served_config(tmp_path, mock.ports["modbus"]), state, token)
+    try:
+        assert served.state()["name"]
+    finally:
+        served.stop()
+        mock.stop()
+    lines = served.log.read_text().splitlines()
+    assert any("bwsd.opcua.server: OPC UA on opc.tcp://" in line for line in lines), lines[-5:]
+    assert [line for line in lines if " INFO asyncua." in line] == []
+    assert len(lines) < 50, len(lines)
