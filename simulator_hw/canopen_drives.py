@@ -170,11 +170,14 @@ class _Drive:
             self.owner.call(self._controlword, value)
 
     def _live(self, index: int) -> int:
-        return self.values(time.monotonic())[(index, 0)]
+        now = time.monotonic()
+        self.owner.loom.tick(now)
+        return self.values(now)[(index, 0)]
 
     def values(self, now: float) -> dict[Entry, int]:
-        """Every live object of the drive at time ``now`` (the loom advanced to it)."""
-        sim = self._sync(now)
+        """Every live object of the drive at time ``now`` (the caller advanced the loom to it:
+        a SYNC's sample advances it once for all the drives)."""
+        sim = self._follow()
         values = {
             STATUSWORD: self.statusword(),
             MODE_DISPLAY: self.mode,
@@ -187,9 +190,14 @@ class _Drive:
         }
         return {(index, 0): value for index, value in values.items()}
 
-    def _sync(self, now: float | None = None) -> AxisSim:
-        """Advance the loom; the drive is in FAULT exactly while its axis is faulted."""
-        self.owner.loom.tick(time.monotonic() if now is None else now)
+    def _sync(self) -> AxisSim:
+        """Advance the loom to now, and follow it."""
+        self.owner.loom.tick(time.monotonic())
+        return self._follow()
+
+    def _follow(self) -> AxisSim:
+        """The drive's axis as the loom has it: the drive is in FAULT exactly while its axis
+        is faulted."""
         sim = self.owner.loom.axes[self.index]
         if sim.fault:
             self.state = S.FAULT
@@ -395,8 +403,9 @@ class CanopenLoom:
         if index == OWNER_PID:
             self._pid = value
         elif index == OWNER:
-            held = self.call(self.loom.claim, value, self._pid, time.monotonic())
-            if held is not None or not value:
+            if not value:  # no claimer has id 0: refused before the loom is asked
+                raise SdoAbortedError(ABORT_DEVICE_STATE)
+            if self.call(self.loom.claim, value, self._pid, time.monotonic()) is not None:
                 raise SdoAbortedError(ABORT_DEVICE_STATE)
 
     def _beat(self) -> None:

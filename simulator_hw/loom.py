@@ -17,12 +17,12 @@ from bwsd.fieldbus.base import (
     FAULT_JAM,
     FAULT_NONE,
     FAULT_STALL,
+    OWNER_LEASE,
+    STROKES_WRAP,
 )
 from bwsd.twin.machine import Machine
 
 WRONG_POSITION_OFFSET = 500  # µm a drive with an injected position fault is off by
-STROKES_WRAP = 0x10000  # the stroke counter is 16 bits on every bus
-OWNER_LEASE = 2.0  # s a claim lasts after its holder's last claim (docs/fieldbus-modbus.md)
 
 
 @dataclass

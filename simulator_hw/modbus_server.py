@@ -263,7 +263,7 @@ class ModbusLoomServer:
                     return ExcCodes.ILLEGAL_VALUE
                 target = words_int32(word(base + OFF_TARGET), word(base + OFF_TARGET + 1))
                 starts.append((i, target, seq))
-        if address <= REG_OWNER < end or (REG_OWNER < address < REG_OWNER + OWNER_WORDS):
+        if address < REG_OWNER + OWNER_WORDS and end > REG_OWNER:  # the write touches the claim
             return self._claim(address, values, now)
         if address <= REG_COMMAND < end:
             if not self._machine_command(values[REG_COMMAND - address], now):

@@ -25,7 +25,7 @@ from typing import Literal
 import numpy as np
 
 from bwsd.controller.plan import Mismatch, verify
-from bwsd.fieldbus.base import BoolGrid, MachineState
+from bwsd.fieldbus.base import STROKES_WRAP, BoolGrid, MachineState
 from bwsd.twin import Prediction, Shift, Weft
 from bwsd.twin.instructions import Instruction
 
@@ -48,9 +48,6 @@ class Before:
 
     occupancy: BoolGrid
     takeup_um: int
-
-
-STROKES_WRAP = 0x10000  # the stroke counters are 16 bits on every bus
 
 
 def settle(instruction: Instruction, pred: Prediction, machine: MachineState, takeup_um: int,

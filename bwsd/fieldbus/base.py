@@ -77,6 +77,7 @@ class BusHeld(FieldbusError):
 # The loom's claim (docs/fieldbus-modbus.md, docs/fieldbus-canopen.md): a client claims the
 # loom before it moves it; the claim lasts OWNER_LEASE seconds after the holder's last one.
 OWNER_LEASE = 2.0  # s, the loom's
+STROKES_WRAP = 0x10000  # an axis's stroke counter is 16 bits on every bus (AxisState.strokes)
 CLAIM_RENEW = 0.5  # s: a claim older than this is renewed before the next command
 
 

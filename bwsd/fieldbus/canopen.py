@@ -66,9 +66,7 @@ from bwsd.fieldbus.cia402 import (
     CW_NEW_SETPOINT,
     CW_QUICK_STOP,
     CW_RELATIVE,
-    DRIVE_OBJECTS,
     HEARTBEAT,
-    IO_OBJECTS,
     MODE,
     MODE_HOMING,
     MODE_PROFILE_POSITION,
@@ -78,15 +76,10 @@ from bwsd.fieldbus.cia402 import (
     SW_TARGET_REACHED,
     WALK,
     Cia402,
-    dictionary,
     drive_dictionary,
     io_dictionary,
-    occupancy_bytes,
 )
 from bwsd.twin.machine import Machine
-
-# the map's tables, as the tests and tools have always imported them from here
-__all__ = ["DRIVE_OBJECTS", "IO_OBJECTS", "CanopenBus", "Cia402", "dictionary", "occupancy_bytes"]
 
 
 class CanopenBus(Fieldbus):

@@ -58,7 +58,7 @@ class BusLock:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            found = read_holder(path) or Holder(0, "", 0.0)
+            found = read_holder(path)
             raise BusHeld(f"{path}: the bus is held by {found.describe()}") from None
         named = Path(config).resolve() if Path(config).exists() else config
         record = {"pid": os.getpid(), "config": str(named), "since": time.time()}
@@ -85,19 +85,19 @@ def holder(state_dir: Path) -> Holder | None:
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
-        return read_holder(path) or Holder(0, "", 0.0)
+        return read_holder(path)
     finally:
         os.close(fd)
     return None
 
 
-def read_holder(path: Path) -> Holder | None:
-    """The record in a lock file (None when it is empty or unreadable)."""
+def read_holder(path: Path) -> Holder:
+    """The record in a lock file (pid 0 when it is empty or unreadable)."""
     try:
         data: Any = json.loads(path.read_text() or "null")
         return Holder(int(data["pid"]), str(data["config"]), float(data["since"]))
     except (OSError, ValueError, TypeError, KeyError):
-        return None
+        return Holder(0, "", 0.0)
 
 
 def daemon_owner_id(state_dir: Path) -> int:

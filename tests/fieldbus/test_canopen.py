@@ -26,8 +26,9 @@ from bwsd.fieldbus.base import (
     FieldbusConnectionError,
     FieldbusTimeout,
 )
-from bwsd.fieldbus.canopen import CanopenBus, occupancy_bytes
+from bwsd.fieldbus.canopen import CanopenBus
 from bwsd.fieldbus.canopen_pdo import Pdo, configure, drive_pdos, layout, wanted_layout
+from bwsd.fieldbus.cia402 import occupancy_bytes
 from bwsd.twin import Machine
 from simulator_hw.canopen_drives import CanopenLoom
 from simulator_hw.loom import Loom, Speeds

@@ -12,7 +12,7 @@ from typing import Any
 import canopen
 import pytest
 
-from bwsd.fieldbus.canopen import DRIVE_OBJECTS, IO_OBJECTS, Cia402, dictionary
+from bwsd.fieldbus.cia402 import DRIVE_OBJECTS, IO_OBJECTS, Cia402, dictionary
 from bwsd.twin import Machine
 from simulator_hw.canopen_drives import CanopenLoom
 from simulator_hw.loom import Loom, Speeds
