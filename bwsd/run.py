@@ -50,12 +50,9 @@ def load_and_simulate(
     try:
         twin = simulate(machine, program, progress, timings)
     except TwinError as exc:
-        line = (
-            program.lines[exc.instruction - 1] if 0 < exc.instruction <= len(program.lines) else 0
-        )
-        raise ProgramError(
-            f"instruction {exc.instruction}: {exc.reason}", line=line, column=1, source=program_path
-        ) from None
+        raise ProgramError(f"instruction {exc.instruction}: {exc.reason}",
+                           line=program.line_of(exc.instruction), column=1,
+                           source=program_path) from None  # fmt: skip
     return machine, program, twin
 
 

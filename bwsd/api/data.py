@@ -115,8 +115,8 @@ async def _refused_at(exc: TwinError, body: ProgramIn) -> ProgramError:
 def _refusal_at(exc: TwinError, body: ProgramIn) -> ProgramError:
     program, positions = parse_program_with_positions(body.text, body.name)
     i = exc.instruction - 1
-    line = program.lines[i] if 0 <= i < len(program.lines) else 0
     column = positions.keywords[i] if 0 <= i < len(positions.keywords) else 0
+    line = program.line_of(exc.instruction)
     return ProgramError(str(exc), line=line, column=column, source=body.name)
 
 

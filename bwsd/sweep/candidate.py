@@ -7,6 +7,7 @@ daemon. A candidate the generator, the validation or the twin refuses is a row w
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
@@ -51,9 +52,13 @@ class ProgramSource:
     config: Mapping[str, Any] = field(repr=False)
     config_digest: str = ""
 
+    @functools.cached_property
+    def program_digest(self) -> str:
+        """The program's hash, taken once (a spec asks for it at every candidate)."""
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
     def fingerprint(self) -> dict[str, str]:
-        text = hashlib.sha256(self.text.encode()).hexdigest()
-        return {"program": text, "config": self.config_digest}
+        return {"program": self.program_digest, "config": self.config_digest}
 
 
 Source = GeneratorSource | ProgramSource
@@ -137,8 +142,7 @@ def _run(
             return simulate(machine, program), program, None, None
         twin, visits = simulate_with_visits(machine, program, named.section)
     except TwinError as exc:
-        index = exc.instruction
-        line = program.lines[index - 1] if 0 < index <= len(program.lines) else 0
+        line = program.line_of(exc.instruction)
         raise Refused("simulate", f"{name}:{line}: {exc}" if line else str(exc)) from exc
     return twin, program, visits, named
 

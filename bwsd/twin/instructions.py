@@ -98,3 +98,7 @@ class Program:
     instructions: tuple[Instruction, ...]
     lines: tuple[int, ...] = ()
     cycle_length: int | None = None
+
+    def line_of(self, instruction: int) -> int:
+        """The source line of instruction number ``instruction`` (1-based; 0: not known)."""
+        return self.lines[instruction - 1] if 0 < instruction <= len(self.lines) else 0
