@@ -129,8 +129,8 @@ class OpcUaServer:
             close_unsecured(server)
         self._tally = Tally(time.monotonic(), self.controller.packml.state)
         self._events = asyncio.Queue()
-        self._values["Command/UnitMode"] = int(self.controller.packml.mode)
-        await self._write_now("Command/UnitMode")
+        self._values = {}  # a new address space: nothing written to it yet
+        await self._write("Command/UnitMode", int(self.controller.packml.mode))
         self._read_live(server)
         await self._refresh()
         self.controller.events.subscribe(self._on_event)
@@ -235,20 +235,17 @@ class OpcUaServer:
         return {**values, "Machine/TwinOccupancy": occupancy, "Machine/TakeUp": twin.takeup,
                 "Machine/Contacts": twin.contact_count}  # fmt: skip
 
-    async def _write_now(self, path: str, at: float | None = None) -> None:
-        """Write (and notify) the value kept for ``path``; ``at``: when it became true."""
-        assert self.server is not None and self._space is not None
-        value = ua.Variant(self._values[path], _KINDS[path])
-        stamp = ua.DateTime.fromtimestamp(at, UTC) if at is not None else None
-        await self.server.write_attribute_value(
-            self._space.variables[path].nodeid, ua.DataValue(value, SourceTimestamp=stamp)
-        )
-
     async def _write(self, path: str, value: Any, at: float | None = None) -> None:
+        """Write (and notify) ``value`` at ``path`` unless it is there already; ``at``: when
+        it became true."""
         if self._values.get(path, _UNSET) == value or self._space is None or not self.server:
             return
         self._values[path] = value
-        await self._write_now(path, at)
+        stamp = ua.DateTime.fromtimestamp(at, UTC) if at is not None else None
+        await self.server.write_attribute_value(
+            self._space.variables[path].nodeid,
+            ua.DataValue(ua.Variant(value, _KINDS[path]), SourceTimestamp=stamp),
+        )
 
     # ----- commands: methods -----
     def _method(self, command: Command) -> space.MethodCall:
