@@ -46,3 +46,31 @@ def opcua_folder(config: Config, state_dir: Path) -> Path:
 def journal_file(config: Config, state_dir: Path) -> Path:
     """The journal (``[journal] path``); a relative path starts at ``state_dir``."""
     return _within(state_dir, config.table("journal")["path"])
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Write a 0600 file beside ``path``, fsync it, rename it into place, fsync the folder:
+    a crash leaves the old file or the new one, never a part. Run as root, the file keeps
+    the owner of the old file (or of its folder), so the daemon's own user can still read
+    what an administrator wrote. OSError if it cannot."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.unlink(missing_ok=True)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        try:
+            os.fchmod(fd, 0o600)  # whatever the umask
+            if os.geteuid() == 0:
+                owner = (path if path.exists() else path.parent).stat()
+                os.fchown(fd, owner.st_uid, owner.st_gid)
+            os.write(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+        folder = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(folder)
+        finally:
+            os.close(folder)
+    finally:
+        tmp.unlink(missing_ok=True)

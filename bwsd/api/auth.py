@@ -15,7 +15,6 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
-import os
 import re
 import secrets
 import time
@@ -28,6 +27,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from bwsd.api.problems import ApiError
 from bwsd.errors import BwsdError
+from bwsd.paths import write_private
 
 Role = Literal["viewer", "operator", "admin"]
 ROLES: tuple[Role, ...] = get_args(Role)
@@ -181,44 +181,11 @@ def _entry(item: Any) -> TokenEntry:
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    """Write a 0600 file beside ``path``, fsync it, rename it into place, fsync the folder."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    """Write the token file in one step (``write_private``); TokenError if it cannot."""
     try:
-        tmp.unlink(missing_ok=True)
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        try:
-            os.fchmod(fd, 0o600)  # whatever the umask
-            _keep_owner(fd, path)
-            os.write(fd, text.encode("utf-8"))
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-        _fsync_folder(path.parent)
+        write_private(path, text.encode("utf-8"))
     except OSError as exc:
         raise TokenError(f"{path}: cannot write: {exc.strerror}") from exc
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _keep_owner(fd: int, path: Path) -> None:
-    """Run as root, give the file the owner of the old file (or of its folder).
-
-    So a token added by an administrator stays readable by the daemon's own user.
-    """
-    if os.geteuid() != 0:
-        return
-    source = path if path.exists() else path.parent
-    st = source.stat()
-    os.fchown(fd, st.st_uid, st.st_gid)
-
-
-def _fsync_folder(folder: Path) -> None:
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 # ----- FastAPI -----

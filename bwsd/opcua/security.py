@@ -36,6 +36,7 @@ from bwsd.api.auth import RANK, Role, TokenStore
 from bwsd.errors import BwsdError
 from bwsd.logs import Summary
 from bwsd.opcua.space import standard_id, status
+from bwsd.paths import write_private
 
 log = logging.getLogger(__name__)
 CERT_FILE = "server-cert.der"
@@ -96,18 +97,12 @@ def certificate(folder: Path, *, renew: bool = False) -> Certificate:
             key, f"bwsd@{host}", {"organizationName": "bwsd"}, names,
             [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_DAYS,
         )  # fmt: skip
-        _write_private(found.key, cert_gen.dump_private_key_as_pem(key))
+        write_private(found.key, cert_gen.dump_private_key_as_pem(key))
         found.cert.write_bytes(cert.public_bytes(Encoding.DER))
     except OSError as exc:
         raise OpcUaError(f"{folder}: cannot write the server certificate: {exc}") from exc
     log.info("OPC UA server certificate made: %s", found.thumbprint())
     return found
-
-
-def _write_private(path: Path, data: bytes) -> None:
-    path.unlink(missing_ok=True)
-    path.touch(mode=0o600)
-    path.write_bytes(data)
 
 
 # ----- users -----
