@@ -17,7 +17,7 @@ import gc
 import logging
 import signal
 import socket
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,9 +25,9 @@ from typing import Any
 import uvicorn
 
 from bwsd.config import Config
+from bwsd.controller.facade import Controller, Settings
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
-from bwsd.controller.runner import Controller, Settings
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
 from bwsd.fieldbus.owner import BusLock, daemon_owner_id
@@ -36,6 +36,7 @@ from bwsd.notify import notify, watchdog_interval
 from bwsd.paths import journal_file, tokens_file
 
 log = logging.getLogger("bwsd")
+STOP_HOLD = 30.0  # s a stopping daemon waits for the running instruction to end
 
 
 @dataclass
@@ -57,6 +58,7 @@ async def start(config: Config, state_dir: Path) -> Daemon:
     journal = Journal.open(journal_file(config, state_dir))
     try:
         await asyncio.to_thread(journal.check)
+        await asyncio.to_thread(_warn_damaged, journal)
         lock = BusLock.take(state_dir, config.path)  # `bwsd hw` refuses to move meanwhile
     except BaseException:
         journal.close()
@@ -78,9 +80,7 @@ async def start(config: Config, state_dir: Path) -> Daemon:
         await _serve_api(daemon)
         await _serve_plc(daemon)
         await _serve_opcua(daemon)
-        watch = asyncio.create_task(controller.watch(), name="bwsd-watch")
-        daemon._tasks.append(watch)
-        daemon._closers.append(watch.cancel)
+        await controller.start()  # the reads at rest and the journal's stall watch
         # Everything made so far (modules, the app, its schemas) lives as long as the daemon:
         # out of the collector's reach, a full collection no longer walks it (60-70 ms that
         # would otherwise stall the event loop now and then, whichever thread triggers it).
@@ -90,6 +90,14 @@ async def start(config: Config, state_dir: Path) -> Daemon:
         await stop(daemon)  # what did start is closed again
         raise
     return daemon
+
+
+def _warn_damaged(journal: Journal) -> None:
+    """Warn at start-up about rows of the program a restart restores that it cannot use."""
+    record = journal.active_program() or journal.latest_program()
+    if record is not None:
+        for problem in journal.damaged_rows(record.id):
+            log.warning("journal: %s", problem)
 
 
 async def _serve_api(daemon: Daemon) -> None:
@@ -117,7 +125,7 @@ async def _serve_api(daemon: Daemon) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     except OSError as exc:
         raise ConfigError(f"[api] cannot listen on {where}: {exc.strerror or exc}") from None
-    task = asyncio.create_task(server.serve(sockets=[sock]))
+    task = daemon.controller.supervisor.start("api", lambda: server.serve(sockets=[sock]))
     while not server.started:
         if task.done():
             task.result()  # raises the reason
@@ -153,22 +161,37 @@ async def _serve_opcua(daemon: Daemon) -> None:
 
 
 async def stop(daemon: Daemon) -> None:
-    """Hold a running program after its current instruction, then close everything."""
+    """Hold a running program after its current instruction, then close everything: each
+    part is closed even when another failed to (the failure is logged)."""
     ctl = daemon.controller
     if ctl.packml.state is State.EXECUTE:
-        await ctl.command(Command.HOLD, "daemon stopping")
+        with _logged("holding the program"):
+            await asyncio.wait_for(ctl.command(Command.HOLD, "daemon stopping"), STOP_HOLD)
     for close in reversed(daemon._closers):
-        result = close()
-        if asyncio.iscoroutine(result):
-            await result
-    for task in daemon._tasks:
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-    await ctl.close()
-    await ctl.bus.close()
+        with _logged("closing a door"):
+            result = close()
+            if asyncio.iscoroutine(result):
+                await result
+    if daemon._tasks:
+        await asyncio.wait(daemon._tasks, timeout=STOP_HOLD)
+    with _logged("closing the controller"):
+        await ctl.close()
+    with _logged("closing the bus"):
+        await ctl.bus.close()
     if daemon.bus_lock is not None:
-        daemon.bus_lock.release()
-    daemon.journal.close()
+        with _logged("releasing the bus lock"):
+            daemon.bus_lock.release()
+    with _logged("closing the journal"):
+        daemon.journal.close()
+
+
+@contextlib.contextmanager
+def _logged(what: str) -> Iterator[None]:
+    """Log a failure of one shutdown step and go on with the next."""
+    try:
+        yield
+    except Exception as exc:
+        log.error("%s failed: %s", what, exc, exc_info=exc)
 
 
 async def serve(config: Config, state_dir: Path, on_ready: Callable[[Daemon], None]) -> None:
@@ -180,10 +203,10 @@ async def serve(config: Config, state_dir: Path, on_ready: Callable[[Daemon], No
         loop.add_signal_handler(sig, stopping.set)
     on_ready(daemon)
     notify("READY=1", f"STATUS={_status(daemon)}")
-    pinger = asyncio.create_task(_watchdog(daemon))
+    daemon.controller.supervisor.start("watchdog", lambda: _watchdog(daemon))
     await stopping.wait()
     notify("STOPPING=1")
-    pinger.cancel()
+    daemon.controller.supervisor.cancel("watchdog")
     await stop(daemon)
 
 

@@ -20,7 +20,7 @@ from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import JSONResponse, Response
 
 from bwsd import __version__
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 
 from . import control, data, problems, web
 from .auth import Auth, TokenStore, refused_token, require
@@ -70,7 +70,7 @@ def create_app(
     data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
     app.add_api_websocket_route(f"{PREFIX}/events", _events(ctx))
     app.add_api_route("/healthz", healthz, methods=["GET"], response_model=Health,
-                      tags=["service"])  # fmt: skip
+                      responses={503: {"model": Health}}, tags=["service"])  # fmt: skip
     app.add_api_route("/metrics", _metrics(metrics), methods=["GET"], tags=["service"],
                       dependencies=[Depends(require("viewer"))], response_class=Response,
                       responses={200: {"content": {CONTENT_TYPE: {}}}, 401: {"model": Error},
@@ -129,10 +129,16 @@ def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[N
     return lifespan
 
 
-async def healthz(request: Request) -> Health:
-    """The daemon answers (no token needed), and says whether reads need a token."""
+async def healthz(request: Request, response: Response) -> Health:
+    """The daemon answers (no token needed), says whether reads need a token, and what part
+    of it is down (then HTTP 503): a task that failed, a recovery that could not complete,
+    a stalled journal."""
     auth: Auth = request.app.state.auth
-    return Health(ok=True, open_reads=auth.open_reads)
+    ctx: Context = request.app.state.ctx
+    problems = ctx.controller.health()
+    if problems:
+        response.status_code = 503
+    return Health(ok=not problems, open_reads=auth.open_reads, problems=problems)
 
 
 def _metrics(metrics: Metrics) -> Callable[[], Any]:

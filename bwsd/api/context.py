@@ -7,8 +7,8 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import State
-from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, Fault, StateChanged
 
 from .events import EventHub

@@ -8,9 +8,9 @@ from typing import Annotated, Any
 from fastapi import Depends
 
 from bwsd.controller.errors import ControllerError
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
 from bwsd.controller.programs import instruction_dict, step_dict
-from bwsd.controller.runner import Controller
 from bwsd.fieldbus.base import FAULT_NAMES
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction
@@ -76,6 +76,7 @@ async def get_state(ctx: Ctx) -> StateOut:
         stop_cause=st.stop_cause.label,
         allowed=command_names(st.allowed),
         recovering=st.recovering,
+        resumable=st.resumable,
         bus=BusHealth(
             connected=bus.connected,
             last_error=bus.last_error,
@@ -135,7 +136,8 @@ async def post_command(name: CommandName, ctx: Ctx, who: Operator,
     ctl = ctx.controller
     command = Command[name.upper()]
     try:
-        await ctl.command(command, body.reason if body is not None else "", who.name)
+        await ctl.command(command, body.reason if body is not None else "", who.name,
+                          resume=body is not None and body.resume)  # fmt: skip
     except InvalidCommand as exc:
         raise _refused(str(exc), exc.state, ctl.allowed()) from None
     except (ControllerError, JournalError) as exc:

@@ -7,7 +7,7 @@ import time
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.controller.status import Event, Fault, InstructionDone
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"

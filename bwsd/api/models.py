@@ -77,10 +77,12 @@ class StateOut(BaseModel):
     reason: str = Field(description="why the machine stopped, held, suspended or aborted")
     stop_cause: str = Field(
         description="the cause of the last stop: none, refused_move, "
-        "drive_fault, estop, bus, mismatch, operator, restart, internal"
+        "drive_fault, estop, bus, mismatch, operator, restart, internal, journal"
     )
     allowed: list[str] = Field(description="exactly the commands that will be accepted now")
     recovering: str = Field(description="why commands wait after a restart ('' if they do not)")
+    resumable: bool = Field(False, description="start with resume continues the loaded "
+                            "program where an Abort or a Stop left it")  # fmt: skip
     bus: BusHealth
     last_fault: str | None = Field(description="the controller's last fault report, if any")
     next: NextOut | None = Field(description="the instruction to run next; null if none")
@@ -141,6 +143,8 @@ class ProgramDetailOut(ProgramOut):
 
 class CommandIn(BaseModel):
     reason: str = Field("", max_length=MAX_REASON_CHARS)
+    resume: bool = Field(False, description="with start: continue the loaded program where "
+                         "an Abort or a Stop left it (see resumable in the state)")  # fmt: skip
 
 
 class ModeIn(BaseModel):
@@ -223,8 +227,10 @@ class HistoryOut(BaseModel):
 
 
 class Health(BaseModel):
-    ok: bool
+    ok: bool = Field(description="false (and HTTP 503) while a part of the daemon is down")
     open_reads: bool = Field(description="reads are served without a token")
+    problems: dict[str, str] = Field(default_factory=dict, description="what is down, by "
+                                     "part: a task, the recovery, the journal")  # fmt: skip
 
 
 Responses = dict[int | str, dict[str, Any]]

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import asyncio
 
-from bwsd.controller.runner import Controller
-from bwsd.twin import SkeletonData
+from bwsd.controller.facade import Controller
+from bwsd.twin import SkeletonData, Twin
 
 
 class SkeletonView:
@@ -22,7 +22,8 @@ class SkeletonView:
 
     def __init__(self, controller: Controller) -> None:
         self._ctl = controller
-        self._key: tuple[int, int] | None = None
+        self._twin: Twin | None = None  # the twin the copy was taken of (held: never reused)
+        self._done = -1
         self._copy: SkeletonData | None = None
 
     async def current(self) -> SkeletonData | None:
@@ -30,9 +31,8 @@ class SkeletonView:
         twin = self._ctl.twin
         if twin is None:
             return None
-        key = (id(twin), twin.done)
-        if self._key != key or self._copy is None:
+        if self._twin is not twin or self._done != twin.done or self._copy is None:
             copy = await asyncio.to_thread(twin.skeleton)
-            self._key, self._copy = (id(twin), copy.instructions), copy
+            self._twin, self._done, self._copy = twin, copy.instructions, copy
             return copy
         return self._copy

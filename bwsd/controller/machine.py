@@ -11,7 +11,6 @@ from bwsd.controller.recovery import differing_cells
 from bwsd.controller.status import BusChanged, BusStatus, Event
 from bwsd.fieldbus.base import (
     BoolGrid,
-    DriveFault,
     EStopError,
     Fieldbus,
     FieldbusConnectionError,
@@ -47,9 +46,7 @@ class MachineView:
 
     def failed(self, exc: FieldbusError) -> None:
         """A failure: lost (no answer, no connection) or answered (a fault, the e-stop)."""
-        lost = not isinstance(exc, DriveFault | EStopError) and (
-            isinstance(exc, FieldbusConnectionError) or "did not complete" not in str(exc)
-        )
+        lost = exc.lost
         estop = True if isinstance(exc, EStopError) else self.status.estop
         self._set(replace(self.status, connected=not lost, last_error=str(exc),
                           checked=time.time(), estop=estop))  # fmt: skip

@@ -224,6 +224,13 @@ class PackML:
             raise InvalidEvent("execute done", self._state, {State.EXECUTE})
         return self._enter(State.COMPLETING, "execute done")
 
+    def restore(self, state: State, reason: str) -> State:
+        """Take up ``state`` (a waiting state) after a restart, with why; heard as a change."""
+        if state not in WAITING:
+            raise InvalidEvent("restore", state, WAITING)
+        self.reason = reason
+        return self._enter(state, "restart")
+
     def set_mode(self, mode: UnitMode) -> None:
         """Change the unit mode (only in MODE_CHANGE_STATES; the same mode is always fine)."""
         mode = UnitMode(mode)

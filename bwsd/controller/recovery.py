@@ -6,7 +6,8 @@ the state before the instruction and with its prediction:
 - it shows the prediction: the move happened, **commit** it;
 - it shows the state before: the move never started, **rerun** it;
 - a shift shows some of its lines moved and the rest as before, nothing else moved:
-  **finish** the other lines;
+  **finish** the other lines; a take-up stopped between its start and its target, the
+  cases as before: **finish** it (its set-point is absolute);
 - a weft leaves no trace in the occupancy or the take-up: its insert axis's stroke counter,
   journaled before the move, says whether the insert ran (one stroke more: commit if the
   rest shows the prediction) or not (the same count: rerun); anything else, or no counter,
@@ -25,8 +26,9 @@ from typing import Literal
 import numpy as np
 
 from bwsd.controller.plan import Mismatch, verify
+from bwsd.fieldbus.axes import UM_PER_MM
 from bwsd.fieldbus.base import STROKES_WRAP, BoolGrid, MachineState
-from bwsd.twin import Prediction, Shift, Weft
+from bwsd.twin import Prediction, Shift, TakeUp, Weft
 from bwsd.twin.instructions import Instruction
 
 Kind = Literal["commit", "rerun", "finish", "blocked"]
@@ -39,7 +41,7 @@ class Settle:
     kind: Kind
     index: int
     reason: str  # what the machine showed, in words
-    rest: Shift | None = None  # for "finish": the lines still to move
+    rest: Instruction | None = None  # for "finish": a shift's lines still to move, a take-up
 
 
 @dataclass(frozen=True)
@@ -50,9 +52,16 @@ class Before:
     takeup_um: int
 
 
-def settle(instruction: Instruction, pred: Prediction, machine: MachineState, takeup_um: int,
-           before: Before, origin_um: int, tolerance: int,
-           strokes: Mapping[int, int] | None = None) -> Settle:  # fmt: skip
+def settle(
+    instruction: Instruction,
+    pred: Prediction,
+    machine: MachineState,
+    takeup_um: int,
+    before: Before,
+    origin_um: int,
+    tolerance: int,
+    strokes: Mapping[int, int] | None = None,
+) -> Settle:
     """Decide from the read-back ``machine`` (its take-up axis at ``takeup_um``);
     ``strokes``: the stroke counters of a weft's insert axes before it started (axis: count)."""
     index = pred.index
@@ -62,10 +71,18 @@ def settle(instruction: Instruction, pred: Prediction, machine: MachineState, ta
             return Settle("blocked", index, f"instruction {index} started and not done: {ran}")
         if not ran:
             if _shows(machine, takeup_um, before.occupancy, before.takeup_um, tolerance):
-                return Settle("rerun", index, f"instruction {index} started, the weft was not "
-                              "inserted (the insert's stroke count is unchanged)")  # fmt: skip
-            return Settle("blocked", index, f"instruction {index} started and not done: the "
-                          "weft was not inserted and the machine moved")  # fmt: skip
+                return Settle(
+                    "rerun",
+                    index,
+                    f"instruction {index} started, the weft was not "
+                    "inserted (the insert's stroke count is unchanged)",
+                )
+            return Settle(
+                "blocked",
+                index,
+                f"instruction {index} started and not done: the "
+                "weft was not inserted and the machine moved",
+            )
     try:
         verify(pred, machine, takeup_um - origin_um, tolerance)
     except Mismatch as exc:
@@ -74,11 +91,20 @@ def settle(instruction: Instruction, pred: Prediction, machine: MachineState, ta
         return Settle("commit", index, f"instruction {index} completed from the read-back")
     if _shows(machine, takeup_um, before.occupancy, before.takeup_um, tolerance):
         return Settle("rerun", index, f"instruction {index} started, the machine has not moved")
+    if (
+        isinstance(instruction, TakeUp)
+        and _between(takeup_um, before.takeup_um, pred, origin_um, tolerance)
+        and _same(machine.occupancy, before.occupancy)
+    ):
+        stopped = f"the take-up stopped at {takeup_um - origin_um} um on its way"
+        return Settle("finish", index, f"instruction {index} started, {stopped}", instruction)
     rest = lines_left(instruction, machine.occupancy, before.occupancy, pred.occupancy >= 0)
-    if rest is not None and _shows(machine, takeup_um, machine.occupancy, before.takeup_um,
-                                   tolerance):  # fmt: skip
-        return Settle("finish", index, f"instruction {index} started, some of its lines moved",
-                      rest)  # fmt: skip
+    if rest is not None and _shows(
+        machine, takeup_um, machine.occupancy, before.takeup_um, tolerance
+    ):
+        return Settle(
+            "finish", index, f"instruction {index} started, some of its lines moved", rest
+        )
     return Settle("blocked", index, f"instruction {index} started and not done: {difference}")
 
 
@@ -86,14 +112,18 @@ def inserted(machine: MachineState, strokes: Mapping[int, int] | None) -> bool |
     """Whether the insert ran, from its stroke counters before and now: True (one stroke
     more), False (the same count), or why it cannot be told."""
     if not strokes:
-        return ("no stroke count of the insert was journaled before it started: whether the "
-                "weft was inserted cannot be told")  # fmt: skip
+        return (
+            "no stroke count of the insert was journaled before it started: whether the "
+            "weft was inserted cannot be told"
+        )
     counts = set()
     for axis, was in strokes.items():
         now = machine.axes[axis]
         if now.strokes is None:
-            return ("the bus reports no stroke counter (Modbus map 2): whether the weft was "
-                    "inserted cannot be told")  # fmt: skip
+            return (
+                "the bus reports no stroke counter (Modbus map 2): whether the weft was "
+                "inserted cannot be told"
+            )
         if now.fault:
             return f"the insert axis reports fault {now.fault}: the stroke may be cut"
         counts.add((now.strokes - was) % STROKES_WRAP)
@@ -101,20 +131,34 @@ def inserted(machine: MachineState, strokes: Mapping[int, int] | None) -> bool |
         return False
     if counts == {1}:
         return True
-    return (f"the insert counted {', '.join(map(str, sorted(counts)))} strokes since it "
-            "started, not 0 or 1")  # fmt: skip
-
-
-def _shows(machine: MachineState, takeup_um: int, occupancy: BoolGrid, want_um: int,
-           tolerance: int) -> bool:  # fmt: skip
-    same = machine.occupancy.shape == occupancy.shape and bool(
-        np.array_equal(machine.occupancy, occupancy)
+    return (
+        f"the insert counted {', '.join(map(str, sorted(counts)))} strokes since it "
+        "started, not 0 or 1"
     )
-    return same and abs(takeup_um - want_um) <= tolerance
 
 
-def lines_left(instruction: Instruction, machine: BoolGrid, before: BoolGrid,
-               after: BoolGrid) -> Shift | None:  # fmt: skip
+def _between(
+    takeup_um: int, before_um: int, pred: Prediction, origin_um: int, tolerance: int
+) -> bool:
+    """The take-up stands strictly on its way from ``before_um`` to the predicted position."""
+    target = origin_um + round(pred.takeup * UM_PER_MM)
+    lo, hi = sorted((before_um, target))
+    return lo + tolerance < takeup_um < hi - tolerance
+
+
+def _shows(
+    machine: MachineState, takeup_um: int, occupancy: BoolGrid, want_um: int, tolerance: int
+) -> bool:
+    return _same(machine.occupancy, occupancy) and abs(takeup_um - want_um) <= tolerance
+
+
+def _same(a: BoolGrid, b: BoolGrid) -> bool:
+    return a.shape == b.shape and bool(np.array_equal(a, b))
+
+
+def lines_left(
+    instruction: Instruction, machine: BoolGrid, before: BoolGrid, after: BoolGrid
+) -> Shift | None:
     """The entries of a shift whose line (or segment) is still as before, when every other
     entry shows its predicted result and nothing else moved; None otherwise (or for no
     shift). Each entry is its own actuator, so a cut shift stops between entries."""

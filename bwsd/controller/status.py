@@ -19,6 +19,7 @@ from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.controller.plan import Mismatch, RefusedMove
 from bwsd.errors import TwinError
 from bwsd.fieldbus.base import FAULT_ESTOP, DriveFault, EStopError, FieldbusError
+from bwsd.journal.records import JournalError
 
 log = logging.getLogger("bwsd.controller")
 
@@ -34,7 +35,8 @@ class StopCause(IntEnum):
     MISMATCH = 5  # the read-back differs from the prediction
     OPERATOR = 6  # a command from REST, the PLC or the page
     RESTART = 7  # the daemon restarted with a program active
-    INTERNAL = 8  # an error nothing expected (the journal's disk, a bug): see the log
+    INTERNAL = 8  # an error nothing expected (a task that failed, a bug): see the log
+    JOURNAL = 9  # the journal cannot write (its disk is full, another process holds its lock)
 
     @property
     def label(self) -> str:
@@ -53,6 +55,8 @@ def cause_of(error: BaseException) -> StopCause:
         return StopCause.REFUSED_MOVE
     if isinstance(error, Mismatch):
         return StopCause.MISMATCH
+    if isinstance(error, JournalError):
+        return StopCause.JOURNAL
     return StopCause.INTERNAL
 
 
@@ -84,6 +88,7 @@ class StatusSnapshot:
     bus: BusStatus
     recovering: str  # why commands wait ("" when they do not)
     next: dict[str, Any] | None  # the instruction that runs next, with its line
+    resumable: bool = False  # Start with resume continues the program where it stopped
 
 
 # ----- the event stream -----

@@ -45,15 +45,31 @@ FAULT_NAMES = {
 
 
 class FieldbusError(BwsdError):
-    """Base of the errors of the actuator bus."""
+    """Base of the errors of the actuator bus.
+
+    ``lost``: the machine did not answer (no connection, no reply), as opposed to an answer
+    that refused or reported a fault. Decided where the error is raised, never from its text.
+    """
+
+    lost = False
+
+    def __init__(self, message: str, *, lost: bool | None = None) -> None:
+        super().__init__(message)
+        if lost is not None:
+            self.lost = lost
 
 
 class FieldbusConnectionError(FieldbusError):
     """The bus cannot be reached, or the connection was lost (after the retries)."""
 
+    lost = True
+
 
 class FieldbusTimeout(FieldbusError):
-    """An axis did not complete within the timeout, or the bus stopped answering."""
+    """The bus stopped answering (``lost``), or an axis that answers did not complete within
+    the timeout (``lost=False``)."""
+
+    lost = True
 
 
 class DriveFault(FieldbusError):
@@ -276,7 +292,8 @@ class Fieldbus(ABC):
                 return state
             if time.monotonic() > limit:
                 late = [self.axes[i].name for i in axes if state.axes[i].done_seq != self._seq[i]]
-                raise FieldbusTimeout(f"axes {', '.join(late)} did not complete in time")
+                raise FieldbusTimeout(f"axes {', '.join(late)} did not complete in time",
+                                      lost=False)  # fmt: skip
             await asyncio.sleep(0.002)
 
     async def execute(

@@ -309,7 +309,8 @@ class ModbusBus(Fieldbus):
         limit = loop.time() + self.settings.timeout
         while (await self._read_registers(REG_COMMAND, 1))[0] != CMD_NONE:
             if loop.time() > limit:
-                raise FieldbusTimeout(f"{self.where}: machine command {code} was not taken")
+                raise FieldbusTimeout(f"{self.where}: machine command {code} was not taken",
+                                      lost=False)  # fmt: skip
             await asyncio.sleep(0.002)
 
     async def _read_registers(self, start: int, count: int) -> list[int]:

@@ -19,7 +19,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from bwsd.journal import codec
-from bwsd.journal.check import damage, invariants
+from bwsd.journal.check import damage, invariants, records
 from bwsd.journal.files import close_keeping_wal
 from bwsd.journal.records import JournalError
 from bwsd.journal.schema import begin_session, connect, end_session, lock
@@ -119,6 +119,11 @@ class Store:
             raise self._error("damaged: SQLite quick check: " + "; ".join(broken))
         if found:
             raise self._error("inconsistent: " + "; ".join(found))
+
+    def damaged_rows(self, program: int | None = None) -> list[str]:
+        """Rows a restart could not use (``check.records``): of ``program``, or of all."""
+        with self._read() as conn:
+            return records(conn, program)
 
     def _payload(self, payload: dict[str, Any], program_id: int | None, index: int | None) -> str:
         try:

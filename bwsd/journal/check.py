@@ -7,6 +7,8 @@ Cheap enough for every start-up: one ``quick_check`` pass over the file's pages 
 
 from __future__ import annotations
 
+import hashlib
+import json
 import sqlite3
 
 from bwsd.journal.records import ACTIVE, COMPLETE, LOADED
@@ -99,3 +101,43 @@ def _program_problems(
     if outcome == COMPLETE and finished != total:
         out.append(f"{where}: complete with {finished} of {total} instructions done")
     return out
+
+
+def records(conn: sqlite3.Connection, program: int | None = None) -> list[str]:
+    """What the journal's rows hold that a restart could not use, naming each row: a program
+    text that fails its sha256, a payload that is not a JSON object, a snapshot that fails
+    its sha256. ``program``: that program's rows only. One pass over the rows."""
+    where, args = ("WHERE id = ?", (program,)) if program is not None else ("", ())
+    found = [f"program {pid}: its text does not match its sha256 (the journal was changed "
+             "outside bwsd)"
+             for pid, text, digest in conn.execute(
+                 f"SELECT id, text, sha256 FROM programs {where} ORDER BY id", args)
+             if _sha256(text.encode() if isinstance(text, str) else text) != digest]  # fmt: skip
+    inner = "WHERE program_id = ?" if program is not None else ""
+    for pid, idx, started, done in conn.execute(
+        f"SELECT program_id, idx, started_payload, done_payload FROM instructions {inner} "
+        "ORDER BY program_id, idx", args,
+    ):  # fmt: skip
+        for which, text in (("started", started), ("done", done)):
+            if text is not None and not _json_object(text):
+                found.append(f"program {pid}, instruction {idx}: its {which} payload is not a "
+                             "JSON object")  # fmt: skip
+    for pid, idx, data, digest in conn.execute(
+        f"SELECT program_id, idx, data, sha256 FROM snapshots {inner} ORDER BY program_id, idx",
+        args,
+    ):  # fmt: skip
+        if not isinstance(data, bytes) or _sha256(data) != digest:
+            found.append(f"program {pid}: the snapshot at instruction {idx} does not match its "
+                         "sha256 (a restart skips it)")  # fmt: skip
+    return found
+
+
+def _sha256(data: bytes | None) -> str:
+    return hashlib.sha256(data or b"").hexdigest()
+
+
+def _json_object(text: object) -> bool:
+    try:
+        return isinstance(text, str) and isinstance(json.loads(text), dict)
+    except ValueError:
+        return False

@@ -31,7 +31,7 @@ from bwsd import __version__
 from bwsd.config import SCHEMA as CONFIG_SCHEMA
 from bwsd.config import Text, load_config
 from bwsd.errors import BwsdError
-from bwsd.journal.check import integrity, invariants
+from bwsd.journal.check import integrity, invariants, records
 from bwsd.journal.files import (
     LOCK,
     SHM,
@@ -196,6 +196,11 @@ def _check_file(report: Report, conn: sqlite3.Connection, where: str, lost: bool
             report.problems.extend(f"inconsistent: {line}" for line in found)
         else:
             report.facts.append(("consistency", "ok (the journal's invariants)"))
+        if found := records(conn):
+            report.problems.extend(f"damaged row: {line}" for line in found)
+        else:
+            report.facts.append(("rows", "ok (program texts and snapshots match their "
+                                 "sha256, payloads are JSON)"))  # fmt: skip
         alone = " (as the file alone says, without its lost log)" if lost else ""
         report.facts.append(("sessions", _sessions(conn) + alone))
         report.facts.append(("programs", _programs(conn) + alone))

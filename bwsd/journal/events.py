@@ -12,27 +12,28 @@ from bwsd.journal.records import EventRecord, StateRecord
 class EventLog(Store):
     """The event and state logs of a journal."""
 
-    def log_event(self, kind: str, data: dict[str, Any]) -> int:
-        """Append an event; its id."""
+    def log_event(self, kind: str, data: dict[str, Any], at: float | None = None) -> int:
+        """Append an event (that happened at ``at``, by default now); its id."""
         if not kind:
             raise self._error("an event needs a kind")
         text = self._payload(data, None, None)
         with self._write() as conn:
             cur = conn.execute(
                 "INSERT INTO events (time, kind, data) VALUES (?, ?, ?)",
-                (self._clock(), kind, text),
+                (self._clock() if at is None else at, kind, text),
             )
             assert cur.lastrowid is not None
             return cur.lastrowid
 
-    def log_state(self, state: int, name: str, reason: str) -> int:
-        """Append a PackML state change (state number, name, reason); its id."""
+    def log_state(self, state: int, name: str, reason: str, at: float | None = None) -> int:
+        """Append a PackML state change (state number, name, reason) made at ``at`` (by
+        default now); its id."""
         if isinstance(state, bool) or not isinstance(state, int) or state < 0:
             raise self._error(f"state must be an integer >= 0, got {state!r}")
         with self._write() as conn:
             cur = conn.execute(
                 "INSERT INTO states (time, state, name, reason) VALUES (?, ?, ?, ?)",
-                (self._clock(), state, name, reason),
+                (self._clock() if at is None else at, state, name, reason),
             )
             assert cur.lastrowid is not None
             return cur.lastrowid

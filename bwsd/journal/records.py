@@ -15,7 +15,8 @@ COMPLETE = "complete"
 ABORTED = "aborted"
 STOPPED = "stopped"
 ACTIVE = (RUNNING, HELD, SUSPENDED)  # at most one program at a time
-FINAL = (COMPLETE, ABORTED, STOPPED)  # a program that reached one never changes again
+FINAL = (COMPLETE, ABORTED, STOPPED)  # the run is over: complete, or ended before it
+ENDED = (ABORTED, STOPPED)  # ended before complete: resumable while it is the newest program
 OUTCOMES = (LOADED, *ACTIVE, *FINAL)
 
 

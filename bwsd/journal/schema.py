@@ -12,15 +12,16 @@ from pathlib import Path
 
 from bwsd import __version__
 from bwsd.journal.files import WAL, beside, close_keeping_wal, lost_wal, wal_holds_a_commit
-from bwsd.journal.records import ACTIVE, FINAL, OUTCOMES, JournalError
+from bwsd.journal.records import ACTIVE, COMPLETE, ENDED, FINAL, OUTCOMES, RUNNING, JournalError
 
-SCHEMA_VERSION = 3  # PRAGMA user_version; an older file is upgraded in place on open
+SCHEMA_VERSION = 4  # PRAGMA user_version; an older file is upgraded in place on open
 APPLICATION_ID = 0x62777364  # PRAGMA application_id: "bwsd" in ASCII
 BUSY_TIMEOUT_MS = 5000  # readers in other processes may hold the WAL briefly
 
 _OUTCOMES = ", ".join(f"'{o}'" for o in OUTCOMES)
 _ACTIVE = ", ".join(f"'{o}'" for o in ACTIVE)
 _FINAL = ", ".join(f"'{o}'" for o in FINAL)
+_ENDED = ", ".join(f"'{o}'" for o in ENDED)
 
 _BASE = f"""
 CREATE TABLE programs (
@@ -111,10 +112,20 @@ CREATE TABLE sessions (
     version TEXT NOT NULL
 );
 """
-SCHEMA = _BASE + _SNAPSHOTS + _SESSIONS
+# Version 4: an aborted or stopped program resumes (back to running) while it is the newest
+# program; only a complete one never changes again.
+_RESUME = f"""
+DROP TRIGGER programs_final;
+CREATE TRIGGER programs_final BEFORE UPDATE ON programs WHEN OLD.outcome = '{COMPLETE}'
+BEGIN SELECT RAISE(ABORT, 'a complete program never changes'); END;
+CREATE TRIGGER programs_resumed BEFORE UPDATE ON programs WHEN OLD.outcome IN ({_ENDED})
+    AND (NEW.outcome IS NOT '{RUNNING}' OR EXISTS (SELECT 1 FROM programs WHERE id > OLD.id))
+BEGIN SELECT RAISE(ABORT, 'an ended program only resumes, and only while it is the newest'); END;
+"""
+SCHEMA = _BASE + _SNAPSHOTS + _SESSIONS + _RESUME
 # The script that takes a file from version N to N + 1, and the tables each version added.
-UPGRADES = {1: _SNAPSHOTS, 2: _SESSIONS}
-ADDED = {2: ("snapshots",), 3: ("sessions",)}
+UPGRADES = {1: _SNAPSHOTS, 2: _SESSIONS, 3: _RESUME}
+ADDED: dict[int, tuple[str, ...]] = {2: ("snapshots",), 3: ("sessions",), 4: ()}
 TABLES = ("events", "instructions", "programs", "sessions", "snapshots", "states")
 
 

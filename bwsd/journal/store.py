@@ -17,6 +17,7 @@ from bwsd.journal.events import EventLog
 from bwsd.journal.records import (
     ACTIVE,
     COMPLETE,
+    ENDED,
     FINAL,
     LOADED,
     OUTCOMES,
@@ -56,6 +57,8 @@ class Journal(EventLog):
                 (name, text, digest, instructions, self._clock()),
             )
             assert cur.lastrowid is not None
+            # an ended program resumes only while it is the newest: its snapshots go now
+            conn.execute("DELETE FROM snapshots WHERE program_id < ?", (cur.lastrowid,))
             return cur.lastrowid
 
     def program(self, program_id: int) -> ProgramRecord:
@@ -85,6 +88,12 @@ class Journal(EventLog):
             ).fetchall()
         return [ProgramRecord(*row) for row in rows]
 
+    def latest_program(self) -> ProgramRecord | None:
+        """The newest program (the one loaded when the daemon stopped), if any."""
+        with self._read() as conn:
+            row = conn.execute(f"{_PROGRAM} ORDER BY id DESC LIMIT 1").fetchone()
+        return None if row is None else ProgramRecord(*row)
+
     def active_program(self) -> ProgramRecord | None:
         """The program running, held or suspended, if any (at most one is)."""
         with self._read() as conn:
@@ -105,13 +114,22 @@ class Journal(EventLog):
                 "finished = CASE WHEN ? THEN ? ELSE finished END WHERE id = ?",
                 (outcome, reason, outcome == RUNNING, now, outcome in FINAL, now, program_id),
             )
-            if outcome in FINAL:  # a finished program is never resumed: its snapshots go
+            if outcome == COMPLETE:  # a complete program never runs again: its snapshots go
                 conn.execute("DELETE FROM snapshots WHERE program_id = ?", (program_id,))
 
     def _check_outcome(self, conn: sqlite3.Connection, rec: ProgramRecord, outcome: str) -> None:
-        if rec.outcome in FINAL:
-            raise self._error(f"already {rec.outcome}: a finished program never changes",
+        if rec.outcome == COMPLETE:
+            raise self._error("already complete: a complete program never changes",
                               program=rec.id)  # fmt: skip
+        if rec.outcome in ENDED:
+            if outcome != RUNNING:
+                raise self._error(f"already {rec.outcome}: an ended program only resumes",
+                                  program=rec.id)  # fmt: skip
+            newer = conn.execute("SELECT min(id) FROM programs WHERE id > ?", (rec.id,))
+            if (later := newer.fetchone()[0]) is not None:
+                raise self._error(f"program {later} was loaded after it: an ended program "
+                                  "resumes only while it is the newest",
+                                  program=rec.id)  # fmt: skip
         if outcome in ACTIVE:
             row = conn.execute(
                 f"SELECT id, outcome FROM programs WHERE outcome IN ({_ACTIVE_SQL}) AND id <> ?",

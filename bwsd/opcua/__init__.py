@@ -9,7 +9,7 @@ from bwsd.config import Config
 from bwsd.extras import OPCUA, needs
 
 if TYPE_CHECKING:
-    from bwsd.controller.runner import Controller
+    from bwsd.controller.facade import Controller
     from bwsd.opcua.server import OpcUaServer
 
 

@@ -30,8 +30,8 @@ from asyncua.common.callback import CallbackType, ServerItemCallback
 from asyncua.common.utils import ServiceError
 
 from bwsd.api.auth import TokenStore
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, UnitMode
-from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, InstructionDone, ProgramLoaded, StateChanged
 from bwsd.errors import BwsdError
 from bwsd.logs import Summary
@@ -117,7 +117,8 @@ class OpcUaServer:
         await server.load_certificate(str(cert.cert))
         await server.load_private_key(str(cert.key))
         server.set_certificate_validator(trust)
-        self._space = await space.build(server, self._method, self._set_mode_method)
+        self._space = await space.build(server, self._method, self._set_mode_method,
+                                        self._resume_method)  # fmt: skip
         policies = [self.policy] + ([ua.SecurityPolicyType.NoSecurity] if self.allow_none else [])
         server.set_security_policy(policies, Ruleset(space.needs(self._space.idx)))  # type: ignore[arg-type]
         tokens: list[type] = [ua.UserNameIdentityToken]
@@ -134,8 +135,7 @@ class OpcUaServer:
         self._read_live(server)
         await self._refresh()
         self.controller.events.subscribe(self._on_event)
-        self._updater = asyncio.create_task(self._update_forever(), name="bwsd-opcua")
-        self._updater.add_done_callback(_ended)
+        self._updater = self.controller.supervisor.start("opcua", self._update_forever)
         log.info("OPC UA on %s (%s%s), certificate %s", self.url, self.policy.name,
                  ", None too" if self.allow_none else "", cert.thumbprint())  # fmt: skip
 
@@ -254,6 +254,13 @@ class OpcUaServer:
 
         return call
 
+    async def _resume_method(self, parent: ua.NodeId) -> ua.StatusCode | list[Any]:
+        return await self._answer(
+            self._through(
+                self.controller.command(Command.START, REASON, WHO, resume=True), "Resume"
+            )
+        )
+
     async def _set_mode_method(self, parent: ua.NodeId, mode: Any) -> ua.StatusCode | list[Any]:
         return await self._answer(self._mode(mode.Value if isinstance(mode, ua.Variant) else mode))
 
@@ -351,14 +358,3 @@ def _unknown(number: Any, what: str) -> Refused:
 
 _UNSET = object()
 _KINDS = {tag.path: tag.kind for tag in space.TAGS}
-
-
-def _ended(task: asyncio.Task[None]) -> None:
-    """The updater's owner: its end is logged, a failure loudly."""
-    if task.cancelled():
-        log.info("OPC UA updater cancelled")
-    elif (error := task.exception()) is not None:
-        log.error("OPC UA updater failed: %s (the variables no longer follow)", error,
-                  exc_info=error)  # fmt: skip
-    else:
-        log.info("OPC UA updater ended")

@@ -78,6 +78,8 @@ TAGS: tuple[Tag, ...] = (
     Tag("Machine/FaultedAxes", V.String, [], "axes reporting a fault"),
     Tag("Machine/SensorsDiffer", V.String, [], "cells 'row,col' where sensors and twin differ"),
     Tag("Machine/Recovering", V.String, "", "why commands wait after a restart"),
+    Tag("Status/Resumable", V.Boolean, False,
+        "the Resume method continues the loaded program where an Abort or a Stop left it"),
     Tag("Machine/Rows", V.UInt32, 0, "rows of the matrix"),
     Tag("Machine/Cols", V.UInt32, 0, "columns of the matrix"),
     Tag("Machine/TwinOccupancy", V.Int32, [], "yarn id per cell, row by row, -1 where empty"),
@@ -85,8 +87,9 @@ TAGS: tuple[Tag, ...] = (
     Tag("Machine/Contacts", V.UInt32, 0, "yarn contacts of the loaded program so far"),
 )  # fmt: skip
 
-# The methods: the PackML commands (operator) and SetUnitMode (admin).
+# The methods: the PackML commands and Resume (operator), and SetUnitMode (admin).
 COMMAND_METHODS: tuple[Command, ...] = tuple(Command)
+RESUME = "Resume"  # Start, continuing the loaded program where an Abort or a Stop left it
 SET_UNIT_MODE = "SetUnitMode"
 MethodCall = Callable[..., Awaitable[Any]]
 
@@ -118,6 +121,7 @@ def needs(idx: int) -> dict[ua.NodeId, Role]:
     table: dict[ua.NodeId, Role] = {node_id(idx, t.path): t.writer for t in TAGS if t.writer}
     for command in COMMAND_METHODS:
         table[node_id(idx, command.label)] = "operator"
+    table[node_id(idx, RESUME)] = "operator"
     table[node_id(idx, SET_UNIT_MODE)] = "admin"
     return table
 
@@ -131,8 +135,9 @@ class Space:
 
 
 async def build(server: Server, on_command: Callable[[Command], MethodCall],
-                set_mode: MethodCall) -> Space:  # fmt: skip
-    """Add the PackML object under Objects; methods call ``on_command(c)`` and ``set_mode``."""
+                set_mode: MethodCall, resume: MethodCall) -> Space:  # fmt: skip
+    """Add the PackML object under Objects; methods call ``on_command(c)``, ``set_mode`` and
+    ``resume``."""
     idx = await server.register_namespace(NAMESPACE)
     root = await server.nodes.objects.add_object(node_id(idx, ""), ua.QualifiedName(ROOT, idx))
     objects: dict[str, Node] = {"": root}
@@ -143,6 +148,7 @@ async def build(server: Server, on_command: Callable[[Command], MethodCall],
     for command in COMMAND_METHODS:
         await root.add_method(node_id(idx, command.label), ua.QualifiedName(command.label, idx),
                               on_command(command), [], [])  # fmt: skip
+    await root.add_method(node_id(idx, RESUME), ua.QualifiedName(RESUME, idx), resume, [], [])
     about = ua.LocalizedText("1 Production, 2 Maintenance, 3 Manual")
     mode = ua.Argument(Name="UnitMode", DataType=standard_id(ua.ObjectIds.Int32), ValueRank=-1,
                        Description=about)  # fmt: skip

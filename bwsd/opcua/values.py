@@ -112,6 +112,7 @@ def status_values(st: StatusSnapshot, tally: Tally, now: float) -> dict[str, Any
         "Machine/FaultedAxes": list(st.bus.faulted),
         "Machine/SensorsDiffer": [f"{r},{c}" for r, c in st.bus.differs],
         "Machine/Recovering": st.recovering,
+        "Status/Resumable": st.resumable,
     }
 
 

@@ -1,6 +1,6 @@
 """The PackML tags as holding registers (map: docs/plc.md): addresses and the codec (pure).
 
-Seventeen holding registers from address 0, no gaps, so a PLC reads them all in one request.
+Nineteen holding registers from address 0, no gaps, so a PLC reads them all in one request.
 32-bit values take two registers, high word first, unsigned.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import astuple, dataclass
 
-MAP_VERSION = 2  # 2: the e-stop register (16) and stop reason 8 (internal error)
+MAP_VERSION = 3  # 2: the e-stop register (16), stop reason 8; 3: resume (17, 18), reason 9
 
 REG_MAP_VERSION = 0
 REG_CNTRL_CMD = 1  # Command.CntrlCmd
@@ -25,9 +25,11 @@ REG_GOOD_COUNT = 12  # 12, 13
 REG_STOP_REASON = 14
 REG_HEARTBEAT = 15
 REG_ESTOP = 16  # 1 while the emergency stop is pressed (as last read)
-REG_COUNT = 17
+REG_RESUME = 17  # Command.Resume (bwsd): 1: a Start request resumes the loaded program
+REG_RESUMABLE = 18  # Status.Resumable (bwsd): 1 while a Start with resume is accepted
+REG_COUNT = 19
 
-WRITABLE = range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1)
+WRITABLE = (*range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1), REG_RESUME)
 """The command registers the PLC writes; every other register is read-only."""
 
 REQUEST_REGISTERS = (REG_CMD_CHANGE_REQUEST, REG_UNIT_MODE_CHANGE_REQUEST)
@@ -37,7 +39,7 @@ U16 = 0xFFFF
 U32 = 0xFFFFFFFF
 
 # The fields of Tags in register order, with the number of registers each takes.
-_WIDTHS = (1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 1, 1, 1)
+_WIDTHS = (1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 1, 1, 1, 1, 1)
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,8 @@ class Tags:
     stop_reason: int = 0
     heartbeat: int = 0
     estop: int = 0
+    resume: int = 0
+    resumable: int = 0
 
 
 def u32_words(value: int) -> tuple[int, int]:

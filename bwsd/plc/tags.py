@@ -21,8 +21,8 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
 
 from bwsd.config import Config
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State, UnitMode
-from bwsd.controller.runner import Controller
 from bwsd.controller.status import Event, StateChanged
 from bwsd.errors import BwsdError, ConfigError
 from bwsd.logs import Summary
@@ -32,6 +32,7 @@ from bwsd.plc.registers import (
     REG_CNTRL_CMD,
     REG_COUNT,
     REG_MAP_VERSION,
+    REG_RESUME,
     REG_UNIT_MODE,
     REG_UNIT_MODE_CHANGE_REQUEST,
     REQUEST_REGISTERS,
@@ -62,13 +63,11 @@ class PlcError(BwsdError):
 
 def build_device(device_id: int, action: SimAction) -> SimDevice:
     """The map as a SimDevice: the command registers writable, the rest read-only."""
-    first, last = WRITABLE[0], WRITABLE[-1]
-    holding = [
-        SimData(REG_MAP_VERSION, values=MAP_VERSION, datatype=DataType.REGISTERS, readonly=True),
-        SimData(first, count=last - first + 1, datatype=DataType.REGISTERS),
-        SimData(last + 1, count=REG_COUNT - last - 1, datatype=DataType.REGISTERS,
-                readonly=True),
-    ]  # fmt: skip
+    holding = [SimData(REG_MAP_VERSION, values=MAP_VERSION, datatype=DataType.REGISTERS,
+                       readonly=True)]  # fmt: skip
+    for address in range(REG_MAP_VERSION + 1, REG_COUNT):
+        holding.append(SimData(address, datatype=DataType.REGISTERS,
+                               readonly=address not in WRITABLE))  # fmt: skip
     return SimDevice(id=device_id, simdata=holding, action=action)
 
 
@@ -146,6 +145,7 @@ class PlcTags:
         self.heartbeat_period = heartbeat_period
         self._cntrl_cmd = 0
         self._unit_mode = int(controller.packml.mode)
+        self._resume = 0  # Command.Resume as the PLC wrote it
         self._pending: set[int] = set()  # request registers whose request is not taken yet
         self._invalid = False
         self._good = 0
@@ -174,8 +174,9 @@ class PlcTags:
         self.controller.events.subscribe(self._on_event)
         self._closing, self._queue = False, asyncio.Queue()
         self._pending.clear()
-        self._worker = asyncio.create_task(self._work())
-        self._beater = asyncio.create_task(self._beat_forever())
+        supervisor = self.controller.supervisor
+        self._worker = supervisor.start("plc-requests", self._work)
+        self._beater = supervisor.start("plc-heartbeat", self._beat_forever)
 
     async def stop(self) -> None:
         """Close every connection; a request being taken is finished, queued ones dropped."""
@@ -212,6 +213,8 @@ class PlcTags:
             stop_reason=int(st.stop_cause),
             heartbeat=self._beat,
             estop=int(bool(st.bus.estop)),
+            resume=self._resume,
+            resumable=int(st.resumable),
         )
 
     async def _action(
@@ -238,8 +241,10 @@ class PlcTags:
     def _write(self, address: int, values: list[int]) -> ExcCodes | None:
         """Take the command registers, queue a change request; refuse a request but 0 or 1."""
         written = dict(zip(range(address, address + len(values)), values, strict=True))
-        if any(written.get(register, 0) not in (0, 1) for register in REQUEST_REGISTERS):
+        if any(written.get(register, 0) not in (0, 1)
+               for register in (*REQUEST_REGISTERS, REG_RESUME)):  # fmt: skip
             return ExcCodes.ILLEGAL_VALUE
+        self._resume = written.get(REG_RESUME, self._resume)
         self._cntrl_cmd = written.get(REG_CNTRL_CMD, self._cntrl_cmd)
         self._unit_mode = written.get(REG_UNIT_MODE, self._unit_mode)
         asked = {REG_CMD_CHANGE_REQUEST: self._cntrl_cmd,
@@ -269,7 +274,8 @@ class PlcTags:
             return False
         try:
             if isinstance(wanted, Command):
-                await self.controller.command(wanted, PLC_REASON, PLC_WHO)
+                resume = wanted is Command.START and self._resume == 1
+                await self.controller.command(wanted, PLC_REASON, PLC_WHO, resume=resume)
             else:
                 await self.controller.set_mode(wanted, PLC_WHO)
         except BwsdError as exc:

@@ -17,7 +17,7 @@ import uvicorn
 
 from bwsd.api import ROLES, TokenStore, create_app, server
 from bwsd.api.doors import DEFAULT_DOORS, Doors
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from tests.fieldbus.conftest import Mock, client_config, mock

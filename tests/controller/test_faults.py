@@ -12,6 +12,7 @@ import json
 import logging
 import socket
 import sqlite3
+import time
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ import pytest
 
 from bwsd.controller.errors import ControllerError
 from bwsd.controller.packml import Command, State
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.controller.status import Event, Fault, InstructionDone, StopCause
 from bwsd.errors import BwsdError
 from bwsd.program import parse_program
@@ -133,37 +134,49 @@ def test_a_hold_whose_fault_persists_stays_held_with_the_reason(mock, tmp_path):
     run(scenario())
 
 
-def test_an_unexpected_error_aborts_with_its_reason_logged_counted_and_published(
-    mock, tmp_path, caplog
-):
+def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tmp_path, caplog):
     """Mid-run, another program takes the journal's write lock and keeps it (as an sqlite3
-    shell left in a transaction would): the journal's writes fail after its busy timeout."""
+    shell left in a transaction would): the stall is published within a second, the run
+    holds (nothing is lost, so nothing is aborted), and once the lock is gone Unhold runs the
+    same program to Complete with the predicted skeleton."""
 
     async def scenario() -> None:
         ctl, journal, events = await controller(mock, tmp_path)
+        await ctl.start()
         pid = await ctl.load("braid.bws", TEXT)
         await ctl.command(Command.RESET)
         other = sqlite3.connect(journal.path, isolation_level=None, check_same_thread=False)
-        after(ctl, 3, lambda: other.execute("BEGIN IMMEDIATE"))
-        faults: list[Fault] = []
-        ctl.events.subscribe(lambda e: faults.append(e) if isinstance(e, Fault) else None)
+        locked: list[float] = []
+        after(ctl, 3, lambda: (other.execute("BEGIN IMMEDIATE"), locked.append(time.monotonic())))
+        faults: list[tuple[float, Fault]] = []
+        ctl.events.subscribe(
+            lambda e: faults.append((time.monotonic(), e)) if isinstance(e, Fault) else None
+        )
         await ctl.command(Command.START)
         await ctl.wait()
-        assert ctl.packml.state is State.ABORTED  # not stuck in Execute or Aborting
-        assert "internal error" in ctl.packml.reason and "locked" in ctl.packml.reason
-        assert ctl.stop_cause is StopCause.INTERNAL and ctl.faults == 1
-        assert faults and faults[0].cause is StopCause.INTERNAL
-        assert [e["to"] for e in events if e["event"] == "state"][-2:] == ["Aborting", "Aborted"]
-        assert "the run loop failed" in caplog.text
+        assert ctl.packml.state is State.HELD, ctl.packml.reason
+        assert "locked" in ctl.packml.reason and "then Unhold" in ctl.packml.reason
+        assert ctl.stop_cause is StopCause.JOURNAL
+        stall = [t for t, f in faults if f.cause is StopCause.JOURNAL and "not finished" in
+                 f.reason]  # fmt: skip
+        assert stall and stall[0] - locked[0] < 1.0, faults  # seen before the write gave up
+        assert "the journal has not finished writing" in caplog.text
         assert ctl.twin.done == 3  # instruction 4 never started: its "started" met the lock
-        # the lock is gone: the operator clears, resets; "done" of 3 and the outcome are
-        # recorded late
         other.execute("ROLLBACK")
         other.close()
-        assert await ctl.command(Command.CLEAR) is State.STOPPED
-        assert await ctl.command(Command.RESET) is State.IDLE
+        deadline = time.monotonic() + 2
+        while "journal" in ctl.health():  # the stall ends with the lock
+            assert time.monotonic() < deadline, ctl.health()
+            await asyncio.sleep(0.05)
+        await ctl.command(Command.UNHOLD)
+        await ctl.wait()
+        assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+        assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))
         record = journal.program(pid)
-        assert (record.outcome, record.done) == ("aborted", 3) and journal.pending(pid) is None
+        assert (record.outcome, record.done) == ("complete", 15) and journal.pending(pid) is None
+        names = [state.name for state in journal.states()]
+        assert names[-4:] == ["Unholding", "Execute", "Completing", "Complete"]
+        assert "Holding" in names and "Held" in names  # every state is in the history
         await ctl.close()
 
     with caplog.at_level(logging.INFO, logger="bwsd"):

@@ -14,7 +14,7 @@ from bwsd.controller.errors import Busy, Cancelled, ControllerError
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
 from bwsd.controller.recovery import lines_left
-from bwsd.controller.runner import Controller, Settings
+from bwsd.controller.facade import Controller, Settings
 from bwsd.controller.status import Event, InstructionDone
 from bwsd.errors import ProgramError
 from bwsd.fieldbus import AxisMove, open_bus
@@ -244,7 +244,7 @@ def test_after_a_program_ends_every_command_still_lands_in_a_waiting_state(mock,
         assert await ctl.command(Command.ABORT) is State.ABORTED
         assert await ctl.command(Command.CLEAR) is State.STOPPED
         assert await ctl.command(Command.RESET) is State.IDLE
-        with pytest.raises(ControllerError, match="has ended"):
+        with pytest.raises(ControllerError, match="is complete: load a program"):
             await ctl.command(Command.START)
         assert ctl.packml.state is State.IDLE
         assert journal.program(pid).outcome == "complete"  # an ended program stays ended

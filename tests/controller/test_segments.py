@@ -17,7 +17,7 @@ import pytest
 
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import setpoints
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program

@@ -50,7 +50,7 @@ def test_the_cause_of_a_stop_by_its_error(error, cause):
 
 def test_the_plc_stop_reason_codes_are_the_causes():
     assert StopReason is StopCause
-    assert [int(c) for c in StopCause] == list(range(9))
+    assert [int(c) for c in StopCause] == list(range(10))
 
 
 def test_a_failing_subscriber_is_logged_and_the_others_still_hear(caplog):

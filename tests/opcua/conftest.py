@@ -18,7 +18,7 @@ from cryptography.hazmat.primitives.serialization import Encoding
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from bwsd.api.auth import TokenStore
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.opcua.server import OpcUaServer

@@ -643,7 +643,7 @@ async function start() {
     if (!getToken()) {
       const health = await request('healthz');
       heard();
-      if (!(health.ok && health.body?.open_reads)) return; // the login form is showing
+      if (!health.body?.open_reads) return; // the login form is showing (503: a part is down)
     }
     answer = await session.readRole();
     if (answer.ok) answer = await request('api/v1/state');
