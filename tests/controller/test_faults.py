@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from bwsd.controller.errors import ControllerError
-from bwsd.controller.packml import Command, State
 from bwsd.controller.facade import Controller
+from bwsd.controller.packml import Command, State
 from bwsd.controller.status import Event, Fault, InstructionDone, StopCause
 from bwsd.errors import BwsdError
 from bwsd.program import parse_program
@@ -141,7 +141,7 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
     same program to Complete with the predicted skeleton."""
 
     async def scenario() -> None:
-        ctl, journal, events = await controller(mock, tmp_path)
+        ctl, journal, _events = await controller(mock, tmp_path)
         await ctl.start()
         pid = await ctl.load("braid.bws", TEXT)
         await ctl.command(Command.RESET)

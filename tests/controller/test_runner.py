@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from bwsd.controller.errors import Busy, Cancelled, ControllerError
+from bwsd.controller.facade import Controller, Settings
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import Limits
 from bwsd.controller.recovery import lines_left
-from bwsd.controller.facade import Controller, Settings
 from bwsd.controller.status import Event, InstructionDone
 from bwsd.errors import ProgramError
 from bwsd.fieldbus import AxisMove, open_bus

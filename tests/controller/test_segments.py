@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State
 from bwsd.controller.plan import setpoints
-from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program

@@ -15,9 +15,9 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from bwsd.config import parse_config
+from bwsd.controller.facade import Controller
 from bwsd.controller.packml import PackML, State, UnitMode
 from bwsd.controller.plan import Limits
-from bwsd.controller.facade import Controller
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
