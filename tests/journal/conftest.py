@@ -93,3 +93,27 @@ def writer() -> Iterator[Callable[[Path, str], subprocess.Popen[str]]]:
         for stream in (proc.stdout, proc.stderr):
             if stream is not None:
                 stream.close()
+
+
+# What each schema version added, undone: a current journal made to look as an older bwsd
+# wrote it (version 4 let an ended program resume; 3 added sessions; 2 snapshots).
+_UNDO = {
+    4: "DROP TRIGGER programs_resumed; DROP TRIGGER programs_final; "
+    "CREATE TRIGGER programs_final BEFORE UPDATE ON programs "
+    "WHEN OLD.outcome IN ('complete', 'aborted', 'stopped') "
+    "BEGIN SELECT RAISE(ABORT, 'a finished program never changes'); END;",
+    3: "DROP TABLE sessions;",
+    2: "DROP TABLE snapshots;",
+}
+
+
+def downgrade(path: Path, version: int) -> None:
+    """Make the journal at ``path`` (of this schema) one of schema ``version``."""
+    import sqlite3
+
+    from bwsd.journal import SCHEMA_VERSION
+
+    undo = " ".join(_UNDO[v] for v in range(SCHEMA_VERSION, version, -1))
+    conn = sqlite3.connect(path, isolation_level=None)
+    conn.executescript(f"BEGIN; {undo} PRAGMA user_version = {version}; COMMIT;")
+    conn.close()

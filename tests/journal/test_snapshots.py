@@ -266,16 +266,39 @@ def test_schema_refuses_what_the_api_refuses(journal: Journal, path: Path) -> No
 # -- finished programs -------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("outcome", ["complete", "aborted", "stopped"])
-def test_dropped_when_the_program_finishes(journal: Journal, path: Path, outcome: str) -> None:
+def test_dropped_when_the_program_completes(journal: Journal, path: Path) -> None:
     pid = running(journal, instructions=3, done=3)
     journal.save_snapshot(pid, 1, blob(1))
     journal.save_snapshot(pid, 3, blob(3))
     journal.set_outcome(pid, "held", "stall")  # not final: kept
     assert kept(path, pid) == [1, 3]
-    journal.set_outcome(pid, outcome, "reason")
+    journal.set_outcome(pid, "complete", "")
     assert kept(path, pid) == []
     assert journal.latest_snapshot(pid) is None
+    assert journal.program(pid).outcome == "complete"
+    with pytest.raises(JournalError, match="a complete program never changes"):
+        journal.set_outcome(pid, "running")
+
+
+@pytest.mark.parametrize("outcome", ["aborted", "stopped"])
+def test_an_ended_program_resumes_until_a_newer_one_is_loaded(
+    journal: Journal, path: Path, outcome: str
+) -> None:
+    pid = running(journal, instructions=3, done=2)
+    journal.save_snapshot(pid, 1, blob(1))
+    journal.save_snapshot(pid, 2, blob(2))
+    journal.set_outcome(pid, outcome, "reason")
+    assert kept(path, pid) == [1, 2]  # a resume restores from them
+    with pytest.raises(JournalError, match="an ended program only resumes"):
+        journal.set_outcome(pid, "held")
+    journal.set_outcome(pid, "running")  # the resume
+    journal.started(pid, 3, {})
+    journal.done(pid, 3, {})
+    journal.set_outcome(pid, outcome, "again")
+    newer = journal.add_program("next.bws", "TAKEUP 1\n", 1)
+    assert kept(path, pid) == []  # it can no longer resume: its snapshots went with the load
+    with pytest.raises(JournalError, match=f"program {newer} was loaded after it"):
+        journal.set_outcome(pid, "running")
     assert journal.program(pid).outcome == outcome
 
 
@@ -428,7 +451,7 @@ def test_a_version_1_file_is_upgraded_in_place(path: Path) -> None:
     before = _rows(path)
     assert "snapshots" not in _tables(path)
     with Journal.open(path) as j:
-        assert j.pragmas()["user_version"] == SCHEMA_VERSION == 3
+        assert j.pragmas()["user_version"] == SCHEMA_VERSION
         j.check()
         assert [p.name for p in j.history()] == ["part.bws", "done.bws"]
         pending = j.pending(2)
@@ -480,8 +503,8 @@ def test_a_newer_file_is_refused_untouched(path: Path) -> None:
     conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
     conn.close()
     before = path.read_bytes()
-    with pytest.raises(JournalError, match=r"newer bwsd \(schema version 4; this bwsd reads "
-                       r"version 3\)") as err:  # fmt: skip
+    newer = rf"newer bwsd \(schema version {SCHEMA_VERSION + 1}; this bwsd reads version "
+    with pytest.raises(JournalError, match=rf"{newer}{SCHEMA_VERSION}\)") as err:
         Journal.open(path)
     assert str(path) in str(err.value)
     assert path.read_bytes() == before

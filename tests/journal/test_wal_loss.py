@@ -22,7 +22,7 @@ from bwsd.journal import schema as journal_schema
 from bwsd.journal.files import main_file_session, wal_holds_a_commit
 from bwsd.journal.schema import APPLICATION_ID
 from tests.fieldbus.conftest import start_mock
-from tests.journal.conftest import DONE, TOTAL, files
+from tests.journal.conftest import DONE, TOTAL, downgrade, files
 from tests.test_daemon import LONG, Served, daemon_config
 
 Writer = Callable[[Path, str], subprocess.Popen[str]]
@@ -194,12 +194,10 @@ def test_a_reader_in_the_way_of_the_opening_checkpoint_is_refused_clearly(
 def test_a_version_2_journal_is_upgraded_and_records_sessions(path: Path) -> None:
     with Journal.open(path) as j:
         j.add_program("p.bws", "TAKEUP 1\n", 1)
-    conn = sqlite3.connect(path, isolation_level=None)
-    conn.executescript("BEGIN; DROP TABLE sessions; PRAGMA user_version = 2; COMMIT;")
-    conn.close()
+    downgrade(path, 2)
     assert main_file_session(path, APPLICATION_ID) is None
     with Journal.open(path) as j:
-        assert j.pragmas()["user_version"] == SCHEMA_VERSION == 3
+        assert j.pragmas()["user_version"] == SCHEMA_VERSION
         j.check()
         assert [p.name for p in j.history()] == ["p.bws"]
         session = main_file_session(path, APPLICATION_ID)
