@@ -8,6 +8,7 @@ import logging
 import select
 import socket
 import threading
+from collections.abc import Callable
 
 import can
 from can.interfaces.socketcand import SocketCanDaemonBus
@@ -55,12 +56,15 @@ class LinkWatch(can.Listener):
     def __init__(self, network: Network) -> None:
         self.network = network
         self.error: Exception | None = None
+        self.on_lost: Callable[[Exception], None] | None = None  # told at once (any thread)
 
     def on_message_received(self, msg: can.Message) -> None:
         pass
 
     def on_error(self, exc: Exception) -> None:
         self.error = exc
+        if self.on_lost is not None:
+            self.on_lost(exc)
         notifier = self.network.notifier
         if notifier is not None:
             # a thread cannot join itself; left running, it would spin on the dead socket

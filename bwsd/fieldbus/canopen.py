@@ -218,6 +218,7 @@ class CanopenBus(Fieldbus):
             raise FieldbusConnectionError(f"cannot open the CAN bus: {exc}") from exc
         self._network, self._watch = network, watch
         self._sampler = SyncSampler(network)
+        watch.on_lost = self._sampler.fail  # a sample waiting for the dead link ends now
 
     def _socketcand(self) -> can.BusABC:
         where = f"socketcand at {self.host}:{self.port}"

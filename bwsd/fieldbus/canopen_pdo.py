@@ -22,6 +22,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import can
 from canopen import Network, ObjectDictionary
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.objectdictionary.datatypes import UNSIGNED8, UNSIGNED32
@@ -162,6 +163,7 @@ class SyncSampler:
         self._count = 0
         self._seen: dict[Key, tuple[int, dict[Entry, int]]] = {}
         self._waiters: list[_Waiter] = []
+        self._broken: Exception | None = None  # the link's end, once it has ended
 
     def listen(self, node_id: int, number: int, pdo_map: PdoMap) -> None:
         pdo_map.add_callback(lambda m: self._arrived((node_id, number), m))
@@ -181,6 +183,15 @@ class SyncSampler:
         for waiter in done:
             waiter.loop.call_soon_threadsafe(_resolve, waiter.future)
 
+    def fail(self, error: Exception) -> None:
+        """The link is gone: every sample waiting, and every later one, ends with ``error``
+        now, not at its timeout (any thread)."""
+        with self._lock:
+            self._broken = error
+            waiters, self._waiters = self._waiters, []
+        for waiter in waiters:
+            waiter.loop.call_soon_threadsafe(_reject, waiter.future, error)
+
     async def sample(self, every: Sequence[Key], kept: Sequence[Key],
                      timeout: float) -> dict[Key, dict[Entry, int]]:  # fmt: skip
         """Send one SYNC; wait for the TPDOs ``every`` it makes the nodes send; with them
@@ -188,6 +199,8 @@ class SyncSampler:
         loop = asyncio.get_running_loop()
         future: asyncio.Future[None] = loop.create_future()
         with self._lock:
+            if self._broken is not None:
+                raise can.CanOperationError(f"the CAN link is gone: {self._broken}")
             self._count += 1
             waiter = _Waiter(self._count, tuple(every), loop, future)
             self._waiters.append(waiter)
@@ -225,6 +238,11 @@ class _Waiter:
 def _resolve(future: asyncio.Future[None]) -> None:
     if not future.done():
         future.set_result(None)
+
+
+def _reject(future: asyncio.Future[None], error: Exception) -> None:
+    if not future.done():
+        future.set_exception(can.CanOperationError(f"the CAN link is gone: {error}"))
 
 
 def _int(value: Any) -> int:

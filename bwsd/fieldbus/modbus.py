@@ -11,7 +11,7 @@ import asyncio
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import fields
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -188,6 +188,10 @@ class ModbusBus(Fieldbus):
         self.map_version = map_version
         self._client: AsyncModbusTcpClient | None = None
         self._lost = False  # the server closed the connection; not yet reported
+        self._gate = asyncio.Lock()  # one request on the wire at a time (as pymodbus sends)
+        self._connecting = asyncio.Lock()  # one connection attempt at a time
+        self._inflight: asyncio.Future[ModbusPDU] | None = None  # the request on the wire
+        self._gone: AsyncModbusTcpClient | None = None  # the last client whose link closed
 
     @classmethod
     def from_config(cls, config: Config) -> ModbusBus:
@@ -236,28 +240,15 @@ class ModbusBus(Fieldbus):
             lambda c: c.write_registers(address, [high, low, seq], device_id=self.device_id),
         )
 
-    async def _write_setpoints(self, setpoints: Sequence[tuple[Axis, int, int]]) -> None:
-        """Every set-point's request sent at once (one round trip for a whole shift); the
-        first error is raised once all are answered."""
-        done = await asyncio.gather(*(self._write_setpoint(*sp) for sp in setpoints),
-                                    return_exceptions=True)  # fmt: skip
-        for result in done:
-            if isinstance(result, BaseException):
-                raise result
-
     async def _read_state(self, axes: Sequence[int] | None = None) -> MachineState:
         if self.map_version >= 3:
             return await self._read_image(axes)
         wanted = range(len(self.axes)) if axes is None else sorted(set(axes))
         groups = _runs(wanted)
         cells = self.machine.rows * self.machine.cols
-        reads: list[Awaitable[list[int]] | Awaitable[list[bool]]] = [
-            self._read_registers(axis_address(lo), AXIS_STRIDE * (hi - lo)) for lo, hi in groups
-        ]
-        reads.append(self._read_inputs(0, estop_input(self.machine) + 1))
-        done: list[Any] = await asyncio.gather(*reads)  # one round trip for all of them
-        blocks: list[list[int]] = done[:-1]
-        bits: list[bool] = done[-1]
+        blocks = [await self._read_registers(axis_address(lo), AXIS_STRIDE * (hi - lo))
+                  for lo, hi in groups]  # fmt: skip
+        bits = await self._read_inputs(0, estop_input(self.machine) + 1)
         read = {
             i: decode_axis(words[(i - lo) * AXIS_STRIDE : (i - lo + 1) * AXIS_STRIDE])
             for (lo, hi), words in zip(groups, blocks, strict=True)
@@ -272,10 +263,10 @@ class ModbusBus(Fieldbus):
         not)."""
         last = len(self.axes) - 1 if axes is None else max(axes, default=-1)
         count = image_words(self.machine.rows * self.machine.cols, last + 1)
-        spans = read_spans(0, count, MAX_READ_REGISTERS)
-        done = await asyncio.gather(*(self._request(a, self._image(a, n)) for a, n in spans))
-        words = [w for response, (_, n) in zip(done, spans, strict=True)
-                 for w in response.registers[:n]]  # fmt: skip
+        words: list[int] = []
+        for address, n in read_spans(0, count, MAX_READ_REGISTERS):
+            response = await self._request(address, self._image(address, n))
+            words += response.registers[:n]
         status, grid, read = decode_image(words, self.machine.rows, self.machine.cols)
         return self._merge(dict(enumerate(read)), grid, bool(status & MACHINE_ESTOP))
 
@@ -347,7 +338,20 @@ class ModbusBus(Fieldbus):
         with a code of ``refusals`` is returned to the caller."""
         client = await self._ready()
         try:
-            response = await send(client)
+            async with self._gate:
+                if self._lost or client is not self._client:  # lost while this one waited
+                    raise ConnectionException("connection lost")
+                self._inflight = asyncio.ensure_future(send(client))
+                try:
+                    response = await self._inflight
+                finally:
+                    self._inflight = None
+        except asyncio.CancelledError:
+            self._drop()
+            task = asyncio.current_task()
+            if self._lost_now(client) and (task is None or not task.cancelling()):
+                raise FieldbusConnectionError(f"{self.where}: connection lost") from None
+            raise
         except ConnectionException as exc:
             self._drop()
             raise FieldbusConnectionError(f"{self.where}: not connected ({exc})") from None
@@ -362,9 +366,6 @@ class ModbusBus(Fieldbus):
             ) from None
         except ModbusException as exc:
             raise FieldbusError(f"{self.where}: address {address}: {exc}") from None
-        except asyncio.CancelledError:
-            self._drop()
-            raise
         if response.isError() and response.exception_code not in refusals:
             raise FieldbusError(
                 f"{self.where}: address {address} refused "
@@ -373,12 +374,15 @@ class ModbusBus(Fieldbus):
         return response
 
     async def _ready(self) -> AsyncModbusTcpClient:
-        """The connected client: report a lost connection once, else (re)connect."""
+        """The connected client: report a lost connection once, else (re)connect (one
+        attempt at a time: requests that wait meanwhile take its result)."""
         if self._lost:
             self._drop()
             raise FieldbusConnectionError(f"{self.where}: connection lost")
         if self._client is None or not self._client.connected:
-            await self.connect()
+            async with self._connecting:
+                if self._client is None or not self._client.connected:
+                    await self.connect()
         client = self._client
         if client is None:
             raise FieldbusConnectionError(f"{self.where}: not connected")
@@ -416,5 +420,14 @@ class ModbusBus(Fieldbus):
                 )
 
     def _on_connect(self, client: AsyncModbusTcpClient, up: bool) -> None:
+        """The transport closed: the request on the wire fails now (pymodbus would wait
+        for its answer until the I/O timeout), the ones waiting fail at the gate."""
         if not up and client is self._client:
             self._lost = True
+            self._gone = client
+            if self._inflight is not None:
+                self._inflight.cancel()
+
+    def _lost_now(self, client: AsyncModbusTcpClient) -> bool:
+        """The request on ``client`` was cancelled because its connection closed."""
+        return self._gone is client
