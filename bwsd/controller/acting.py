@@ -118,9 +118,7 @@ async def _prepare(ctl: Controller, command: C, resume: bool) -> None:
     if job is None or job.pending is None:
         return
     if command in (C.UNHOLD, C.UNSUSPEND) or (command is C.START and resume):
-        # a resumed program is ended in the journal: its instruction is committed once the
-        # program runs again (``_begin_run``); decide here, so a blocked one is refused
-        decision = await ctl.settle(state, commit=command is not C.START)
+        decision = await ctl.settle(state)  # a blocked one is refused below
         if decision is not None:
             log.info(
                 "pending instruction %d: %s (%s)", decision.index, decision.kind, decision.reason
@@ -144,10 +142,9 @@ async def _act(ctl: Controller, state: S, resume: bool = False) -> None:
 
 
 async def _begin_run(ctl: Controller, state: S) -> None:
-    """Record the program as running, settle a resumed one's cut instruction, run it."""
+    """Record the program as running (a resumed one too), then run it."""
     job = ctl.job
     assert job is not None
-    resumed = job.ended in ENDED
     try:
         await ctl.recorder.outcome(Outcome(job.program_id, RUNNING, ""))
     except JournalError as exc:
@@ -159,8 +156,6 @@ async def _begin_run(ctl: Controller, state: S) -> None:
         )
         return
     job.ended = ""
-    if resumed and job.pending is not None:
-        await ctl.settle(await ctl.read_machine())
     if ctl.packml.state is not state:
         return  # an Abort or a Stop came meanwhile
     ctl.packml.state_complete()
@@ -243,10 +238,11 @@ async def end_now(
     await _quick_stop(ctl)
     job, pid = ctl.job, ctl.program_id
     outcome = ABORTED if command is C.ABORT else STOPPED
-    if pid is not None and not (job is not None and job.ended == COMPLETE):
+    if job is not None and not job.ended:  # an ended program keeps the outcome it has
+        job.ended = outcome
+        await ctl.recorder.outcome_soon(Outcome(job.program_id, outcome, ctl.packml.reason), OUTCOME_WAIT)
+    elif job is None and pid is not None and ctl.broken:  # a program that cannot be restored
         await ctl.recorder.outcome_soon(Outcome(pid, outcome, ctl.packml.reason), OUTCOME_WAIT)
-        if job is not None:
-            job.ended = outcome
     if ctl.broken and job is None:
         ctl.broken, ctl.restoring = "", None  # ended: nothing is left to restore
     if ctl.packml.state is state:

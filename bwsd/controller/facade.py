@@ -321,16 +321,16 @@ class Controller:
         self.seen.observe(state, self.at_rest())
         return state
 
-    async def settle(self, state: MachineState, commit: bool = True) -> Settle | None:
+    async def settle(self, state: MachineState) -> Settle | None:
         """Settle the pending instruction from ``state`` (just read), then compare the
-        machine with the twin again (``commit``: see ``settling.settle_pending``)."""
+        machine with the twin again."""
         job = self.job
         if job is None:
             return None
         tolerance = self.bus.settings.position_tolerance
         every = self.settings.snapshot_every
         decision = await settle_pending(
-            job, state, tolerance, self.recorder, self.events.publish, every, commit
+            job, state, tolerance, self.recorder, self.events.publish, every
         )
         self.seen.observe(state, self.at_rest())
         return decision

@@ -143,7 +143,7 @@ class Job:
                 step_dict(self.next_step()),
             )
         )
-        if snapshot_every and index - self.snapped >= snapshot_every:
+        if snapshot_every and not self.ended and index - self.snapped >= snapshot_every:
             await recorder.flush()
             await self.snapshot(recorder)
 

@@ -114,15 +114,13 @@ async def settle_cut(ctl: Controller, job: object) -> None:
         except ControllerError as exc:
             log.warning("instruction %d was cut; %s: it is settled on resume", found.index, exc)
             return
-        decision = await ctl.settle(state, commit=False)
+        decision = await ctl.settle(state)
         if decision is None:
             return
         then = NEXT[decision.kind]
         log.info("cut instruction %d: %s (%s)", decision.index, decision.kind, decision.reason)
         if ctl.packml.state in (S.ABORTED, S.STOPPED) and ctl.job is current:
-            ctl.packml.reason = (
-                f"{ctl.packml.reason}; {decision.reason}: on resume, {then}"
-            ).lstrip("; ")
+            ctl.packml.reason = f"{ctl.packml.reason}; {decision.reason}: {then}".lstrip("; ")
 
 
 async def reset_machine(ctl: Controller) -> None:

@@ -14,10 +14,10 @@ from bwsd.fieldbus.axes import axis_by_name
 from bwsd.fieldbus.base import MachineState
 
 NEXT = {
-    "commit": "done",
-    "rerun": "it runs again",
-    "finish": "the rest of it runs",
-    "blocked": "Abort ends the program",
+    "commit": "recorded done",
+    "rerun": "a resume runs it again",
+    "finish": "a resume moves the rest",
+    "blocked": "a resume is refused",
 }
 
 
@@ -33,11 +33,10 @@ async def settle_pending(
     recorder: Recorder,
     publish: Callable[[Event], None],
     snapshot_every: int,
-    commit: bool = True,
 ) -> Settle | None:
     """Decide on the job's pending instruction from ``state`` (just read) and apply it:
-    commit what the machine shows done (only where ``commit``: the journal must take it),
-    keep what is left to move, or block it with the reason. None when nothing is pending."""
+    commit what the machine shows done, keep what is left to move, or block it with the
+    reason. None when nothing is pending."""
     pending = job.pending
     if pending is None:
         return None
@@ -53,7 +52,7 @@ async def settle_pending(
         tolerance,
         pending.strokes,
     )
-    if decision.kind == "commit" and commit:
+    if decision.kind == "commit":
         await job.commit(pred, recorder, publish, snapshot_every)
         await recorder.flush()
         return decision

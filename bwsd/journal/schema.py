@@ -113,12 +113,19 @@ CREATE TABLE sessions (
 );
 """
 # Version 4: an aborted or stopped program resumes (back to running) while it is the newest
-# program; only a complete one never changes again.
+# program; only a complete one never changes again. The instruction an Abort or a Stop cut
+# is recorded done once the machine shows it done.
 _RESUME = f"""
+DROP TRIGGER instructions_done_once;
+CREATE TRIGGER instructions_done_once BEFORE UPDATE OF done, done_payload ON instructions
+WHEN OLD.done IS NOT NULL OR NEW.done IS NULL
+    OR (SELECT outcome FROM programs WHERE id = NEW.program_id) NOT IN ({_ACTIVE}, {_ENDED})
+BEGIN SELECT RAISE(ABORT, 'instruction done twice or outside a run'); END;
 DROP TRIGGER programs_final;
 CREATE TRIGGER programs_final BEFORE UPDATE ON programs WHEN OLD.outcome = '{COMPLETE}'
 BEGIN SELECT RAISE(ABORT, 'a complete program never changes'); END;
-CREATE TRIGGER programs_resumed BEFORE UPDATE ON programs WHEN OLD.outcome IN ({_ENDED})
+CREATE TRIGGER programs_resumed BEFORE UPDATE OF outcome ON programs
+WHEN OLD.outcome IN ({_ENDED})
     AND (NEW.outcome IS NOT '{RUNNING}' OR EXISTS (SELECT 1 FROM programs WHERE id > OLD.id))
 BEGIN SELECT RAISE(ABORT, 'an ended program only resumes, and only while it is the newest'); END;
 """

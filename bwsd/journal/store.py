@@ -189,7 +189,7 @@ class Journal(EventLog):
 
     def _done(self, conn: sqlite3.Connection, program_id: int, index: int, data: str) -> None:
         rec = self._program(conn, program_id, index)
-        if rec.outcome not in ACTIVE:
+        if rec.outcome not in ACTIVE and rec.outcome not in ENDED:
             raise self._error(f"the program is {rec.outcome}: no instruction of it can finish",
                               program=program_id, index=index)  # fmt: skip
         row = conn.execute(

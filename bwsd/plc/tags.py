@@ -175,8 +175,8 @@ class PlcTags:
         self._closing, self._queue = False, asyncio.Queue()
         self._pending.clear()
         supervisor = self.controller.supervisor
-        self._worker = supervisor.start("plc-requests", self._work)
-        self._beater = supervisor.start("plc-heartbeat", self._beat_forever)
+        self._worker = supervisor.start(f"plc {self.port} requests", self._work)
+        self._beater = supervisor.start(f"plc {self.port} heartbeat", self._beat_forever)
 
     async def stop(self) -> None:
         """Close every connection; a request being taken is finished, queued ones dropped."""

@@ -99,6 +99,11 @@ def writer() -> Iterator[Callable[[Path, str], subprocess.Popen[str]]]:
 # wrote it (version 4 let an ended program resume; 3 added sessions; 2 snapshots).
 _UNDO = {
     4: "DROP TRIGGER programs_resumed; DROP TRIGGER programs_final; "
+    "DROP TRIGGER instructions_done_once; "
+    "CREATE TRIGGER instructions_done_once BEFORE UPDATE OF done, done_payload ON instructions "
+    "WHEN OLD.done IS NOT NULL OR NEW.done IS NULL OR (SELECT outcome FROM programs WHERE "
+    "id = NEW.program_id) NOT IN ('running', 'held', 'suspended') "
+    "BEGIN SELECT RAISE(ABORT, 'instruction done twice or outside a run'); END; "
     "CREATE TRIGGER programs_final BEFORE UPDATE ON programs "
     "WHEN OLD.outcome IN ('complete', 'aborted', 'stopped') "
     "BEGIN SELECT RAISE(ABORT, 'a finished program never changes'); END;",

@@ -263,6 +263,19 @@ def test_done_while_held_completes_the_pending_instruction(journal: Journal) -> 
     assert journal.done_count(pid) == 1
 
 
+@pytest.mark.parametrize("outcome", ["aborted", "stopped"])
+def test_an_instruction_cut_by_an_abort_or_a_stop_is_recorded_done_later(
+    journal: Journal, outcome: str
+) -> None:
+    pid = journal.add_program("p", TEXT, 3)
+    journal.set_outcome(pid, "running")
+    journal.started(pid, 1, {})
+    journal.set_outcome(pid, outcome, "operator")
+    journal.done(pid, 1, {"completed": "from the read-back"})  # the machine showed it done
+    assert journal.done_count(pid) == 1 and journal.pending(pid) is None
+    assert journal.program(pid).outcome == outcome
+
+
 def _violations() -> list[tuple[str, list[tuple[str, int]], tuple[str, int], str]]:
     """(outcome, steps before, the refused step, message) on a running 3-instruction program."""
     return [
@@ -277,8 +290,15 @@ def _violations() -> list[tuple[str, list[tuple[str, int]], tuple[str, int], str
         ("running", [("started", 1), ("done", 1)], ("done", 1), "already done"),
         ("running", [("started", 1)], ("done", 2), "not started"),
         ("loaded", [], ("started", 1), "the program is loaded"),
-        ("aborted", [("started", 1)], ("done", 1), "the program is aborted"),
+        ("aborted", [("started", 1)], ("started", 2), "the program is aborted"),
+        ("aborted", [("started", 1)], ("done", 2), "not started"),
         ("stopped", [], ("started", 1), "the program is stopped"),
+        (
+            "complete",
+            [("started", 1), ("done", 1), ("started", 2), ("done", 2), ("started", 3), ("done", 3)],
+            ("started", 3),
+            "the program is complete",
+        ),
     ]
 
 
