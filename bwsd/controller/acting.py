@@ -240,7 +240,9 @@ async def end_now(
     outcome = ABORTED if command is C.ABORT else STOPPED
     if job is not None and not job.ended:  # an ended program keeps the outcome it has
         job.ended = outcome
-        await ctl.recorder.outcome_soon(Outcome(job.program_id, outcome, ctl.packml.reason), OUTCOME_WAIT)
+        await ctl.recorder.outcome_soon(
+            Outcome(job.program_id, outcome, ctl.packml.reason), OUTCOME_WAIT
+        )
     elif job is None and pid is not None and ctl.broken:  # a program that cannot be restored
         await ctl.recorder.outcome_soon(Outcome(pid, outcome, ctl.packml.reason), OUTCOME_WAIT)
     if ctl.broken and job is None:
