@@ -144,6 +144,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "takeup_speed": Num(float, 0.0, 1e6, 0.0),
         "weft_speed": Num(float, 0.0, 1e6, 0.0),
         "heartbeat_ms": Num(int, 0, 65535, 100),
+        "state_file": Text(""),
     },
 }
 REQUIRED = ("machine",)

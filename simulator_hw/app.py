@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
+import json
+import os
 from collections.abc import Iterable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bwsd.config import Config
@@ -42,6 +45,26 @@ def canopen_ids_problem(config: Config) -> str:
     return ""
 
 
+def keep_mechanics(loom: Loom, path: Path) -> None:
+    """Power on with the mechanics saved in ``path`` (if it exists, else the FILL), and save
+    them there at every change: a killed mock loom comes back as a loom after a power cut,
+    its cases where they were."""
+    if path.exists():
+        try:
+            loom.restore(json.loads(path.read_text()))
+        except (OSError, ValueError, TypeError, AttributeError) as exc:
+            raise ConfigError(f"{path}: not the saved state of this machine ({exc})",
+                              table="simulator", key="state_file") from None  # fmt: skip
+
+    def save() -> None:
+        new = path.with_name(path.name + ".new")
+        new.write_text(json.dumps(loom.mechanics()))
+        os.replace(new, path)
+
+    loom.on_change = save
+    save()
+
+
 class MockLoom:
     """Every part of the mock loom on the ``[simulator]`` addresses of a config.
 
@@ -61,6 +84,8 @@ class MockLoom:
         speeds = Speeds(sim["stroke_speed"], sim["takeup_speed"], sim["weft_speed"])
         self.config = config
         self.loom = Loom(config.machine, fill, speeds)
+        if sim["state_file"]:
+            keep_mechanics(self.loom, Path(config.path).parent / sim["state_file"])
         host = sim["host"]
         modbus = config.table("fieldbus.modbus")
         self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], modbus["device_id"],

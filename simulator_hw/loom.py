@@ -7,8 +7,9 @@ Units as on the wire: micrometres, millidegrees.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 from bwsd.fieldbus.axes import MDEG_PER_DEG, UM_PER_MM, Axis, machine_axes, moved_cells
 from bwsd.fieldbus.base import (
@@ -87,6 +88,39 @@ class Loom:
         self.estop = False
         self.faults = Faults()
         self.owner = Owner()
+        self.on_change: Callable[[], None] | None = None  # the mechanics changed (state file)
+
+    # ----- what survives a power cut -----
+    def mechanics(self) -> dict[str, Any]:
+        """What a power cut leaves as it is: where the cases are, the absolute axes'
+        positions and every axis's stroke counter (a relative axis is home at power-on)."""
+        return {
+            "occupied": [row[:] for row in self.occupied],
+            "axes": {sim.axis.name: {"position": 0 if sim.axis.relative else sim.position,
+                                     "strokes": sim.strokes, "done_seq": sim.done_seq}
+                     for sim in self.axes},
+        }  # fmt: skip
+
+    def restore(self, saved: dict[str, Any]) -> None:
+        """Power on with the mechanics a ``mechanics()`` saved (ValueError if they are not of
+        this machine)."""
+        occupied = saved.get("occupied")
+        if (
+            not isinstance(occupied, list)
+            or [len(row) for row in occupied] != [self.machine.cols] * self.machine.rows
+        ):
+            raise ValueError("the saved occupancy is not of this machine's matrix")
+        self.occupied = [[bool(cell) for cell in row] for row in occupied]
+        axes = saved.get("axes", {})
+        for sim in self.axes:
+            kept = axes.get(sim.axis.name, {})
+            sim.position = int(kept.get("position", 0))
+            sim.strokes = int(kept.get("strokes", 0)) % STROKES_WRAP
+            sim.done_seq = sim.seq = int(kept.get("done_seq", 0))
+
+    def _changed(self) -> None:
+        if self.on_change is not None:
+            self.on_change()
 
     # ----- the owner -----
     def claim(self, ident: int, pid: int, now: float) -> Owner | None:
@@ -151,6 +185,7 @@ class Loom:
     def reset_faults(self) -> None:
         for sim in self.axes:
             sim.fault = FAULT_NONE
+        self._changed()
 
     def home(self, now: float) -> None:
         """Home the shift and weft axes (instantly: they are at rest between strokes)."""
@@ -158,6 +193,7 @@ class Loom:
         for sim in self.axes:
             if sim.axis.kind != "takeup" and not sim.busy and not sim.fault:
                 sim.position, sim.done_seq, sim.homed = 0, 0, True
+        self._changed()
 
     # ----- time -----
     def tick(self, now: float) -> None:
@@ -195,6 +231,7 @@ class Loom:
         sim.done_seq = sim.seq
         sim.last_stroke = sim.stroke if sim.axis.relative else 0
         sim.strokes = (sim.strokes + 1) % STROKES_WRAP
+        self._changed()
 
     def _stop(self, sim: AxisSim, code: int) -> None:
         sim.legs.clear()
@@ -242,6 +279,7 @@ class Loom:
             self._set(axis.kind, line, i, False)
         for i in at:
             self._set(axis.kind, line, i + k, True)
+        self._changed()
 
     def _get(self, kind: str, line: int, i: int) -> bool:
         return self.occupied[line][i] if kind == "row" else self.occupied[i][line]

@@ -94,7 +94,7 @@ class Controller:
         if publish is not None:
             self.events.subscribe(lambda event: publish(event.wire()))
         self.supervisor = Supervisor(self._task_failed)
-        self.recorder = Recorder(journal, self._journal_stalled)
+        self.recorder = Recorder(journal, self._journal_trouble)
         self.packml = PackML()
         self.packml.on_change.append(self._on_state)
         self.seen = MachineView(bus, self.events.publish)  # the machine as last read
@@ -384,7 +384,7 @@ class Controller:
         self.events.publish(Fault(reason, StopCause.INTERNAL))
         acting.after_failure(self, name, reason)
 
-    def _journal_stalled(self, what: str) -> None:
+    def _journal_trouble(self, what: str) -> None:
         self.events.publish(Fault(what, StopCause.JOURNAL))
 
     async def close(self) -> None:

@@ -47,10 +47,10 @@ class Outcome:
 class Recorder:
     """The controller's one way to the journal (see the module's rule)."""
 
-    def __init__(self, journal: Journal, stalled: Callable[[str], None]) -> None:
+    def __init__(self, journal: Journal, trouble: Callable[[str], None]) -> None:
         self.journal = journal
         self.writer = JournalWriter(journal)
-        self._stalled = stalled  # called once per stall, with what stalls
+        self._trouble = trouble  # told once per stall and per run of failed routine records
         self._done: tuple[int, int, dict[str, Any]] | None = None  # (pid, index, payload)
         self._outcome: Outcome | None = None  # the last outcome not yet written
         self._backlog: deque[tuple[str, _Call]] = deque(maxlen=BACKLOG)
@@ -161,6 +161,8 @@ class Recorder:
                     self._backlog[0][0],
                     BACKLOG,
                 )
+            if not self._backlog:  # the first of a run of failures is published
+                self._trouble(f"the journal cannot record {what}: {error}")
             self._backlog.append((what, call))
             log.error("the journal cannot record %s: %s (written again once it can)", what, error)
             return
@@ -192,7 +194,7 @@ class Recorder:
                         "process holds its lock"
                     )
                     log.error("%s", self.stall)
-                    self._stalled(self.stall)
+                    self._trouble(self.stall)
             elif self.stall and (busy is None or busy[0] < STALL_AFTER):
                 log.warning("the journal writes again")
                 self.stall = ""

@@ -62,6 +62,7 @@ async def look(ctl: Controller) -> None:
 def _fault_on_change(ctl: Controller, before: BusStatus, now: BusStatus) -> None:
     """A bus lost, or the e-stop pressed, at rest: one Fault when it happens."""
     if now.connected is False and before.connected is not False:
+        log.warning("the machine cannot be read: %s", now.last_error)
         ctl.events.publish(Fault(f"the machine cannot be read: {now.last_error}", StopCause.BUS))
     if now.estop and not before.estop:
         ctl.events.publish(Fault("the emergency stop is pressed", StopCause.ESTOP))
