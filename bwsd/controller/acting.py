@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING
 
 from bwsd.controller import resting
 from bwsd.controller.errors import ControllerError
+from bwsd.controller.packml import ACTING, InvalidCommand
 from bwsd.controller.packml import Command as C
-from bwsd.controller.packml import InvalidCommand
 from bwsd.controller.packml import State as S
 from bwsd.controller.recorder import Outcome
 from bwsd.controller.runloop import Aborted, Ending, Finished, Held, Parts, RunLoop
@@ -43,7 +43,24 @@ def said(command: C, reason: str, who: str, resume: bool = False) -> str:
 
 
 async def take(ctl: Controller, command: C, reason: str, who: str, resume: bool) -> S:
-    """A command other than Abort and Stop, under the command lock."""
+    """A command other than Abort and Stop, under the command lock. An error nothing
+    expects is logged, published as a Fault and answered as a refusal; a machine it left
+    in an acting state is aborted (an exit, not a wedge)."""
+    try:
+        return await _take(ctl, command, reason, who, resume)
+    except BwsdError:
+        raise
+    except Exception as exc:
+        ctl.faults += 1
+        why = f"{command.label} failed: {type(exc).__name__}: {exc}"
+        log.exception("command %s", why)
+        ctl.events.publish(Fault(why, StopCause.INTERNAL))
+        if ctl.packml.state in ACTING and ctl.packml.accepts(C.ABORT):
+            await end_now(ctl, C.ABORT, why, "the controller", StopCause.INTERNAL)
+        raise ControllerError(f"{why} (see the log)") from exc
+
+
+async def _take(ctl: Controller, command: C, reason: str, who: str, resume: bool) -> S:
     text = said(command, reason, who, resume)
     log.info("command %s", text)
     try:

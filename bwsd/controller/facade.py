@@ -97,7 +97,9 @@ class Controller:
         self.recorder = Recorder(journal, self._journal_trouble)
         self.packml = PackML()
         self.packml.on_change.append(self._on_state)
-        self.seen = MachineView(bus, self.events.publish)  # the machine as last read
+        self.seen = MachineView(
+            bus, self.events.publish, lambda old, new: resting.worse(self, old, new)
+        )
         self.job: Job | None = None
         self.faults = 0  # runs ended by an unexpected error, tasks that failed
         self.lock = asyncio.Lock()  # one command at a time (but Abort and Stop)

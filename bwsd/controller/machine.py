@@ -24,9 +24,11 @@ log = logging.getLogger("bwsd.controller")
 class MachineView:
     """The machine as last read over ``bus``; every change is published as ``BusChanged``."""
 
-    def __init__(self, bus: Fieldbus, publish: Callable[[Event], None]) -> None:
+    def __init__(self, bus: Fieldbus, publish: Callable[[Event], None],
+                 worse: Callable[[BusStatus, BusStatus], None] | None = None) -> None:  # fmt: skip
         self.bus = bus
         self._publish = publish
+        self._worse = worse  # told (old, new) when the machine is lost or its e-stop pressed
         self.status = BusStatus()
         self.last: MachineState | None = None
 
@@ -37,7 +39,8 @@ class MachineView:
                 await self.bus.connect()
             try:
                 return await self.bus.state()
-            except FieldbusConnectionError:
+            except FieldbusConnectionError as exc:
+                self.failed(exc)  # lost, if only for a moment: said, then connected again
                 await self.bus.connect()
                 return await self.bus.state()
         except FieldbusError as exc:
@@ -78,3 +81,6 @@ class MachineView:
             if status.estop != old.estop and None not in (status.estop, old.estop):
                 log.warning("emergency stop %s", "pressed" if status.estop else "released")
             self._publish(BusChanged(status))
+            lost = status.connected is False and old.connected is not False
+            if (lost or (status.estop and not old.estop)) and self._worse is not None:
+                self._worse(old, status)

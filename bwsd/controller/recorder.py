@@ -71,21 +71,46 @@ class Recorder:
         return self._done[1] if self._done is not None else None
 
     async def started(self, program_id: int, index: int, payload: dict[str, Any]) -> None:
-        """Instruction ``index`` starts (with the last "done" in the same transaction)."""
-        done = self._done
-        previous = None if done is None or done[0] != program_id else (done[1], done[2])
-        await self.writer.run(self.journal.started, program_id, index, payload, previous)
-        if self._done is done:
-            self._done = None
+        """Instruction ``index`` starts (with the last "done" in the same transaction). The
+        write is never cancelled: a caller cut meanwhile stops waiting, the write goes on."""
+        done = self._take_done(program_id)
+        previous = None if done is None else (done[1], done[2])
+        call = functools.partial(self.journal.started, program_id, index, payload, previous)
+        await self._kept(call, done)
 
     async def flush(self) -> None:
         """Write the last "done" now; it stays kept when the journal refuses it."""
+        done = self._take_done(None)
+        if done is not None:
+            await self._kept(functools.partial(self.journal.done, *done), done)
+
+    async def _kept(self, call: Callable[[], Any], done: tuple[int, int, dict[str, Any]] | None,
+                    ) -> None:  # fmt: skip
+        """Run ``call`` (which writes ``done``) to its end whatever its caller does; a
+        ``done`` it could not write is kept for the next try."""
+        future = self.writer.queue(URGENT, call)
+        future.add_done_callback(functools.partial(self._written, done))
+        await asyncio.shield(future)
+
+    def _written(
+        self, done: tuple[int, int, dict[str, Any]] | None, future: asyncio.Future[Any]
+    ) -> None:
+        if not future.cancelled() and future.exception() is not None:
+            self._give_back(done)
+
+    def _take_done(self, program_id: int | None) -> tuple[int, int, dict[str, Any]] | None:
+        """The "done" to write now (of ``program_id``, if given), no longer kept: a write
+        that runs meanwhile (a flush beside a start) cannot write it twice."""
         done = self._done
-        if done is None:
-            return
-        await self.writer.run(self.journal.done, *done)
-        if self._done is done:
-            self._done = None
+        if done is None or (program_id is not None and done[0] != program_id):
+            return None
+        self._done = None
+        return done
+
+    def _give_back(self, done: tuple[int, int, dict[str, Any]] | None) -> None:
+        """A "done" whose write failed is kept for the next try (unless a newer one came)."""
+        if done is not None and self._done is None:
+            self._done = done
 
     async def outcome(self, record: Outcome) -> None:
         """Record a program's outcome and wait for it; on failure it is kept for

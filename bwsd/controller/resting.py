@@ -42,16 +42,13 @@ async def watch(ctl: Controller) -> None:
 
 
 async def look(ctl: Controller) -> None:
-    """One read at rest: publish what changed for the worse, settle a held instruction."""
-    before = ctl.seen.status
+    """One read at rest: settle a held instruction once the machine can be read."""
     try:
         state = await ctl.read_machine()
     except ControllerError as exc:
         UNREAD.note("%s", exc)
-        _fault_on_change(ctl, before, ctl.seen.status)
         return
     UNREAD.reset()
-    _fault_on_change(ctl, before, ctl.seen.status)
     job = ctl.job
     if job is None or job.pending is None or ctl.recovering:
         return
@@ -59,8 +56,11 @@ async def look(ctl: Controller) -> None:
         await settle_held(ctl, state)
 
 
-def _fault_on_change(ctl: Controller, before: BusStatus, now: BusStatus) -> None:
-    """A bus lost, or the e-stop pressed, at rest: one Fault when it happens."""
+def worse(ctl: Controller, before: BusStatus, now: BusStatus) -> None:
+    """The machine lost, or its e-stop pressed, outside a run (a run reports its own stop):
+    one Fault, and a warning, when it happens."""
+    if ctl.running:
+        return
     if now.connected is False and before.connected is not False:
         log.warning("the machine cannot be read: %s", now.last_error)
         ctl.events.publish(Fault(f"the machine cannot be read: {now.last_error}", StopCause.BUS))
@@ -103,9 +103,10 @@ async def settle_cut(ctl: Controller, job: object) -> None:
     async with ctl.lock:
         if ctl.job is not job or ctl.job is None:
             return
-        found = await ctl.recorder.write(ctl.journal.pending, ctl.job.program_id)
         current = ctl.job
-        if found is None:
+        await ctl.recorder.flush()  # the last "done", so that the journal knows what it knows
+        found = await ctl.recorder.write(ctl.journal.pending, current.program_id)
+        if found is None or found.index <= current.done:
             current.settled(None)
             return
         if current.pending is None or current.pending.index != found.index:
