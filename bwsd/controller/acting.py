@@ -25,7 +25,7 @@ from bwsd.controller.runloop import Aborted, Ending, Finished, Held, Parts, RunL
 from bwsd.controller.status import Fault, StopCause, cause_of
 from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import FieldbusError
-from bwsd.journal import ABORTED, COMPLETE, ENDED, HELD, RUNNING, STOPPED, SUSPENDED, JournalError
+from bwsd.journal import ABORTED, COMPLETE, ENDED, HELD, RUNNING, STOPPED, SUSPENDED
 
 if TYPE_CHECKING:
     from bwsd.controller.facade import Controller
@@ -35,6 +35,7 @@ _RUNS = frozenset({C.START, C.UNHOLD, C.UNSUSPEND})
 _READS_FIRST = _RUNS | {C.RESET, C.CLEAR}
 QUICK_STOP_WAIT = 1.0  # s an Abort or Stop waits for the bus to confirm its quick stop
 OUTCOME_WAIT = 0.5  # s an Abort or Stop waits for the journal to record it (then goes on)
+START_WAIT = 2.0  # s a run waits for the journal to record that it starts (else it holds)
 
 
 def said(command: C, reason: str, who: str, resume: bool = False) -> str:
@@ -116,7 +117,7 @@ def _start_refused(ctl: Controller, resume: bool) -> str | None:
     job = ctl.job
     if job is None:
         return "no program is loaded"
-    if job.ended == COMPLETE or (job.complete and job.ended):
+    if job.ended == COMPLETE:
         return "the loaded program is complete: load a program to start"
     if job.ended in ENDED and not resume and (job.done or job.pending is not None):
         return (
@@ -162,17 +163,12 @@ async def _begin_run(ctl: Controller, state: S) -> None:
     """Record the program as running (a resumed one too), then run it."""
     job = ctl.job
     assert job is not None
-    try:
-        await ctl.recorder.outcome(Outcome(job.program_id, RUNNING, ""))
-    except JournalError as exc:
-        await _hold(
-            ctl,
-            StopCause.JOURNAL,
-            f"the journal cannot record that program "
-            f"{job.program_id} runs: {exc}: free its disk, then Unhold",
-        )
+    job.ended = ""  # from here on it runs, or is held: a resumed program too
+    problem = await ctl.recorder.outcome_within(Outcome(job.program_id, RUNNING, ""), START_WAIT)
+    if problem:
+        why = f"the journal cannot record that program {job.program_id} runs: {problem}"
+        await _hold(ctl, StopCause.JOURNAL, f"{why}: free its disk, then Unhold")
         return
-    job.ended = ""
     if ctl.packml.state is not state:
         return  # an Abort or a Stop came meanwhile
     ctl.packml.state_complete()
@@ -255,7 +251,7 @@ async def end_now(
     await _quick_stop(ctl)
     job, pid = ctl.job, ctl.program_id
     outcome = ABORTED if command is C.ABORT else STOPPED
-    if job is not None and not job.ended:  # an ended program keeps the outcome it has
+    if job is not None and not job.ended and not job.complete:  # an ended one keeps its own
         job.ended = outcome
         await ctl.recorder.outcome_soon(
             Outcome(job.program_id, outcome, ctl.packml.reason), OUTCOME_WAIT

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from bwsd.journal import Journal, JournalError
+from bwsd.journal import Journal, JournalError, JournalUnavailable
 from bwsd.journal.writer import ROUTINE, URGENT, JournalWriter
 
 log = logging.getLogger("bwsd.controller")
@@ -95,8 +95,13 @@ class Recorder:
     def _written(
         self, done: tuple[int, int, dict[str, Any]] | None, future: asyncio.Future[Any]
     ) -> None:
-        if not future.cancelled() and future.exception() is not None:
+        """A "done" the journal could not take now is kept for the next try; one it refuses
+        (a broken rule, which no retry changes) is logged and dropped."""
+        error = None if future.cancelled() else future.exception()
+        if isinstance(error, JournalUnavailable):
             self._give_back(done)
+        elif error is not None and done is not None:
+            log.error("the journal refuses instruction %d done: %s", done[1], error)
 
     def _take_done(self, program_id: int | None) -> tuple[int, int, dict[str, Any]] | None:
         """The "done" to write now (of ``program_id``, if given), no longer kept: a write
@@ -117,6 +122,17 @@ class Recorder:
         ``catch_up`` and the error raised."""
         await self._outcome_future(record)
 
+    async def outcome_within(self, record: Outcome, limit: float) -> str:
+        """Record a program's outcome, waiting at most ``limit`` seconds: "" once written,
+        else what keeps it (a write still waiting goes on, and is written again by
+        ``catch_up`` if it fails)."""
+        future = self._outcome_future(record)
+        done, _ = await asyncio.wait({future}, timeout=limit)
+        if not done:
+            return f"no answer within {limit:g} s ({self.stall or 'its disk is slow'})"
+        error = future.exception()
+        return "" if error is None else str(error)
+
     async def outcome_soon(self, record: Outcome, limit: float) -> None:
         """Record a program's outcome, waiting at most ``limit`` seconds (Abort, Stop: a
         stalled journal does not hold them up); a failure is logged and the outcome written
@@ -135,7 +151,8 @@ class Recorder:
     def _outcome_written(self, record: Outcome, future: asyncio.Future[None]) -> None:
         if future.cancelled():
             return
-        if (error := future.exception()) is not None:
+        error = future.exception()
+        if isinstance(error, JournalUnavailable):
             log.error(
                 "the journal cannot record that program %d is %s: %s (written again "
                 "before the next command)",
@@ -143,29 +160,42 @@ class Recorder:
                 record.outcome,
                 error,
             )
-        elif self._outcome is record:
+            return
+        if error is not None:  # a broken rule: no retry changes it
+            log.error(
+                "the journal refuses that program %d is %s: %s",
+                record.program_id,
+                record.outcome,
+                error,
+            )
+        if self._outcome is record:
             self._outcome = None
 
     async def catch_up(self) -> None:
         """Write what the journal could not take when it came: the last "done", then the
-        last outcome. Raises JournalError naming the record that still fails."""
+        last outcome. Raises JournalUnavailable naming the record that still cannot be
+        written (one the journal refuses outright is logged and dropped)."""
         if (index := self.unwritten_done) is not None:
             try:
                 await self.flush()
-            except JournalError as exc:
-                raise JournalError(
+            except JournalUnavailable as exc:
+                raise JournalUnavailable(
                     f"the journal still cannot record instruction {index} done: {exc.reason}",
                     path=exc.path,
                 ) from exc
+            except JournalError:
+                pass  # refused: logged and dropped (``_written``)
         if (record := self._outcome) is not None:
             try:
                 await self._outcome_future(record)
-            except JournalError as exc:
-                raise JournalError(
-                    f"the journal still cannot record that program "
-                    f"{record.program_id} is {record.outcome}: {exc.reason}",
+            except JournalUnavailable as exc:
+                raise JournalUnavailable(
+                    f"the journal still cannot record that program {record.program_id} is "
+                    f"{record.outcome}: {exc.reason}",
                     path=exc.path,
                 ) from exc
+            except JournalError:
+                return  # refused: logged and dropped (``_outcome_written``)
             log.info("program %d recorded %s", record.program_id, record.outcome)
 
     # ----- routine -----
@@ -179,7 +209,9 @@ class Recorder:
         if future.cancelled():
             return
         error = future.exception()
-        if error is not None:
+        if error is not None and not isinstance(error, JournalUnavailable):
+            log.error("the journal refuses %s: %s", what, error)  # no retry changes that
+        elif error is not None:
             if len(self._backlog) == self._backlog.maxlen:
                 log.error(
                     "the journal never recorded %s (more than %d records waited)",

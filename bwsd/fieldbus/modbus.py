@@ -192,6 +192,7 @@ class ModbusBus(Fieldbus):
         self._connecting = asyncio.Lock()  # one connection attempt at a time
         self._inflight: asyncio.Future[ModbusPDU] | None = None  # the request on the wire
         self._gone: AsyncModbusTcpClient | None = None  # the last client whose link closed
+        self._distrusted: AsyncModbusTcpClient | None = None  # one that left a request unanswered
 
     @classmethod
     def from_config(cls, config: Config) -> ModbusBus:
@@ -338,18 +339,11 @@ class ModbusBus(Fieldbus):
         with a code of ``refusals`` is returned to the caller."""
         client = await self._ready()
         try:
-            async with self._gate:
-                if self._lost or client is not self._client:  # lost while this one waited
-                    raise ConnectionException("connection lost")
-                self._inflight = asyncio.ensure_future(send(client))
-                try:
-                    response = await self._inflight
-                finally:
-                    self._inflight = None
+            response = await self._send(client, send)
         except asyncio.CancelledError:
-            self._drop()
             task = asyncio.current_task()
             if self._lost_now(client) and (task is None or not task.cancelling()):
+                self._drop()
                 raise FieldbusConnectionError(f"{self.where}: connection lost") from None
             raise
         except ConnectionException as exc:
@@ -373,12 +367,44 @@ class ModbusBus(Fieldbus):
             )
         return response
 
+    async def _send(self, client: AsyncModbusTcpClient, send: Send) -> ModbusPDU:
+        """Send one request on ``client`` when the one before it is answered. A caller
+        cancelled meanwhile stops waiting, but a request on the wire keeps the connection
+        until its answer (or its timeout): what is sent next (a quick stop after a cut
+        move) follows it on the same connection, in order, and no late answer is taken
+        for another request's."""
+        await self._gate.acquire()
+        try:
+            if self._lost or client is not self._client:  # lost while this one waited
+                raise ConnectionException("connection lost")
+            inflight = asyncio.ensure_future(send(client))
+        except BaseException:
+            self._gate.release()
+            raise
+        self._inflight = inflight
+        inflight.add_done_callback(partial(self._answered, client))
+        return await asyncio.shield(inflight)
+
+    def _answered(self, client: AsyncModbusTcpClient, inflight: asyncio.Future[ModbusPDU]) -> None:
+        """The request on the wire ended: the next one may go. One whose caller had gone
+        and that got no answer leaves a connection that cannot be trusted: it is dropped."""
+        if self._inflight is inflight:
+            self._inflight = None
+        self._gate.release()
+        unanswered = not inflight.cancelled() and isinstance(
+            inflight.exception(), ModbusIOException
+        )
+        if unanswered and client is self._client:
+            self._distrusted = client  # the next request connects again
+
     async def _ready(self) -> AsyncModbusTcpClient:
         """The connected client: report a lost connection once, else (re)connect (one
         attempt at a time: requests that wait meanwhile take its result)."""
         if self._lost:
             self._drop()
             raise FieldbusConnectionError(f"{self.where}: connection lost")
+        if self._client is not None and self._client is self._distrusted:
+            self._drop()
         if self._client is None or not self._client.connected:
             async with self._connecting:
                 if self._client is None or not self._client.connected:

@@ -21,7 +21,7 @@ from typing import Any, Self
 from bwsd.journal import codec
 from bwsd.journal.check import damage, invariants, records
 from bwsd.journal.files import close_keeping_wal
-from bwsd.journal.records import JournalError
+from bwsd.journal.records import JournalError, JournalUnavailable
 from bwsd.journal.schema import begin_session, connect, end_session, lock
 
 Clock = Callable[[], float]
@@ -120,6 +120,12 @@ class Store:
         if found:
             raise self._error("inconsistent: " + "; ".join(found))
 
+    def wait_when_busy(self, milliseconds: int) -> None:
+        """How long a write waits for another process's lock before it fails (SQLite's
+        busy timeout) from now on."""
+        with self._mutex:
+            self._live().execute(f"PRAGMA busy_timeout = {int(milliseconds)}")
+
     def damaged_rows(self, program: int | None = None) -> list[str]:
         """Rows a restart could not use (``check.records``): of ``program``, or of all."""
         with self._read() as conn:
@@ -136,9 +142,21 @@ class Store:
             raise self._error(f"limit must be an integer >= 1, got {limit!r}")
 
     def _error(
-        self, message: str, *, program: int | None = None, index: int | None = None
+        self,
+        message: str,
+        *,
+        program: int | None = None,
+        index: int | None = None,
+        unavailable: BaseException | None = None,
     ) -> JournalError:
-        return JournalError(message, path=str(self._path), program=program, index=index)
+        """The error naming the file; ``unavailable``: the SQLite error, when it says the
+        file cannot be used now (busy, full, read-only, I/O) rather than a broken rule."""
+        kind = (
+            JournalUnavailable
+            if isinstance(unavailable, sqlite3.OperationalError)
+            else JournalError
+        )
+        return kind(message, path=str(self._path), program=program, index=index)
 
     @contextmanager
     def _read(self) -> Iterator[sqlite3.Connection]:
@@ -147,7 +165,7 @@ class Store:
             try:
                 yield conn
             except sqlite3.Error as exc:
-                raise self._error(f"cannot read: {exc}") from exc
+                raise self._error(f"cannot read: {exc}", unavailable=exc) from exc
 
     @contextmanager
     def _write(self) -> Iterator[sqlite3.Connection]:
@@ -163,7 +181,7 @@ class Store:
                     with suppress(sqlite3.Error):
                         conn.execute("ROLLBACK")
                 if isinstance(exc, sqlite3.Error):
-                    raise self._error(f"cannot write: {exc}") from exc
+                    raise self._error(f"cannot write: {exc}", unavailable=exc) from exc
                 raise
 
     def _live(self) -> sqlite3.Connection:

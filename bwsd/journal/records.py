@@ -42,6 +42,12 @@ class JournalError(BwsdError):
         self.index = index
 
 
+class JournalUnavailable(JournalError):
+    """The journal cannot read or write now (its disk is full, another process holds its
+    lock, the file is read-only): the same call may succeed later. Any other JournalError is
+    a refusal that no retry changes."""
+
+
 @dataclass(frozen=True)
 class ProgramRecord:
     """One program in the history, like one print in a printer's print history.

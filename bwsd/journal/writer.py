@@ -23,11 +23,13 @@ from types import TracebackType
 from typing import Any, ParamSpec, Self, TypeVar
 
 from bwsd.journal.records import JournalError
+from bwsd.journal.schema import BUSY_TIMEOUT_MS
 from bwsd.journal.store import Journal
 
 P = ParamSpec("P")
 T = TypeVar("T")
 URGENT, ROUTINE = 0, 1
+ROUTINE_BUSY_MS = 200  # ms a routine record waits for another process's lock
 _Job = tuple[int, int, Callable[[], Any] | None, Future[Any] | None]
 
 
@@ -45,6 +47,7 @@ class JournalWriter:
         self._order = itertools.count()
         self._closed = False
         self._busy: tuple[float, str] | None = None  # (monotonic start, what) of the call
+        self._waiting = BUSY_TIMEOUT_MS  # the busy timeout set on the journal now
         self._thread = threading.Thread(target=self._serve, name="journal", daemon=True)
         self._thread.start()
 
@@ -81,13 +84,14 @@ class JournalWriter:
 
     def _serve(self) -> None:
         while True:
-            _, _, call, future = self._queue.get()
+            priority, _, call, future = self._queue.get()
             if call is None or future is None:
                 return
             if not future.set_running_or_notify_cancel():
                 continue  # cancelled while queued
             self._busy = (time.monotonic(), _name(call))
             try:
+                self._patience(priority)
                 result = call()
             except BaseException as exc:
                 future.set_exception(exc)
@@ -95,6 +99,14 @@ class JournalWriter:
                 future.set_result(result)
             finally:
                 self._busy = None
+
+    def _patience(self, priority: int) -> None:
+        """A routine record waits a moment for another process's lock, an urgent one the
+        journal's full busy timeout: a locked journal never holds an outcome up behind logs."""
+        wanted = ROUTINE_BUSY_MS if priority == ROUTINE else BUSY_TIMEOUT_MS
+        if wanted != self._waiting:
+            self.journal.wait_when_busy(wanted)
+            self._waiting = wanted
 
     async def __aenter__(self) -> Self:
         return self

@@ -25,7 +25,7 @@ import numpy as np
 
 from bwsd.controller.errors import ControllerError
 from bwsd.controller.facade import Controller, Settings
-from bwsd.controller.packml import Command, State
+from bwsd.controller.packml import ACTING, Command, State
 from bwsd.controller.status import Event, Fault, InstructionDone
 from bwsd.errors import BwsdError
 from bwsd.fieldbus import open_bus
@@ -53,7 +53,7 @@ class Cell:
     fault: str
     state: State
     ended: State | None = None  # where it rested after the fault
-    allowed: tuple[Command, ...] = ()
+    allowed: tuple[Command, ...] = ()  # (for the e-stop: once it is released)
     seconds: float = 0.0  # from the injection to the Fault and a state that rests
     faults: list[str] = field(default_factory=list)  # the Fault events' reasons
     logged: list[str] = field(default_factory=list)  # warnings and errors logged
@@ -203,11 +203,14 @@ async def go(ctl: Controller, state: State) -> None:
 
 
 async def settled(rig: Rig, since: float) -> float:
-    """Seconds until a Fault is published while commands are accepted (an exit)."""
+    """Seconds until a Fault is published and the state is one that waits for a command,
+    with commands accepted (an exit), or Execute going on."""
     ctl = rig.ctl
     while True:
         now = time.monotonic()
-        if rig.faults_since(since) and ctl.allowed():
+        pressed = bool(ctl.seen.status.estop)  # then the exit is its release (Clear waits)
+        acting = ctl.packml.state in ACTING  # it ends by itself (Aborting, Holding, ...)
+        if rig.faults_since(since) and not acting and (ctl.allowed() or pressed):
             return now - since
         assert now - since < SETTLED, (ctl.packml.state, ctl.packml.reason, rig.faults_since(since))
         await asyncio.sleep(0.005)
@@ -223,7 +226,7 @@ async def resume(ctl: Controller) -> None:
         State.STOPPED: lambda: ctl.command(Command.RESET),
         State.IDLE: lambda: ctl.command(Command.START, resume=ctl.resumable()),
     }
-    while ctl.packml.state is not State.COMPLETE:
+    while ctl.packml.state is not State.COMPLETE and not complete(ctl):
         assert time.monotonic() < deadline, (ctl.packml.state, ctl.packml.reason)
         step = steps.get(ctl.packml.state)
         try:
@@ -232,6 +235,12 @@ async def resume(ctl: Controller) -> None:
         except ControllerError:
             pass  # the machine is not read back yet, a journal write is retried: again
         await asyncio.sleep(0.05)
+
+
+def complete(ctl: Controller) -> bool:
+    """The program has run to its end (a Stop or an Abort that came after its last
+    instruction leaves PackML there, and the program complete)."""
+    return ctl.job is not None and ctl.job.ended == "complete"
 
 
 async def run_cell(tmp: Path, fault: str, state: State) -> Cell:
@@ -251,9 +260,12 @@ async def run_cell(tmp: Path, fault: str, state: State) -> Cell:
         cell.faults = rig.faults_since(since)
         cell.logged = [r.getMessage() for t, r in rig.records if t >= since]
         await clear(rig, fault)
+        if fault == "e-stop":  # released: the machine is read again, and Clear is offered
+            await ctl.read_machine()
+            cell.allowed = tuple(ctl.allowed())
         await resume(ctl)
         await ctl.wait()
-        cell.completed = ctl.packml.state is State.COMPLETE
+        cell.completed = complete(ctl)
         whole = simulate(ctl.machine, parse_program(TEXT))
         cell.same_skeleton = _bits(ctl.twin) == _bits(whole)
         answer = await request("127.0.0.1", rig.mock.ports["control"], {"cmd": "state"})
