@@ -155,14 +155,11 @@ class Controller:
         return [c for c in self.packml.allowed() if acting.refusal(self, c) is None]
 
     def resumable(self) -> bool:
-        """Start with resume continues the loaded program where it stopped."""
+        """The loaded program was aborted or stopped, and Start with resume (from Idle,
+        after Clear and Reset) continues it where it stopped."""
         job = self.job
-        return (
-            job is not None
-            and job.ended in ENDED
-            and self.packml.accepts(Command.START)
-            and acting.refusal(self, Command.START, resume=True) is None
-        )
+        blocked = job is not None and job.pending is not None and bool(job.pending.blocked)
+        return job is not None and job.ended in ENDED and not blocked
 
     def status(self) -> StatusSnapshot:
         """The controller as it stands, in one value."""

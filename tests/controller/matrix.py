@@ -64,9 +64,10 @@ class Cell:
 class Rig:
     """The mock loom, the controller on it, its journal and what it published and logged."""
 
-    def __init__(self, tmp: Path) -> None:
+    def __init__(self, tmp: Path, speeds: dict[str, Any] = SPEEDS) -> None:
         self.tmp = tmp
-        self.mock: Mock = start_mock(tmp, SPEEDS)
+        self.speeds = speeds
+        self.mock: Mock = start_mock(tmp, speeds)
         self.events: list[tuple[float, Event]] = []
         self.records: list[tuple[float, logging.LogRecord]] = []
         self.other: sqlite3.Connection | None = None
@@ -138,7 +139,7 @@ async def inject(rig: Rig, fault: str) -> None:
 async def clear(rig: Rig, fault: str) -> None:
     if fault == "loom killed":
         rig.mock.stop()
-        rig.mock = start_mock(rig.tmp, SPEEDS, rig.mock.ports)
+        rig.mock = start_mock(rig.tmp, rig.speeds, rig.mock.ports)
     elif fault == "e-stop":
         await rig.control({"cmd": "estop", "pressed": False})
     elif fault == "full disk":
