@@ -20,11 +20,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import BusHeld, owner_id
 
 LOCK_NAME = "bus.lock"
-__all__ = ["LOCK_NAME", "BusHeld", "BusLock", "Holder", "daemon_owner_id", "holder",
-           "refuse_if_held"]  # fmt: skip
+
+
+class StateFolderError(BwsdError):
+    """The state folder cannot be used (its disk is full, it is read-only): names the file."""
+
+__all__ = ["LOCK_NAME", "BusHeld", "BusLock", "Holder", "StateFolderError", "daemon_owner_id",
+           "holder", "refuse_if_held"]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -53,7 +59,10 @@ class BusLock:
     def take(cls, state_dir: Path, config: str) -> BusLock:
         """Hold the bus of ``state_dir``; BusHeld naming the holder when another has it."""
         path = state_dir / LOCK_NAME
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+        except OSError as exc:
+            raise StateFolderError(f"{path}: cannot open the bus lock: {exc.strerror}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -62,8 +71,13 @@ class BusLock:
             raise BusHeld(f"{path}: the bus is held by {found.describe()}") from None
         named = Path(config).resolve() if Path(config).exists() else config
         record = {"pid": os.getpid(), "config": str(named), "since": time.time()}
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps(record).encode(), 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(record).encode(), 0)
+        except OSError as exc:  # a full disk, a read-only folder
+            os.close(fd)
+            raise StateFolderError(f"{path}: cannot write who holds the bus: {exc.strerror} "
+                                   "(free the state folder's disk)") from None  # fmt: skip
         return cls(path, fd)
 
     def release(self) -> None:

@@ -251,3 +251,35 @@ class TestSegmentAxes:
             assert set(map(tuple, np.argwhere(state.occupancy).tolist())) != set(SEGMENT_FILL)
 
         run(with_segment_bus(segment_mock, backend, body))
+
+
+WIDE = {**MACHINE, "rows": 24, "cols": 4}  # 24 row axes: a shift of every row is 24 set-points
+WIDE_FILL = "FILL row=0 col=1\n" + "XX\n" * 24 + "END\n"
+
+
+@pytest.mark.parametrize("when", ["moving", "at rest"])
+def test_a_killed_loom_is_seen_at_once_not_after_each_requests_timeout(tmp_path, backend, when):
+    """With a 30 s I/O timeout, a loom killed during a 24-line shift (or between moves) is
+    seen as lost at once: the request on the wire and every request queued behind it fail
+    when the connection closes, instead of waiting out their timeouts one after another."""
+    mock = start_mock(tmp_path, {"stroke_speed": 20.0}, machine=WIDE, program=WIDE_FILL)
+    config = client_config(backend, mock.ports, machine=WIDE, io_timeout=30.0, timeout=60.0)
+
+    async def body() -> None:
+        bus = open_bus(config)
+        await bus.connect()
+        try:
+            moves = [stroke(bus, f"row{r}", 1 if r % 2 else -1) for r in range(24)]
+            if when == "moving":
+                moving = asyncio.ensure_future(bus.execute(moves))
+                await asyncio.sleep(0.2)  # the strokes take 0.5 s out
+            mock.proc.kill()
+            mock.proc.wait(10)
+            with pytest.raises(FieldbusConnectionError) as lost:
+                await asyncio.wait_for(moving if when == "moving" else bus.state(), 10)
+            assert lost.value.lost
+        finally:
+            await bus.close()
+            mock.stop()
+
+    run(body())

@@ -9,7 +9,7 @@ import pytest
 
 from bwsd.fieldbus import open_bus
 from bwsd.fieldbus.base import BusHeld, owner_id
-from bwsd.fieldbus.owner import LOCK_NAME, BusLock, holder, refuse_if_held
+from bwsd.fieldbus.owner import LOCK_NAME, BusLock, StateFolderError, holder, refuse_if_held
 from tests.fieldbus.conftest import client_config
 from tests.fieldbus.test_backends import run, stroke
 
@@ -70,3 +70,10 @@ def test_a_second_client_cannot_move_while_the_first_holds_the_loom(mock, backen
 @pytest.fixture(params=["modbus", "canopen"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
+
+
+def test_a_full_disk_is_a_clear_error_naming_the_lock_not_a_crash(tmp_path: Path):
+    (tmp_path / LOCK_NAME).symlink_to("/dev/full")  # every write: "No space left on device"
+    with pytest.raises(StateFolderError, match=r"bus.lock: cannot write who holds the bus: "):
+        BusLock.take(tmp_path, "loom.toml")
+    assert holder(tmp_path) is None  # nothing is held
