@@ -8,6 +8,7 @@ that the journal holds every instruction exactly once.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import random
 import re
@@ -15,6 +16,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -142,24 +144,60 @@ def test_a_program_runs_to_complete_over_http_and_equals_simulate(rig):
         served.stop()
 
 
+def resume_run(served: Served, limit: float = 60) -> dict[str, Any]:
+    """The commands an operator gives after a restart, an Abort or a Stop, until the program
+    runs again (or has completed): Unhold, or Clear, Reset and Start with resume."""
+    deadline = time.monotonic() + limit
+    while (state := served.recovered())["name"] not in ("Execute", "Complete"):
+        assert time.monotonic() < deadline, f"{state['name']}: {state['reason']}"
+        step = {"Held": "unhold", "Aborted": "clear", "Stopped": "reset", "Idle": "start"}
+        if state["name"] in step:
+            body = {"resume": state["resumable"]} if state["name"] == "Idle" else {}
+            served.http.post(f"/commands/{step[state['name']]}", json=body)  # 409: again
+        time.sleep(0.02)
+    return state
+
+
+def fire(served: Served, name: str, body: dict[str, Any]) -> None:
+    """Send a command without waiting for its answer (the daemon is killed meanwhile)."""
+
+    def send() -> None:
+        with contextlib.suppress(httpx.HTTPError):
+            httpx.post(f"{served.urls['api']}/api/v1/commands/{name}", json=body, timeout=5,
+                       headers=served.http.headers)  # fmt: skip
+
+    threading.Thread(target=send, daemon=True).start()
+
+
 def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
+    """SIGKILL at random moments: while it runs (predicting, journaling, moving), inside an
+    Abort, and inside the resume that follows one."""
     config, state, token, _ = rig
-    rng = random.Random(20261123)
+    rng = random.Random(20261127)
     served = Served(config, state, token)
     served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
     served.command("reset")
     served.command("start")
     for kill in range(KILLS):
-        time.sleep(rng.uniform(0.0, 0.15))  # anywhere: predicting, journaling, moving...
+        where = rng.choice(["running", "aborting", "resuming"])
+        time.sleep(rng.uniform(0.0, 0.15))
         # A program that completes is no longer resumed: every kill must come before its end.
         assert served.state()["index"] < LONG_STEPS - 10, f"LONG is too short for {KILLS} kills"
+        if where == "aborting":
+            fire(served, "abort", {"reason": "operator"})
+        elif where == "resuming":
+            served.http.post("/commands/abort", json={}).raise_for_status()
+            served.command("clear")
+            served.command("reset")
+            fire(served, "start", {"resume": True})
+        time.sleep(rng.uniform(0.0, 0.05) if where != "running" else 0)
         served.kill()
         served = Served(config, state, token)
         now = served.recovered()
-        assert now["name"] == "Held" and now["reason"].startswith("restarted"), (
-            f"after kill {kill + 1}: {now['name']}: {now['reason']} at {now['index']}"
+        assert now["name"] in ("Held", "Aborted") and now["reason"].startswith("restarted"), (
+            f"after kill {kill + 1} ({where}): {now['name']}: {now['reason']} at {now['index']}"
         )
-        served.command("unhold")
+        resume_run(served)
     try:
         final = served.wait_for({"Complete", "Held", "Aborted"})
         assert final["name"] == "Complete" and final["index"] == LONG_STEPS, final
@@ -341,3 +379,85 @@ def test_a_tls_file_that_cannot_serve_is_a_clear_error(rig):
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("bwsd: error: [api.certfile]: cannot serve TLS with "), last
     assert "Traceback" not in done.stderr
+
+
+def test_a_restart_restores_the_loaded_program_with_its_cause(rig):
+    config, state, token, _ = rig
+    for stop in ("kill", "stop"):
+        served = Served(config, state, token)
+        loaded = served.http.post("/programs", json={"name": "braid.bws", "text": TEXT}).json()
+        served.command("reset")
+        getattr(served, stop)()
+        served = Served(config, state, token)
+        try:
+            now = served.recovered()
+            assert (now["name"], now["program_id"], now["count"]) == ("Stopped", loaded["id"], 20)
+            assert now["stop_cause"] == "restart" and "is loaded" in now["reason"], now
+            served.command("reset")
+            served.command("start")
+            assert served.wait_for({"Complete", "Held", "Aborted"})["name"] == "Complete"
+        finally:
+            served.stop()
+
+
+def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
+    """Another process holds the journal's lock mid-run: the stall is on /healthz, the run
+    holds; SIGTERM still ends the daemon cleanly, its bus lock free for the next one (the
+    end of its session cannot be recorded: docs/journal.md says what the next start does)."""
+    from bwsd.fieldbus.owner import holder
+
+    config, state, token, _ = rig
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
+    served.command("reset")
+    served.command("start")
+    other = sqlite3.connect(state / "journal.db", isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")
+    try:
+        health = httpx.Client(base_url=served.urls["api"], timeout=30)
+        deadline = time.monotonic() + 30
+        while (answer := health.get("/healthz")).status_code == 200:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        assert "journal" in answer.json()["problems"], answer.text
+        assert served.wait_for({"Held"})["stop_cause"] == "journal"
+        assert holder(state) is not None
+        health.close()
+        served.stop()
+        assert served.proc.returncode == 0
+        assert holder(state) is None  # the bus lock was let go
+        log = served.log.read_text()
+        assert "Traceback" not in log and "the journal has not finished writing" in log
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+
+
+def test_a_start_with_a_damaged_program_warns_holds_with_the_fix_and_aborts(rig):
+    config, state, token, _ = rig
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "braid.bws", "text": TEXT}).raise_for_status()
+    served.command("reset")
+    served.command("start")
+    while served.state()["index"] < 3:
+        time.sleep(0.01)
+    served.stop()  # held, its session closed; then the file is damaged
+    journal = sqlite3.connect(state / "journal.db", isolation_level=None)
+    journal.executescript("BEGIN; DROP TRIGGER programs_fixed; UPDATE programs SET "
+                          "text = text || '# edited' WHERE id = 1; COMMIT;")  # fmt: skip
+    journal.close()
+    served = Served(config, state, token)
+    try:
+        now = served.recovered()
+        assert now["name"] == "Held" and "recovery failed" in now["reason"], now
+        assert "restore the journal from a backup" in now["reason"]
+        assert now["allowed"] == ["stop", "abort"]
+        health = httpx.get(served.urls["api"] + "/healthz", timeout=30)
+        assert health.status_code == 503 and "recovery" in health.json()["problems"]
+        assert served.http.post("/commands/abort", json={}).json()["name"] == "Aborted"
+        served.command("clear")
+        assert served.state()["name"] == "Stopped"
+        assert httpx.get(served.urls["api"] + "/healthz", timeout=30).status_code == 200
+    finally:
+        served.stop()
+    assert "journal: program 1: its text does not match its sha256" in served.log.read_text()

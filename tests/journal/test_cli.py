@@ -370,3 +370,38 @@ def test_errors_are_one_line_without_a_traceback(tmp_path: Path) -> None:
     assert done.stderr == (f"bwsd: error: {tmp_path}/none.db: no journal here (the daemon "
                            "creates one at its first start)\n")  # fmt: skip
     assert not (tmp_path / "none.db").exists()
+
+
+# The rows a restart could not use, each damaged as a tool outside bwsd would (its triggers
+# dropped first): check names the row and exits 1; it said "result: ok" before.
+DAMAGE = {
+    "text": ("DROP TRIGGER programs_fixed; UPDATE programs SET text = 'TAKEUP 2\n' "
+             "WHERE id = 1;", "program 1: its text does not match its sha256"),
+    "payload": ("DROP TRIGGER instructions_fixed; UPDATE instructions SET started_payload = "
+                "'not json' WHERE idx = 1;", "program 1, instruction 1: its started payload "
+                "is not a JSON object"),
+    "snapshot": ("UPDATE snapshots SET data = x'00' WHERE idx = 1;",
+                 "program 1: the snapshot at instruction 1 does not match its sha256"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("damage", list(DAMAGE))
+def test_check_names_each_row_a_restart_could_not_use(
+    capsys: pytest.CaptureFixture[str], path: Path, damage: str
+) -> None:
+    with Journal.open(path) as j:
+        pid = j.add_program("part.bws", "TAKEUP 1\nTAKEUP 1\n", 2)
+        j.set_outcome(pid, "running")
+        j.started(pid, 1, {"setpoints": []})
+        j.done(pid, 1, {})
+        j.save_snapshot(pid, 1, b"twin after 1")
+    status, out, _ = run(capsys, "check", "--journal", str(path))
+    assert status == 0 and report(out)["rows"][0].startswith("ok"), out
+    sql, problem = DAMAGE[damage]
+    conn = sqlite3.connect(path, isolation_level=None)
+    conn.executescript(f"BEGIN; {sql} COMMIT;")
+    conn.close()
+    status, out, _ = run(capsys, "check", "--journal", str(path))
+    assert status == 1, out
+    assert [p for p in report(out)["problem"] if problem in p], out
+    assert report(out)["result"] == ["1 problem(s)"]
