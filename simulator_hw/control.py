@@ -10,8 +10,8 @@ One JSON object a line in, one a line out. Requests (``axis`` is an axis name su
   opposite of the truth (a dirty or broken sensor)
 - ``{"cmd": "estop", "pressed": true | false}``
 - ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
-- ``{"cmd": "state"}``: occupancy, e-stop, and each axis's position, busy flag, fault and
-  stroke count
+- ``{"cmd": "state"}``: occupancy, e-stop, when the last quick stop came (the machine's
+  ``time.monotonic()``), and each axis's position, busy flag, fault and stroke count
 
 Answers are ``{"ok": true, ...}`` or ``{"ok": false, "error": "..."}``.
 """
@@ -91,6 +91,7 @@ def state(loom: Loom) -> dict[str, Any]:
     loom.tick(time.monotonic())
     return {
         "estop": loom.estop,
+        "quick_stopped": loom.quick_stopped,  # time.monotonic() of the last quick stop
         "occupancy": [[int(v) for v in row] for row in loom.occupied],
         "axes": {
             sim.axis.name: {

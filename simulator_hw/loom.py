@@ -89,6 +89,7 @@ class Loom:
         self.faults = Faults()
         self.owner = Owner()
         self.on_change: Callable[[], None] | None = None  # the mechanics changed (state file)
+        self.quick_stopped: float | None = None  # monotonic time of the last quick stop
 
     # ----- what survives a power cut -----
     def mechanics(self) -> dict[str, Any]:
@@ -170,6 +171,7 @@ class Loom:
     def quick_stop(self, now: float) -> None:
         """Stop every axis where it is; moving axes are left faulted (stall)."""
         self.tick(now)
+        self.quick_stopped = now
         for sim in self.axes:
             if sim.busy:
                 self._stop(sim, FAULT_STALL)
