@@ -182,6 +182,24 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
     served.command("reset")
     served.command("start")
+    try:
+        served = kill_anywhere(served, config, state, token, rng)
+        final = served.wait_for({"Complete", "Held", "Aborted"})
+        assert final["name"] == "Complete" and final["index"] == LONG_STEPS, final
+        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
+        assert same_geometry(skeleton, expected_skeleton(LONG))
+    finally:
+        served.stop()
+    journal = sqlite3.connect(state / "journal.db")
+    rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
+    journal.close()
+    assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
+
+
+def kill_anywhere(served: Served, config: Path, state: Path, token: str,
+                  rng: random.Random) -> Served:  # fmt: skip
+    """KILLS kills at random moments, each followed by a restart and a resume; the daemon
+    serving at the end."""
     for kill in range(KILLS):
         where = rng.choice(["running", "aborting", "resuming"])
         time.sleep(rng.uniform(0.0, 0.15))
@@ -197,22 +215,15 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
         time.sleep(rng.uniform(0.0, 0.05) if where != "running" else 0)
         served.kill()
         served = Served(config, state, token)
-        now = served.recovered()
-        assert now["name"] in ("Held", "Aborted") and now["reason"].startswith("restarted"), (
-            f"after kill {kill + 1} ({where}): {now['name']}: {now['reason']} at {now['index']}"
-        )
-        resume_run(served)
-    try:
-        final = served.wait_for({"Complete", "Held", "Aborted"})
-        assert final["name"] == "Complete" and final["index"] == LONG_STEPS, final
-        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
-        assert same_geometry(skeleton, expected_skeleton(LONG))
-    finally:
-        served.stop()
-    journal = sqlite3.connect(state / "journal.db")
-    rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
-    journal.close()
-    assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
+        try:
+            now = served.recovered()
+            assert now["name"] in ("Held", "Aborted"), f"after kill {kill + 1} ({where}): {now}"
+            assert now["reason"].startswith("restarted"), now
+            resume_run(served)
+        except BaseException:
+            served.stop()
+            raise
+    return served
 
 
 def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(rig):
