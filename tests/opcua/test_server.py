@@ -328,3 +328,27 @@ def test_allow_none_offers_an_unsecured_endpoint_with_the_same_roles(mock, tmp_p
             assert r.controller.packml.state is State.IDLE
 
     run(scenario())
+
+
+def test_an_aborted_part_resumes_by_the_resume_method(slow_mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(slow_mock, tmp_path) as r, r.session("operator") as client:
+            await r.controller.load("braid.bws", TEXT)
+            root = await loom(client)
+            idx = await client.get_namespace_index(NAMESPACE)
+            await root.call_method(f"{idx}:Reset")
+            await root.call_method(f"{idx}:Start")
+            while r.controller.index < 2:
+                await asyncio.sleep(0.01)
+            await root.call_method(f"{idx}:Abort")
+            await until_state(client, State.ABORTED)
+            assert await read(client, "Status/Resumable") is True
+            await root.call_method(f"{idx}:Clear")
+            await root.call_method(f"{idx}:Reset")
+            with pytest.raises(ua.UaStatusCodeError):
+                await root.call_method(f"{idx}:Start")  # a plain Start: refused
+            await root.call_method(f"{idx}:Resume")
+            await until_state(client, State.COMPLETE)
+            assert r.controller.index == 15 and r.journal.program(1).outcome == "complete"
+
+    run(scenario())

@@ -25,6 +25,7 @@ from bwsd.plc import REG_COUNT, PlcError, PlcTags, StopReason, Tags, decode, plc
 from bwsd.plc.registers import (
     REG_CMD_CHANGE_REQUEST,
     REG_CNTRL_CMD,
+    REG_RESUME,
     REG_STATE_CURRENT,
     REG_UNIT_MODE,
     REG_UNIT_MODE_CHANGE_REQUEST,
@@ -353,3 +354,29 @@ def test_a_bad_allow_entry_is_a_config_error_naming_the_key(mock, tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"allow": "127.0.0.1 plc-3"}}, "bwsd.toml")
     with pytest.raises(ConfigError, match=r"\[plc\.allow\]: 'plc-3' is not an IP address"):
         plc_tags(SimpleNamespace(), config)  # type: ignore[arg-type]
+
+
+ABORT = 8
+
+
+def test_an_aborted_part_resumes_from_the_plc_with_command_resume(slow_mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
+            pid = await ctl.load("braid.bws", TEXT)
+            await plc.command(RESET)
+            await plc.command(START)
+            await plc.until(lambda t: t.instruction_index >= 2)
+            aborted = await plc.command(ABORT)
+            assert aborted.state_current == State.ABORTED and aborted.resumable == 1
+            await plc.command(CLEAR)
+            await plc.command(RESET)
+            plain = await plc.command(START)  # a plain Start does not run an ended program
+            assert (plain.state_current, plain.cmd_invalid) == (State.IDLE, 1)
+            assert not await plc.write(REG_RESUME, [2])  # 0 or 1 only
+            assert await plc.write(REG_RESUME, [1])
+            resumed = await plc.command(START)
+            assert resumed.cmd_invalid == 0 and resumed.resume == 1 and resumed.resumable == 0
+            end = await plc.until(lambda t: t.state_current == State.COMPLETE)
+            assert end.instruction_index == 15 and journal.program(pid).outcome == "complete"
+
+    run(scenario())
