@@ -160,7 +160,9 @@ def locked_aborts(count: int) -> list[float]:
     return took
 
 
-def losses(count: int, backend: str) -> list[float]:
+def losses(count: int, backend: str, how: str = "kill") -> list[float]:
+    """Seconds from the loom's loss (killed, or muted: it stops answering but keeps the
+    connection open) to Held."""
     rng = random.Random(13)
     took = []
     with serving(QUICK, backend) as (mock, served):
@@ -168,15 +170,22 @@ def losses(count: int, backend: str) -> list[float]:
         for _ in range(count):
             time.sleep(rng.uniform(0.2, 0.8))
             assert served.state()["name"] == "Execute"
-            killed = time.monotonic()
-            mock.proc.kill()
+            lost = time.monotonic()
+            if how == "kill":
+                mock.proc.kill()
+            else:
+                asyncio.run(request("127.0.0.1", mock.ports["control"],
+                                    {"cmd": "fault", "kind": "mute"}))  # fmt: skip
             while served.state()["name"] == "Execute":
                 time.sleep(0.005)
-            took.append(time.monotonic() - killed)
-            mock.proc.wait(10)
-            mock.stop()
-            mock = start_mock(Path(served.log).parent, {**QUICK, "state_file": "loom.json"},
-                              mock.ports)  # fmt: skip
+            took.append(time.monotonic() - lost)
+            if how == "kill":
+                mock.proc.wait(10)
+                mock.stop()
+                mock = start_mock(Path(served.log).parent, {**QUICK, "state_file": "loom.json"},
+                                  mock.ports)  # fmt: skip
+            else:
+                asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "clear"}))
             resume(served)
     return took
 
@@ -191,13 +200,14 @@ def row(name: str, values: list[float], target: str = "") -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--aborts", type=int, default=50, help="Abort and Stop tries in all")
+    parser.add_argument("--aborts", type=int, default=100, help="Abort and Stop tries in all")
     parser.add_argument("--locked", type=int, default=10)
     parser.add_argument("--kills", type=int, default=20, help="kills of the loom per bus")
     args = parser.parse_args()
     cuts = aborts(args.aborts)
     locked = locked_aborts(args.locked)
     lost = {backend: losses(args.kills, backend) for backend in ("modbus", "canopen")}
+    muted = losses(max(5, args.kills // 4), "modbus", "mute")
     print("| measure | n | p50 ms | p99 ms | max ms | target |\n|---|---:|---:|---:|---:|---|")
     print(row("Abort mid-stroke to the loom's quick stop", cuts["abort"], "< 100 ms at p99"))
     print(row("Stop mid-stroke to the loom's quick stop", cuts["stop"], "< 100 ms at p99"))
@@ -207,6 +217,7 @@ def main() -> None:
     print(row("Abort with the journal locked, to Aborted", locked, "< 2 s"))
     for backend, took in lost.items():
         print(row(f"loom killed to Held, {backend}", took, "< 1.5 s at p99"))
+    print(row(f"loom muted to Held, modbus (baseline: io_timeout {BUS['io_timeout']:g} s)", muted))
 
 
 if __name__ == "__main__":

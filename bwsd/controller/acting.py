@@ -21,18 +21,17 @@ from bwsd.controller.packml import ACTING, InvalidCommand
 from bwsd.controller.packml import Command as C
 from bwsd.controller.packml import State as S
 from bwsd.controller.recorder import Outcome
+from bwsd.controller.refusals import READS_FIRST, refusal
 from bwsd.controller.runloop import Aborted, Ending, Finished, Held, Parts, RunLoop
 from bwsd.controller.status import Fault, StopCause, cause_of
 from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import FieldbusError
-from bwsd.journal import ABORTED, COMPLETE, ENDED, HELD, RUNNING, STOPPED, SUSPENDED
+from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED
 
 if TYPE_CHECKING:
     from bwsd.controller.facade import Controller
 
 log = logging.getLogger("bwsd.controller")
-_RUNS = frozenset({C.START, C.UNHOLD, C.UNSUSPEND})
-_READS_FIRST = _RUNS | {C.RESET, C.CLEAR}
 QUICK_STOP_WAIT = 1.0  # s an Abort or Stop waits for the bus to confirm its quick stop
 OUTCOME_WAIT = 0.5  # s an Abort or Stop waits for the journal to record it (then goes on)
 START_WAIT = 2.0  # s a run waits for the journal to record that it starts (else it holds)
@@ -67,7 +66,7 @@ async def _take(ctl: Controller, command: C, reason: str, who: str, resume: bool
     try:
         if not ctl.running:
             await ctl.recorder.catch_up()
-        if command in _READS_FIRST and ctl.packml.accepts(command):
+        if command in READS_FIRST and ctl.packml.accepts(command):
             await _prepare(ctl, command, resume)
         refused = refusal(ctl, command, resume)
         if refused is not None:
@@ -82,51 +81,6 @@ async def _take(ctl: Controller, command: C, reason: str, who: str, resume: bool
         ctl.stop_cause = StopCause.NONE
     await _act(ctl, state, resume)
     return ctl.packml.state
-
-
-def refusal(ctl: Controller, command: C, resume: bool = False) -> str | None:
-    """Why ``command`` is refused beyond PackML's own table (None: it is not). Reads only
-    what the controller knows: the status of the last read, the job, the journal's state."""
-    if command in (C.ABORT, C.STOP):
-        return None  # an exit from every state: recovering, broken or not
-    if ctl.recovering:
-        return f"recovering: {ctl.recovering}"
-    if ctl.broken:
-        return f"{ctl.broken} (Abort ends it)"
-    job, bus = ctl.job, ctl.seen.status
-    if command is C.START and (why := _start_refused(ctl, resume)) is not None:
-        return why
-    if command in _READS_FIRST and bus.estop:
-        return f"the emergency stop is pressed: release it before {command.label}"
-    if command in _RUNS and ctl.packml.accepts(command):
-        if job is not None and job.pending is not None and job.pending.blocked:
-            return f"cannot resume: {job.pending.blocked} (Abort ends the program)"
-        if bus.connected is False:
-            return f"the machine cannot be read: {bus.last_error}"
-        if bus.faulted:
-            route = "Clear and Reset" if command is C.START else "Abort, Clear and Reset"
-            return (f"axes {', '.join(bus.faulted)} report a fault: {route} clear it, then "
-                    "Start with resume continues the program")  # fmt: skip
-        if bus.differs and not (job is not None and job.pending is not None and job.pending.rest):
-            return (
-                "the occupancy sensors differ from the twin at "
-                f"{_cells(bus.differs)}: nothing is moved"
-            )
-    return None
-
-
-def _start_refused(ctl: Controller, resume: bool) -> str | None:
-    job = ctl.job
-    if job is None:
-        return "no program is loaded"
-    if job.ended == COMPLETE:
-        return "the loaded program is complete: load a program to start"
-    if job.ended in ENDED and not resume and (job.done or job.pending is not None):
-        return (
-            f"program {job.program_id} was {job.ended} at instruction {job.done}: Start "
-            "with resume continues it, or load a program"
-        )
-    return None
 
 
 async def _prepare(ctl: Controller, command: C, resume: bool) -> None:
@@ -316,9 +270,3 @@ def after_failure(ctl: Controller, name: str, reason: str) -> None:
             f"{command.label.lower()} after {name}",
             lambda: ctl.command(command, reason, "the supervisor"),
         )
-
-
-def _cells(cells: tuple[tuple[int, int], ...]) -> str:
-    if cells == ((-1, -1),):
-        return "every cell (the grids differ in shape)"
-    return ", ".join(f"({r}, {c})" for r, c in cells)

@@ -3,9 +3,9 @@
 REST, the PLC tags, OPC UA and the page call ``command``, ``set_mode``, ``check``, ``load``,
 ``preview``, ``status`` and ``health``, and follow ``events``. Commands are taken one at a
 time under the command lock, except Abort and Stop: they act at once, whatever else runs
-(``ending.end_now``). The work of each acting state is in ``bwsd.controller.acting``, the run
+(``acting.end_now``). The work of each acting state is in ``bwsd.controller.acting``, the run
 loop in ``bwsd.controller.runloop``, what is written late in ``bwsd.controller.recorder``,
-the restart in ``bwsd.controller.restart`` and the reads at rest in
+the restart and the reads at rest in ``bwsd.controller.resting``, the machine as last read in
 ``bwsd.controller.machine``; every long-lived task has the supervisor as its owner.
 """
 
@@ -20,13 +20,14 @@ from typing import Any
 
 from bwsd.controller import acting, resting
 from bwsd.controller.errors import Busy, Cancelled, ControllerError
-from bwsd.controller.job import Job
+from bwsd.controller.job import Job, Preview
 from bwsd.controller.machine import MachineView
 from bwsd.controller.packml import Command, PackML, State, UnitMode
-from bwsd.controller.plan import Limits, RefusedMove, check_limits
+from bwsd.controller.plan import Limits
 from bwsd.controller.programs import DryRun, check_program
 from bwsd.controller.recorder import Recorder
 from bwsd.controller.recovery import Settle
+from bwsd.controller.refusals import refusal
 from bwsd.controller.runloop import RunLoop
 from bwsd.controller.settling import settle_pending
 from bwsd.controller.status import (
@@ -39,11 +40,10 @@ from bwsd.controller.status import (
     StopCause,
 )
 from bwsd.controller.supervisor import Supervisor
-from bwsd.errors import BwsdError, TwinError
+from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import BoolGrid, Fieldbus, FieldbusError, MachineState
-from bwsd.journal import COMPLETE, ENDED, Journal, ProgramRecord
-from bwsd.twin import Machine, Prediction, Program, Twin
-from bwsd.twin.instructions import Instruction
+from bwsd.journal import ENDED, Journal, ProgramRecord
+from bwsd.twin import Machine, Program, Twin
 
 log = logging.getLogger("bwsd.controller")
 Publish = Callable[[dict[str, Any]], None]
@@ -58,19 +58,6 @@ class Settings:
     max_instructions: int = 1_000_000  # a program may expand to at most this many
     snapshot_every: int = 200  # instructions between twin snapshots in the journal
     poll_interval: float = 0.5  # s between reads of the machine at rest
-
-
-@dataclass(frozen=True)
-class Preview:
-    """The next instruction predicted on the controller's twin (nothing committed)."""
-
-    index: int
-    line: int
-    instruction: Instruction
-    prediction: Prediction | None  # None when the twin refuses it
-    refused: str | None
-    occupancy: Any
-    takeup: float
 
 
 class Controller:
@@ -136,10 +123,6 @@ class Controller:
         return self.job.dry_run if self.job else None
 
     @property
-    def last(self) -> Prediction | None:
-        return self.job.last if self.job else None
-
-    @property
     def index(self) -> int:
         """Instructions done of the loaded program."""
         return self.job.done if self.job else 0
@@ -152,7 +135,7 @@ class Controller:
     def allowed(self) -> list[Command]:
         """Exactly the commands that will be accepted now (as far as the last read knows);
         ``resumable`` in the status says when Start is accepted with resume."""
-        return [c for c in self.packml.allowed() if acting.refusal(self, c) is None]
+        return [c for c in self.packml.allowed() if refusal(self, c) is None]
 
     def resumable(self) -> bool:
         """The loaded program was aborted or stopped, and Start with resume (from Idle,
@@ -249,28 +232,9 @@ class Controller:
 
     async def preview(self) -> Preview:
         """The next instruction predicted on the controller's twin; the twin is not changed."""
-        job = self.job
-        if job is None:
+        if self.job is None:
             raise ControllerError("no program is loaded")
-        while True:
-            step = job.next_step()
-            if step is None:
-                raise ControllerError(f"all {job.count} instructions are done")
-            index, line, instruction = step["index"], step["line"], step["instruction"]
-            try:
-                pred = await asyncio.to_thread(job.twin.predict, instruction)
-            except TwinError as exc:
-                return Preview(
-                    index, line, instruction, None, str(exc), job.twin.occupancy, job.twin.takeup
-                )
-            if pred.index == index:  # else the run committed meanwhile: predict again
-                break
-        try:
-            check_limits(pred, self.limits)
-            refused = None
-        except RefusedMove as exc:
-            refused = str(exc)
-        return Preview(pred.index, line, instruction, pred, refused, pred.occupancy, pred.takeup)
+        return await self.job.preview(self.limits)
 
     # ----- commands -----
     async def command(
@@ -390,7 +354,3 @@ class Controller:
         """Stop the background tasks, finish the journal's queued writes and close it."""
         await self.supervisor.close()
         await self.recorder.close()
-
-
-def is_complete(job: Job | None) -> bool:
-    return job is not None and job.ended == COMPLETE

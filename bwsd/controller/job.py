@@ -11,12 +11,15 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
+from bwsd.controller.errors import ControllerError
+from bwsd.controller.plan import Limits, RefusedMove, check_limits
 from bwsd.controller.programs import DryRun, step_dict
 from bwsd.controller.recorder import Recorder
 from bwsd.controller.status import Event, InstructionDone
+from bwsd.errors import TwinError
 from bwsd.export.skeleton_json import committed_parts, delta_from
 from bwsd.fieldbus.axes import UM_PER_MM
 from bwsd.twin import Prediction, Program, Twin
@@ -32,6 +35,19 @@ class Pending:
     rest: Instruction | None = None  # what is still to move: a cut shift's lines, a take-up
     blocked: str = ""  # why it cannot be settled (a resume is refused)
     decided: str = ""  # what the last read-back showed, in words
+
+
+@dataclass(frozen=True)
+class Preview:
+    """The next instruction predicted on the job's twin (nothing committed)."""
+
+    index: int
+    line: int
+    instruction: Instruction
+    prediction: Prediction | None  # None when the twin refuses it
+    refused: str | None
+    occupancy: Any
+    takeup: float
 
 
 class Job:
@@ -54,7 +70,6 @@ class Job:
         self.snapped = 0  # instructions done at the last snapshot
         self.ended = ""  # the journal's outcome once the run is over (complete, aborted...)
         self.pending: Pending | None = None
-        self.last: Prediction | None = None  # the instruction done last
         self._prediction: Prediction | None = None  # the pending instruction's, once made
 
     @property
@@ -111,9 +126,28 @@ class Job:
             self._prediction = pred
         return pred
 
-    def unblock(self) -> None:
-        if self.pending is not None and self.pending.blocked:
-            self.pending = replace(self.pending, blocked="")
+    async def preview(self, limits: Limits) -> Preview:
+        """The next instruction predicted on the twin (in a worker thread), the limits
+        checked; the twin is not changed. ControllerError when none is left."""
+        while True:
+            step = self.next_step()
+            if step is None:
+                raise ControllerError(f"all {self.count} instructions are done")
+            index, line, instruction = step["index"], step["line"], step["instruction"]
+            try:
+                pred = await asyncio.to_thread(self.twin.predict, instruction)
+            except TwinError as exc:
+                twin = self.twin
+                return Preview(index, line, instruction, None, str(exc), twin.occupancy,
+                               twin.takeup)  # fmt: skip
+            if pred.index == index:  # else the run committed meanwhile: predict again
+                break
+        try:
+            check_limits(pred, limits)
+            refused = None
+        except RefusedMove as exc:
+            refused = str(exc)
+        return Preview(pred.index, line, instruction, pred, refused, pred.occupancy, pred.takeup)
 
     async def commit(
         self,
@@ -130,7 +164,7 @@ class Job:
         delta = await asyncio.to_thread(_commit_twin, self.twin, pred)
         timing = dict(timing or {}, commit_s=time.perf_counter() - committing)
         index = pred.index
-        self.last, self.pending, self._prediction = pred, None, None
+        self.pending, self._prediction = None, None
         recorder.done(self.program_id, index, {"contacts": len(pred.contacts)})
         publish(
             InstructionDone(

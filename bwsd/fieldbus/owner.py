@@ -29,6 +29,7 @@ LOCK_NAME = "bus.lock"
 class StateFolderError(BwsdError):
     """The state folder cannot be used (its disk is full, it is read-only): names the file."""
 
+
 __all__ = ["LOCK_NAME", "BusHeld", "BusLock", "Holder", "StateFolderError", "daemon_owner_id",
            "holder", "refuse_if_held"]  # fmt: skip
 
