@@ -12,6 +12,7 @@ whether the same program then resumed to Complete with the predicted skeleton.
 from __future__ import annotations
 
 import asyncio
+import logging
 import sys
 import tempfile
 from pathlib import Path
@@ -30,6 +31,8 @@ def cell_text(cell: Cell) -> str:
 
 
 def main() -> None:
+    logging.basicConfig(level=logging.WARNING)
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its frame dumps
     rows = []
     slowest = 0.0
     for fault in FAULTS:
@@ -43,7 +46,8 @@ def main() -> None:
     print("| fault | " + " | ".join(s.label for s in STATES) + " |")
     print("|---|" + "---|" * len(STATES))
     print("\n".join(rows))
-    print(f"\nSlowest cell to a Fault at rest: {slowest:.2f} s.")
+    print(f"\nSlowest cell to a Fault at rest: {slowest:.2f} s. The e-stop's commands are "
+          "those accepted once it is released (while pressed, Aborted accepts none).")
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("bwsd.controller")
 QUICK_STOP_WAIT = 1.0  # s an Abort or Stop waits for the bus to confirm its quick stop
 OUTCOME_WAIT = 0.5  # s an Abort or Stop waits for the journal to record it (then goes on)
-START_WAIT = 2.0  # s a run waits for the journal to record that it starts (else it holds)
+START_WAIT = 1.0  # s a run waits for the journal to record that it starts (else it holds)
 
 
 def said(command: C, reason: str, who: str, resume: bool = False) -> str:
