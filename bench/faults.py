@@ -46,8 +46,10 @@ def main() -> None:
     print("| fault | " + " | ".join(s.label for s in STATES) + " |")
     print("|---|" + "---|" * len(STATES))
     print("\n".join(rows))
-    print(f"\nSlowest cell to a Fault at rest: {slowest:.2f} s. The e-stop's commands are "
-          "those accepted once it is released (while pressed, Aborted accepts none).")
+    print(
+        f"\nSlowest cell to a Fault at rest: {slowest:.2f} s. The e-stop's commands are "
+        "those accepted once it is released (while pressed, Aborted accepts none)."
+    )
 
 
 if __name__ == "__main__":

@@ -62,22 +62,23 @@ def config_file(tmp: Path, mock: Mock, backend: str = "modbus") -> Path:
 
 
 @contextmanager
-def serving(speeds: dict[str, Any], backend: str = "modbus") -> Iterator[tuple[Mock, Served]]:
+def serving(speeds: dict[str, Any], backend: str = "modbus") -> Iterator[tuple[list[Mock], Served]]:
+    """The mock loom (in a list: a restarted one takes its place, and is stopped at the
+    end) and `bwsd serve` with the long program loaded and reset."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        mock = start_mock(folder, {**speeds, "state_file": "loom.json"})
-        config = config_file(folder, mock, backend)
+        looms = [start_mock(folder, {**speeds, "state_file": "loom.json"})]
+        config = config_file(folder, looms[0], backend)
         state = state_folder(folder / "state")
         token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
         served = Served(config, state, token)
-        box = [mock]
         try:
             served.http.post("/programs", json={"name": "long.bws", "text": LONG})
             served.command("reset")
-            yield box[0], served
+            yield looms, served
         finally:
             served.stop()
-            box[0].stop()
+            looms[0].stop()
 
 
 def loom(mock: Mock) -> dict[str, Any]:
@@ -123,7 +124,7 @@ def aborts(count: int) -> dict[str, list[float]]:
     rng = random.Random(27)
     out: dict[str, list[float]] = {k: [] for k in ("abort", "abort answer", "stop",
                                                    "stop answer", "hold answer")}  # fmt: skip
-    with serving(SLOW) as (mock, served):
+    with serving(SLOW) as ([mock], served):
         served.command("start")
         for n in range(count):
             command = "abort" if n % 2 == 0 else "stop"
@@ -165,7 +166,8 @@ def losses(count: int, backend: str, how: str = "kill") -> list[float]:
     connection open) to Held."""
     rng = random.Random(13)
     took = []
-    with serving(QUICK, backend) as (mock, served):
+    with serving(QUICK, backend) as (looms, served):
+        mock = looms[0]
         served.command("start")
         for _ in range(count):
             time.sleep(rng.uniform(0.2, 0.8))
@@ -184,6 +186,7 @@ def losses(count: int, backend: str, how: str = "kill") -> list[float]:
                 mock.stop()
                 mock = start_mock(Path(served.log).parent, {**QUICK, "state_file": "loom.json"},
                                   mock.ports)  # fmt: skip
+                looms[0] = mock
             else:
                 asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "clear"}))
             resume(served)
