@@ -8,6 +8,7 @@ loom. Every key of every table is documented in docs/config.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import re
 import tomllib
 from collections.abc import Mapping
@@ -257,9 +258,13 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
             raise ConfigError("missing table", path=path, table=name)
     tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
     try:
-        machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+        machine = Machine(**tables["machine"])
     except ValueError as exc:  # the segments: each key alone is in range
         raise ConfigError(str(exc), path=path, table="machine", key="segments") from None
+    fault = machine.diameter_fault(tables["yarn"]["diameter"])
+    if fault is not None:
+        raise ConfigError(fault, path=path, table="yarn", key="diameter")
+    machine = dataclasses.replace(machine, yarn_diameter=tables["yarn"]["diameter"])
     _check_geometry(machine, path)
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)
