@@ -47,13 +47,20 @@ def load_and_simulate(
     config = load_config(config_path)
     machine = config.machine
     program = load_program(program_path, machine, config.table("controller")["max_instructions"])
-    try:
+    with refused_at_line(program, program_path):
         twin = simulate(machine, program, progress, timings)
+    return machine, program, twin
+
+
+@contextmanager
+def refused_at_line(program: Program, source: str) -> Iterator[None]:
+    """An instruction the twin refuses in the block, as a ProgramError naming its line."""
+    try:
+        yield
     except TwinError as exc:
         raise ProgramError(f"instruction {exc.instruction}: {exc.reason}",
                            line=program.line_of(exc.instruction), column=1,
-                           source=program_path) from None  # fmt: skip
-    return machine, program, twin
+                           source=source) from None  # fmt: skip
 
 
 @contextmanager

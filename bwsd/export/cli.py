@@ -92,10 +92,12 @@ def load_inputs(config: str, program: str) -> tuple[Machine, Program]:
 
 def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
     """Load the config and the program, run the twin, return the final skeleton."""
+    from bwsd.run import refused_at_line
     from bwsd.twin import simulate
 
     machine, parsed = load_inputs(config, program)
-    return simulate(machine, parsed).skeleton(), parsed
+    with refused_at_line(parsed, program):
+        return simulate(machine, parsed).skeleton(), parsed
 
 
 def run_slice(args: argparse.Namespace) -> int:
@@ -117,6 +119,7 @@ def run_metrics(args: argparse.Namespace) -> int:
     from bwsd.export.formed import takeups_of
     from bwsd.export.metrics import metrics
     from bwsd.export.mixing import check_fits, section_option, simulate_with_visits
+    from bwsd.run import refused_at_line
     from bwsd.twin import simulate
 
     named = section_option(args.section) if args.section is not None else None
@@ -125,10 +128,13 @@ def run_metrics(args: argparse.Namespace) -> int:
     cycle = args.cycle_length if args.cycle_length is not None else program.cycle_length
     takeups = takeups_of(program)
     if named is None:
-        result = metrics(simulate(machine, program).skeleton(), cycle, takeups=takeups, z=args.z)
+        with refused_at_line(program, args.program):
+            sk = simulate(machine, program).skeleton()
+        result = metrics(sk, cycle, takeups=takeups, z=args.z)
     else:
         check_fits(named.section, machine)
-        twin, visits = simulate_with_visits(machine, program, named.section)
+        with refused_at_line(program, args.program):
+            twin, visits = simulate_with_visits(machine, program, named.section)
         result = metrics(twin.skeleton(), cycle, takeups=takeups, z=args.z, named=named,
                          visits=visits)  # fmt: skip
     if args.json:

@@ -7,8 +7,10 @@ found from the depth below the guides at which each cycle made its contacts:
 
 1. the depth of cycle k is the guides' height at its end minus the median height of the
    nodes its contacts made;
-2. the steady depth is the median of the depths of the last half of the complete cycles,
-   and the run has settled when each of those lies within 25 % of it;
+2. the steady depth is the median of the depths of the last half of the complete cycles;
+   the run has settled when each of those lies within 25 % of it and they no longer
+   trend: the mean of the later ones differs from that of the earlier ones (the last half
+   split in two, its middle cycle left out) by at most 15 % of it;
 3. the first formed cycle is the one after the last cycle deeper than 1.25 times the
    steady depth; the last complete cycle is the one still forming;
 4. the slab runs from the lowest node the first formed cycle made to the lowest node made
@@ -33,6 +35,7 @@ from bwsd.twin.skeleton import FloatArray
 
 MIN_CYCLES = 4  # to see the depth settle: a steady last half, a formed cycle, one forming
 SETTLED = 0.25  # a cycle's depth within this share of the steady depth has settled
+TREND = 0.15  # ... and the last half's depths drift by at most this share of it
 
 
 @dataclass(frozen=True)
@@ -86,7 +89,7 @@ def find_zone(arrays: Arrays, length: int, guides: FloatArray | None) -> Zone:
     last = depths[complete // 2 :]
     steady = float(np.median(last)) if np.isfinite(last).all() else math.nan
     shown = tuple(None if math.isnan(v) else round(float(v), 6) for v in depths)
-    if not (steady > 0 and np.all(np.abs(last - steady) <= SETTLED * steady)):
+    if not _settled(last, steady):
         return Zone(None, None, complete, shown, _unsettled(last, complete), 2 * complete)
     deep = np.flatnonzero(~(depths <= (1 + SETTLED) * steady))
     first = int(deep.max()) + 2 if len(deep) else 1
@@ -98,6 +101,15 @@ def find_zone(arrays: Arrays, length: int, guides: FloatArray | None) -> Zone:
         return Zone(None, None, complete, shown, "the cycle still forming reaches below the "
                     f"first formed cycle (cycle {first})", complete + 1)  # fmt: skip
     return Zone((low, high), (first, complete - 1), complete, shown)
+
+
+def _settled(last: FloatArray, steady: float) -> bool:
+    """Whether the depths ``last`` (the last half of the cycles) are steady about ``steady``."""
+    if not steady > 0 or not np.all(np.abs(last - steady) <= SETTLED * steady):
+        return False
+    half = len(last) // 2
+    drift = float(last[:half].mean() - last[len(last) - half :].mean())
+    return abs(drift) <= TREND * steady
 
 
 def _depths(arrays: Arrays, length: int, complete: int, guides: FloatArray) -> FloatArray:

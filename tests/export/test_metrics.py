@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from bwsd.export.errors import ExportError
-from bwsd.export.metrics import angles, contact_zone, contacts_per_cycle, metrics, section
+from bwsd.export.angles import skeleton_angles
+from bwsd.export.arrays import Arrays
+from bwsd.export.metrics import contact_zone, contacts_per_cycle, metrics, section
 
 from .conftest import build, warp, weft
 
@@ -22,6 +24,11 @@ def inclined(start, degrees, lengths, azimuth=0.0):
     for length in lengths:
         points.append(points[-1] + length * step)
     return [tuple(p) for p in points]
+
+
+def angles(sk):
+    """The whole skeleton's angles per family."""
+    return skeleton_angles(Arrays.of(sk))
 
 
 def test_angles_of_thirty_degree_yarns():
