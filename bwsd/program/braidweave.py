@@ -153,7 +153,7 @@ def braid_weave(
         f"# a layer of wefts every {weft_every} cycles, at "
         f"{', '.join(map(render.num, plan))} degrees",
         *render.fill_block(*sec.size, rule.carriers),
-        *woven(machine, tuple(sorted(rule.carriers)), bodies, comment, place_layer),
+        *woven(machine, tuple(sorted(rule.carriers)), bodies, comment, place_layer, "layer"),
     ]
     return Generated("braid-weave", title, command, machine, "\n".join(lines) + "\n")
 

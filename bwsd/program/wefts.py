@@ -219,10 +219,10 @@ PlacePick = Callable[[Placer, Pick, Sequence[Instruction]], list[str]]
 
 def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
           cycles: Sequence[Cycle | Sequence[Cycle]], comment: str,
-          place: PlacePick | None = None) -> list[str]:  # fmt: skip
+          place: PlacePick | None = None, unit: str = "cycle") -> list[str]:  # fmt: skip
     """The program lines of ``cycles`` (their moves and wefts), each pick's wefts placed on
     the twin by ``place`` (default: each weft at its own lowest open height); identical
-    consecutive cycles share one REPEAT.
+    consecutive cycles share one REPEAT. Errors name a cycle as ``unit`` and its number.
 
     A cycle may be given as alternatives (a sequence of cycles): the first one whose every
     weft can be placed is used; when none can, the error of the first is raised.
@@ -231,7 +231,7 @@ def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
     bodies = []
     for n, given in enumerate(cycles, start=1):
         options = [given] if given and not isinstance(given[0], list) else given
-        bodies.append(_first_that_places(placer, n, options,  # type: ignore[arg-type]
+        bodies.append(_first_that_places(placer, f"{unit} {n}", options,  # type: ignore[arg-type]
                                          place or _place_pick))  # fmt: skip
     lines: list[str] = []
     for count, body in group_cycles(bodies):
@@ -239,7 +239,7 @@ def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
     return lines
 
 
-def _first_that_places(placer: Placer, n: int, options: Sequence[Cycle],
+def _first_that_places(placer: Placer, n: str, options: Sequence[Cycle],
                        place: PlacePick) -> list[str]:  # fmt: skip
     start = placer.twin.snapshot()
     failure: ValueError | None = None
@@ -253,7 +253,7 @@ def _first_that_places(placer: Placer, n: int, options: Sequence[Cycle],
     raise failure
 
 
-def _place_cycle(placer: Placer, n: int, cycle: Cycle, place: PlacePick) -> list[str]:
+def _place_cycle(placer: Placer, n: str, cycle: Cycle, place: PlacePick) -> list[str]:
     """The cycle's lines, its wefts placed, pick by pick (a run of wefts between moves); a
     move that jams refuses the cycle (ValueError)."""
     closing = _closing(cycle)
@@ -265,13 +265,13 @@ def _place_cycle(placer: Placer, n: int, cycle: Cycle, place: PlacePick) -> list
             try:
                 placer.run(item)
             except JamError as exc:
-                raise ValueError(f"cycle {n}: {exc}") from None
+                raise ValueError(f"{n}: {exc}") from None
             body.append(item.text() if isinstance(item, Shift) else text(item))
             i += 1
             continue
         end = next((j for j in range(i, len(cycle)) if not isinstance(cycle[j], Shed)),
                    len(cycle))  # fmt: skip
-        pick = [(j, replace(s, name=f"cycle {n}, {s.name}")) for j, s in enumerate(cycle[i:end], i)
+        pick = [(j, replace(s, name=f"{n}, {s.name}")) for j, s in enumerate(cycle[i:end], i)
                 if isinstance(s, Shed)]  # fmt: skip
         body += place(placer, pick, closing[end - 1])
         i = end

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from bwsd.export.errors import ExportError
 from bwsd.export.angles import skeleton_angles
 from bwsd.export.arrays import Arrays
+from bwsd.export.errors import ExportError
 from bwsd.export.metrics import contact_zone, contacts_per_cycle, metrics, section
 
 from .conftest import build, warp, weft
