@@ -7,8 +7,9 @@ s in [0, 1], the squared distance to a segment B is a convex function f(s): the 
 B's line where the nearest point of the line lies on B, else the distance to B's nearer
 end. So the part of A closer than d to B is one interval, found exactly from three
 quadratics, and the part closer than d to any other yarn is the union of those intervals.
-The depths along that union are sampled (``SAMPLES`` points to a stretch) for the 95th
-percentile; the deepest overlap is exact.
+The depths along that union are sampled (at the middles of equal steps of at most d /
+``SAMPLES``, two at least to a stretch) for the 95th percentile; the deepest overlap is
+exact.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from bwsd.export.arrays import Arrays
 from bwsd.export.formed import Pieces
 from bwsd.twin.skeleton import FloatArray, IntArray
 
-SAMPLES = 8  # depth samples along each stretch of overlapping yarn (for the percentile)
+SAMPLES = 16  # depth samples per yarn diameter along overlapping yarn (for the percentile)
 TINY = 1e-30  # a quadratic term this small relative to |A|^2 is taken as (nearly) none
 
 
@@ -130,6 +131,16 @@ class Quads:
             end = np.where(some, np.maximum(end, s1), end)
         return start, end
 
+    def at(self, which: IntArray, s: FloatArray) -> FloatArray:
+        """f(s) of the pairs ``which`` at the points ``s``: the least of the two ends'
+        quadratics and, where the nearest point of B's line is on B, the line's."""
+        a, b, c = self.coef[:, :, which].transpose(1, 0, 2)  # each (quadratic, pair)
+        value = (a * s + b) * s + c
+        inner = (s >= self.inner[0][which]) & (s <= self.inner[1][which])
+        line = np.where(inner, value[2], np.inf)
+        out: FloatArray = np.maximum(np.minimum(np.minimum(value[0], value[1]), line), 0.0)
+        return out
+
     def minimum(self, lo: FloatArray, hi: FloatArray) -> FloatArray:
         """The least f(s) over s in [lo, hi] (lo <= hi)."""
         best = np.full(len(lo), np.inf)
@@ -209,24 +220,17 @@ class Overlaps:
     def depths(self, arrays: Arrays, found: Stretches, stretch: IntArray, s: FloatArray
                ) -> FloatArray:  # fmt: skip
         """The overlap depth at the points s of the stretches ``stretch``: d minus the least
-        distance to the segments B of the pairs in that stretch."""
+        distance to the segments B of the pairs in that stretch (all in one segment A)."""
         first = np.searchsorted(found.holder, stretch, side="left")
         count = np.searchsorted(found.holder, stretch, side="right") - first
         point = np.repeat(np.arange(len(s)), count)
         which = found.pairs[np.repeat(first, count) + np.arange(len(point)) - np.repeat(
             np.cumsum(count) - count, count)]  # fmt: skip
-        segment = found.segment[stretch]
-        p0, p1 = arrays.seg_t0[:, segment], arrays.seg_t1[:, segment]
-        at = (p0 + s * (p1 - p0))[:, point]
-        b0 = arrays.seg_t0[:, self.b[which]]
-        v = arrays.seg_t1[:, self.b[which]] - b0
-        t = np.clip(dot(at - b0, v) / dot(v, v), 0.0, 1.0)
-        gap = at - b0 - t * v
-        least = np.sqrt(dot(gap, gap))
+        least = self.quads.at(which, s[point])
         out = np.zeros(len(s))
         if len(least):
             least = np.minimum.reduceat(least, np.cumsum(count) - count)
-            out = np.maximum(arrays.sk.diameter - least, 0.0)
+            out = np.maximum(arrays.sk.diameter - np.sqrt(least), 0.0)
         return out
 
 
@@ -243,13 +247,13 @@ class Stretches:
 
 
 def weighted_percentile(values: FloatArray, weights: FloatArray, share: float) -> float:
-    """The least value that ``share`` of the total weight does not exceed."""
+    """The least value that ``share`` of the total weight does not exceed (``values`` in
+    increasing order)."""
     if not len(values) or weights.sum() <= 0:
         return 0.0
-    order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
+    cumulative = np.cumsum(weights)
     k = int(np.searchsorted(cumulative, share * cumulative[-1], side="left"))
-    return float(values[order][min(k, len(values) - 1)])
+    return float(values[min(k, len(values) - 1)])
 
 
 def _measure(lengths: FloatArray, over: FloatArray, worst: FloatArray, depth: FloatArray,
@@ -297,12 +301,15 @@ def interpenetration(arrays: Arrays, pieces: Pieces) -> dict[str, Any]:
         np.minimum(found.end, hi[segment]) - np.maximum(found.start, lo[segment]), 0.0
     )
     over_formed = np.bincount(segment, weights=inside, minlength=count) * length
-    stretch = np.repeat(np.arange(len(segment)), SAMPLES)
-    s = found.start[stretch] + (np.tile(np.arange(SAMPLES), len(segment)) + 0.5) / SAMPLES * (
-        width[stretch])  # fmt: skip
-    weight = (width * length[segment] / SAMPLES)[stretch]
+    steps = np.maximum(np.ceil(width * length[segment] * SAMPLES / max(d, 1e-300)), 2)
+    steps = steps.astype(np.int64)
+    stretch = np.repeat(np.arange(len(segment)), steps)
+    k = np.arange(len(stretch)) - np.repeat(np.cumsum(steps) - steps, steps)
+    s = found.start[stretch] + (k + 0.5) / steps[stretch] * width[stretch]
+    weight = (width * length[segment] / steps)[stretch]
     depth = pairs.depths(arrays, found, stretch, s)
-    at = segment[stretch]
+    order = np.argsort(depth)  # every percentile below reads these in increasing depth
+    at, s, depth, weight = segment[stretch][order], s[order], depth[order], weight[order]
     in_formed = (s >= lo[at]) & (s <= hi[at])
     pf, sf = arrays.seg_family[pairs.a], arrays.seg_family[at]
     whole = pairs.worst(d, np.zeros(count), np.ones(count))

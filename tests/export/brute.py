@@ -29,7 +29,8 @@ def sample_depths(sk: SkeletonData, step: float,
                   low: float = -np.inf, high: float = np.inf) -> tuple[np.ndarray, np.ndarray,
                                                                          np.ndarray]:  # fmt: skip
     """Per sample of the yarn between heights ``low`` and ``high``: its weight (length), its
-    overlap depth (0 where none) and its yarn."""
+    overlap depth (0 where none) and its yarn. (Only samples within d of a segment's
+    heights can be closer than d to it: the one shortcut taken.)"""
     p0, p1, owner = fixed_segments(sk)
     length = np.linalg.norm(p1 - p0, axis=1)
     parts = np.maximum(np.ceil(length / step), 1).astype(int)
@@ -39,15 +40,22 @@ def sample_depths(sk: SkeletonData, step: float,
     weight = length[seg] / parts[seg]
     keep = (points[:, 2] >= low) & (points[:, 2] <= high)
     points, weight, yarn = points[keep], weight[keep], owner[seg][keep]
+    order = np.argsort(points[:, 2])
+    points, weight, yarn = points[order], weight[order], yarn[order]
     least = np.full(len(points), np.inf)
-    for j in range(len(p0)):
-        other = yarn != owner[j]
+    d = sk.diameter
+    for j in range(len(p0)):  # every segment, against the samples within d of its heights
+        lo, hi = np.searchsorted(points[:, 2], [min(p0[j, 2], p1[j, 2]) - d,
+                                                max(p0[j, 2], p1[j, 2]) + d])  # fmt: skip
+        window = slice(lo, hi)
+        other = yarn[window] != owner[j]
         v = p1[j] - p0[j]
-        q = points[other] - p0[j]
+        q = points[window][other] - p0[j]
         t = np.clip(q @ v / (v @ v), 0.0, 1.0)
         gap = np.linalg.norm(q - t[:, None] * v, axis=1)
-        least[other] = np.minimum(least[other], gap)
-    return weight, np.maximum(sk.diameter - least, 0.0), yarn
+        index = np.arange(lo, hi)[other]
+        least[index] = np.minimum(least[index], gap)
+    return weight, np.maximum(d - least, 0.0), yarn
 
 
 def worst_depth(sk: SkeletonData) -> float:

@@ -29,8 +29,10 @@ def test_a_row_holds_the_metrics_of_the_candidate_run_on_its_own(tmp_path):
     assert row["skeleton_overlap_p95"] == overlap["skeleton"]["all"]["p95"]
     fractions = [h["fraction"] for h in found["volume_fraction"]]
     assert row["volume_fraction"] == sum(fractions) / 3
-    assert (row["volume_fraction_min"], row["volume_fraction_max"]) == (min(fractions),
-                                                                         max(fractions))
+    assert (row["volume_fraction_min"], row["volume_fraction_max"]) == (
+        min(fractions),
+        max(fractions),
+    )
     assert row["width"] == found["section"]["width"]
     assert row["thickness"] == found["section"]["thickness"]
     assert row["contacts"] == found["contacts"] > 0
