@@ -97,7 +97,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "heartbeat_ms": Num(int, 0, 65535, 100),
     },
     "controller": {
-        "max_contacts": Num(int, 0, 10_000_000, 0),
+        "max_contacts": Num(int, 0, 10_000_000, 10_000),
         "tensioner_stroke": Num(float, 0.0, 1e5, 0.0),
         "max_instructions": Num(int, 1, 1_000_000, 1_000_000),
         "snapshot_every": Num(int, 0, 1_000_000, 200),

@@ -174,15 +174,17 @@ def metrics(
     z: float | None = None,
     named: NamedSection | None = None,
     visits: ZoneVisits | None = None,
+    arrays: Arrays | None = None,
 ) -> dict[str, Any]:
     """All metrics as JSON-ready builtins (definitions in docs/exports.md).
 
     ``takeups`` (each instruction's take-up, 0 for all but TAKEUP) places the guides, which
     the formed zone needs; without it there is none. ``visits`` (the carriers' zones,
     recorded while the twin ran) gives the mixing numbers; ``z`` the footprint at that
-    height, against the nominal shape of ``named`` if given.
+    height, against the nominal shape of ``named`` if given. ``arrays``: ``Arrays.of(sk)``,
+    when the caller has it already.
     """
-    arrays = Arrays.of(sk)
+    arrays = arrays or Arrays.of(sk)
     length = cycle_length_or_whole(cycle_length, sk.instructions)
     guides = None if takeups is None else guide_heights(sk.machine.d_mat, takeups)
     section_ = named.section if named is not None else None

@@ -247,13 +247,13 @@ class Stretches:
 
 
 def weighted_percentile(values: FloatArray, weights: FloatArray, share: float) -> float:
-    """The least value that ``share`` of the total weight does not exceed (``values`` in
-    increasing order)."""
-    if not len(values) or weights.sum() <= 0:
+    """The value that ``share`` of the total weight does not exceed, each sample standing
+    for its weight centred on it, linear between them (``values`` in increasing order)."""
+    total = float(weights.sum()) if len(weights) else 0.0
+    if total <= 0:
         return 0.0
-    cumulative = np.cumsum(weights)
-    k = int(np.searchsorted(cumulative, share * cumulative[-1], side="left"))
-    return float(values[min(k, len(values) - 1)])
+    middle = np.cumsum(weights) - weights / 2
+    return float(np.interp(share * total, middle, values))
 
 
 def _measure(lengths: FloatArray, over: FloatArray, worst: FloatArray, depth: FloatArray,

@@ -155,10 +155,11 @@ def measure(candidate: Candidate) -> Row:
     twin, program, visits, named = _run(machine, text, name)
     sk = twin.skeleton()
     with stage("metrics"):
-        band = section(sk, Arrays.of(sk))
+        arrays = Arrays.of(sk)
+        band = section(sk, arrays)
         z = None if band is None else (band["z"][0] + band["z"][1]) / 2
         found = metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
-                        visits=visits)  # fmt: skip
+                        visits=visits, arrays=arrays)  # fmt: skip
     return flatten(found, z)
 
 

@@ -7,31 +7,38 @@ algebra), and the piece overlaps when the least of them is below d. Slow by desi
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from bwsd.twin.skeleton import SkeletonData
 
 
-def fixed_segments(sk: SkeletonData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Start, end and yarn of every fixed segment of positive length."""
-    starts, ends, yarns = [], [], []
+def fixed_segments(sk: SkeletonData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Start, end and yarn of every fixed segment of positive length, and whether both its
+    nodes are contact nodes."""
+    made = {n for c in sk.contacts for n in (c.moving_node, c.hit_node)}
+    starts, ends, yarns, between = [], [], [], []
     for yarn in sk.yarns:
         nodes = yarn.nodes[:-1] if yarn.kind == "warp" else yarn.nodes
+        ids = yarn.node_ids[: len(nodes)].tolist()
         starts += [nodes[:-1]]
         ends += [nodes[1:]]
         yarns += [np.full(len(nodes) - 1, yarn.id)]
+        between += [[a in made and b in made for a, b in itertools.pairwise(ids)]]
     p0, p1, owner = np.vstack(starts), np.vstack(ends), np.concatenate(yarns)
     keep = np.linalg.norm(p1 - p0, axis=1) > 0
-    return p0[keep], p1[keep], owner[keep]
+    return p0[keep], p1[keep], owner[keep], np.concatenate(between).astype(bool)[keep]
 
 
-def sample_depths(sk: SkeletonData, step: float,
-                  low: float = -np.inf, high: float = np.inf) -> tuple[np.ndarray, np.ndarray,
-                                                                         np.ndarray]:  # fmt: skip
-    """Per sample of the yarn between heights ``low`` and ``high``: its weight (length), its
-    overlap depth (0 where none) and its yarn. (Only samples within d of a segment's
-    heights can be closer than d to it: the one shortcut taken.)"""
-    p0, p1, owner = fixed_segments(sk)
+def sample_depths(
+    sk: SkeletonData, step: float, low: float = -np.inf, high: float = np.inf, between: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per sample of the yarn between heights ``low`` and ``high`` (with ``between``: on
+    segments from contact node to contact node only): its weight (length), its overlap depth
+    (0 where none) and its yarn. Distances are to every fixed segment of another yarn. (Only
+    samples within d of a segment's heights can be closer than d to it: the one shortcut.)"""
+    p0, p1, owner, contact_to_contact = fixed_segments(sk)
     length = np.linalg.norm(p1 - p0, axis=1)
     parts = np.maximum(np.ceil(length / step), 1).astype(int)
     seg = np.repeat(np.arange(len(p0)), parts)
@@ -39,6 +46,7 @@ def sample_depths(sk: SkeletonData, step: float,
     points = p0[seg] + ((k + 0.5) / parts[seg])[:, None] * (p1 - p0)[seg]
     weight = length[seg] / parts[seg]
     keep = (points[:, 2] >= low) & (points[:, 2] <= high)
+    keep &= contact_to_contact[seg] if between else True
     points, weight, yarn = points[keep], weight[keep], owner[seg][keep]
     order = np.argsort(points[:, 2])
     points, weight, yarn = points[order], weight[order], yarn[order]
@@ -56,21 +64,6 @@ def sample_depths(sk: SkeletonData, step: float,
         index = np.arange(lo, hi)[other]
         least[index] = np.minimum(least[index], gap)
     return weight, np.maximum(d - least, 0.0), yarn
-
-
-def worst_depth(sk: SkeletonData) -> float:
-    """The deepest overlap between any two segments of different yarns, by a fine search of
-    the segment-to-segment distance (every pair, 64 x 64 parameter samples refined)."""
-    p0, p1, owner = fixed_segments(sk)
-    best = np.inf
-    s = np.linspace(0.0, 1.0, 65)
-    for i in range(len(p0)):
-        a = p0[i] + s[:, None] * (p1[i] - p0[i])
-        for j in np.flatnonzero(owner > owner[i]):
-            v = p1[j] - p0[j]
-            t = np.clip((a - p0[j]) @ v / (v @ v), 0.0, 1.0)
-            best = min(best, float(np.linalg.norm(a - p0[j] - t[:, None] * v, axis=1).min()))
-    return max(sk.diameter - best, 0.0)
 
 
 def percentile(values: np.ndarray, weights: np.ndarray, share: float) -> float:

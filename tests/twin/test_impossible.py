@@ -1,6 +1,6 @@
-"""Jams (docs/twin.md, "Impossible preforms are refused"): a contact node within one yarn
-diameter of the guide plane, or above it, refuses the instruction, in the kernel and in the
-exact reference alike, and nothing of the instruction is applied."""
+"""Impossible preforms are refused, not predicted (docs/twin.md): a jam (a contact node within
+one yarn diameter of the guide plane, or above it) refuses the instruction, in the kernel and
+in the exact reference alike, and nothing of it is applied; a yarn too thick to fit is refused."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import random
 import numpy as np
 import pytest
 
-from bwsd.errors import JamError
+from bwsd.errors import JamError, TwinError
 from bwsd.program.generators import GENERATORS
 from bwsd.program.parser import parse_program
 from bwsd.twin import Machine, Shift, TakeUp, Twin, simulate
@@ -61,7 +61,7 @@ def test_the_twist_that_winds_up_is_refused_as_a_jam_at_the_same_instruction_as_
 def test_a_runaway_take_up_is_refused_as_a_jam_early():
     """braid-2x2 at 0.01 mm a cycle made some 2,100 contacts, ever higher above the guides,
     and ran for seconds an instruction; now it is refused within its first cycles."""
-    generated = GENERATORS["braid4"](2, 2, cycles=200, takeup=0.01)
+    generated = GENERATORS["braid4"](2, 2, cycles=200, takeup=0.01, diameter=1.5)
     program = parse_program(generated.program)
     with pytest.raises(JamError) as found:
         simulate(generated.machine, program)
@@ -182,3 +182,22 @@ def test_a_jam_in_a_prediction_leaves_the_twin_as_it_was():
     for a, b in zip(before.yarns, after.yarns, strict=True):
         assert np.array_equal(a.nodes, b.nodes)
     assert isinstance(program.instructions[113], Shift)
+
+
+@pytest.mark.parametrize("diameter", [5.0, 20.0, 1023.0])
+def test_a_yarn_too_thick_for_the_gap_at_the_fell_is_refused_by_machine_twin_and_reference(
+    diameter,
+):
+    """The warps start c_mat x pitch = 5 mm apart at the fell: d = 20 mm put nodes 19 mm
+    outside the matrix and above the guides, d = 1023 mm 1 m out, and nothing refused them."""
+    with pytest.raises(ValueError, match="does not fit: it must be less than c_mat x the smaller"):
+        Machine(2, 2, 10.0, 10.0, 100.0, 0.5, diameter)
+    with pytest.raises(TwinError, match=f"a yarn diameter of {diameter:g} mm does not fit"):
+        Twin(Machine(2, 2, 10.0, 10.0, 100.0, 0.5), WORKED_FILL, diameter)
+    with pytest.raises(ValueError, match="overlap where they start at the fell"):
+        RefTwin(Machine(2, 2, 10.0, 10.0, 100.0, 0.5), list(WORKED_FILL), diameter)
+
+
+def test_a_yarn_just_thinner_than_the_gap_fits():
+    Twin(Machine(2, 2, 10.0, 10.0, 100.0, 0.5), WORKED_FILL, 4.999)
+    RefTwin(Machine(2, 2, 10.0, 10.0, 100.0, 0.5), list(WORKED_FILL), 4.999)
