@@ -44,8 +44,13 @@ FAULTS = [
     ("FILL row=0 col=0\n.XX\nEND\nROW 0:+1 1:+1\n ROW 1:-1   0:+1", M3, 5, 13, "instruction 2"),
     ("FILL row=0 col=0\nX\nEND\nREPEAT 5\n  COL 0:+1\nEND", M3, 5, 7, "instruction 3"),
     # a YARN the machine cannot hold: c_mat 0.5 x pitch 10 = 5 mm between neighbours at the fell
-    ("# thick\nYARN  diameter=5\nFILL row=0 col=0\nX\nEND", M3, 2, 16,
-     "a yarn diameter of 5 mm does not fit: it must be less than c_mat x the smaller pitch (5 mm)"),
+    (
+        "# thick\nYARN  diameter=5\nFILL row=0 col=0\nX\nEND",
+        M3,
+        2,
+        16,
+        "a yarn diameter of 5 mm does not fit: it must be less than c_mat x the smaller pitch",
+    ),
 ]
 
 
