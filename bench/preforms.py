@@ -56,7 +56,7 @@ def _angle(part: dict[str, Any]) -> str:
 def formed_row(stem: str, m: dict[str, Any]) -> str:
     zone = m["formed"]
     if not zone["found"]:
-        return f"| {stem} | none: needs {zone['needs_cycles']} cycles | | | | | | |"
+        return f"| {stem} | none: needs {zone['needs_cycles']} cycles | | | | | | | |"
     warp = m["angles"]["warp"]
     fractions = ", ".join(f"{100 * h['fraction']:.1f}" for h in m["volume_fraction"])
     wefts = m["wefts"]["contacts"]
