@@ -7,11 +7,14 @@ import math
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError
 
 from bwsd.export.arrays import Arrays
 from bwsd.export.formed import Pieces
-from bwsd.twin.skeleton import FloatArray, IntArray
+from bwsd.twin.skeleton import FloatArray
+
+BoolArray = npt.NDArray[np.bool_]
 
 
 def segment_angles(p0: FloatArray, p1: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -65,7 +68,7 @@ def spacing(area: float, yarns: int) -> float:
     return math.sqrt(area / yarns) if yarns else 0.0
 
 
-def on_surface(arrays: Arrays, where: FloatArray, p0: FloatArray, p1: FloatArray) -> IntArray:
+def on_surface(arrays: Arrays, where: FloatArray, p0: FloatArray, p1: FloatArray) -> BoolArray:
     """Whether each point ``where`` (x, y) lies within one yarn spacing of the outline of the
     formed zone: the convex hull of its yarn in (x, y)."""
     points = np.vstack([p0[:, :2], p1[:, :2]])
@@ -75,5 +78,5 @@ def on_surface(arrays: Arrays, where: FloatArray, p0: FloatArray, p1: FloatArray
         return np.ones(len(where), dtype=bool)
     warps = int((arrays.family == 0).sum())
     inside = -(where @ hull.equations[:, :2].T + hull.equations[:, 2])  # to each edge
-    out: IntArray = inside.min(axis=1) <= spacing(float(hull.volume), warps)
+    out: BoolArray = inside.min(axis=1) <= spacing(float(hull.volume), warps)
     return out
