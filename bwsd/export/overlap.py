@@ -207,8 +207,7 @@ class Overlaps:
         start, end = self.quads.below(d * d, lo[self.a], hi[self.a])
         segment, s0, s1, holder = merge(self.a, start, end)
         listed = np.flatnonzero(holder >= 0)
-        listed = listed[np.argsort(holder[listed], kind="stable")]
-        return Stretches(segment, s0, s1, listed, holder[listed])
+        return Stretches(segment, s0, s1, listed, holder[listed], start[listed], end[listed])
 
     def worst(self, d: float, lo: FloatArray, hi: FloatArray) -> FloatArray:
         """Per pair, the deepest overlap over A's part [lo, hi] (0 where that is empty)."""
@@ -217,33 +216,41 @@ class Overlaps:
         least = self.quads.minimum(np.where(some, lo, 0.0), np.where(some, hi, 1.0))
         return np.where(some, np.maximum(d - np.sqrt(least), 0.0), 0.0)
 
-    def depths(self, arrays: Arrays, found: Stretches, stretch: IntArray, s: FloatArray
-               ) -> FloatArray:  # fmt: skip
-        """The overlap depth at the points s of the stretches ``stretch``: d minus the least
-        distance to the segments B of the pairs in that stretch (all in one segment A)."""
-        first = np.searchsorted(found.holder, stretch, side="left")
-        count = np.searchsorted(found.holder, stretch, side="right") - first
-        point = np.repeat(np.arange(len(s)), count)
-        which = found.pairs[np.repeat(first, count) + np.arange(len(point)) - np.repeat(
-            np.cumsum(count) - count, count)]  # fmt: skip
-        least = self.quads.at(which, s[point])
-        out = np.zeros(len(s))
-        if len(least):
-            least = np.minimum.reduceat(least, np.cumsum(count) - count)
-            out = np.maximum(arrays.sk.diameter - np.sqrt(least), 0.0)
+    def depths(self, arrays: Arrays, found: Stretches, steps: IntArray) -> FloatArray:
+        """The overlap depth at the samples of the stretches (``steps`` of each, at the
+        middles of equal steps): d minus the least distance to the segments B of the pairs
+        whose own interval holds the sample (the others are farther than d there)."""
+        width = found.end - found.start
+        first = np.cumsum(steps) - steps  # each stretch's first sample
+        t = found.holder
+        scale = steps[t] / np.where(width[t] > 0, width[t], 1.0)
+        k0 = np.maximum(np.ceil((found.pair_start - found.start[t]) * scale - 0.5), 0)
+        k1 = np.minimum(np.floor((found.pair_end - found.start[t]) * scale - 0.5), steps[t] - 1)
+        count = np.maximum(k1 - k0 + 1, 0).astype(np.int64)
+        pair = np.repeat(found.pairs, count)
+        k = np.repeat(k0.astype(np.int64), count) + np.arange(len(pair)) - np.repeat(
+            np.cumsum(count) - count, count)  # fmt: skip
+        stretch = np.repeat(t, count)
+        at = found.start[stretch] + (k + 0.5) / steps[stretch] * width[stretch]
+        least = np.full(int(steps.sum()), np.inf)
+        np.minimum.at(least, first[stretch] + k, self.quads.at(pair, at))
+        out: FloatArray = np.maximum(arrays.sk.diameter - np.sqrt(least), 0.0)
         return out
 
 
 @dataclass(frozen=True)
 class Stretches:
     """Disjoint stretches (``segment``, ``start``..``end``) of fixed segments closer than d
-    to another yarn; ``pairs`` the pairs of each, listed by stretch (``holder``)."""
+    to another yarn; the pairs (``pairs``) and the stretch holding each (``holder``), with
+    the pair's own interval (``pair_start``..``pair_end``)."""
 
     segment: IntArray
     start: FloatArray
     end: FloatArray
     pairs: IntArray
     holder: IntArray
+    pair_start: FloatArray
+    pair_end: FloatArray
 
 
 def weighted_percentile(values: FloatArray, weights: FloatArray, share: float) -> float:
@@ -307,7 +314,7 @@ def interpenetration(arrays: Arrays, pieces: Pieces) -> dict[str, Any]:
     k = np.arange(len(stretch)) - np.repeat(np.cumsum(steps) - steps, steps)
     s = found.start[stretch] + (k + 0.5) / steps[stretch] * width[stretch]
     weight = (width * length[segment] / steps)[stretch]
-    depth = pairs.depths(arrays, found, stretch, s)
+    depth = pairs.depths(arrays, found, steps)
     order = np.argsort(depth)  # every percentile below reads these in increasing depth
     at, s, depth, weight = segment[stretch][order], s[order], depth[order], weight[order]
     in_formed = (s >= lo[at]) & (s <= hi[at])
