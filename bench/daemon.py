@@ -73,8 +73,8 @@ def start(tmp: Path, program: str) -> tuple[Mock, Served]:
 
 def braid_24x24(cycles: int) -> str:
     """The benchmarks' 24x24 braid program (624 carriers)."""
-    return braid4(24, 24, cycles=cycles, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
-                  diameter=1.5).program  # fmt: skip
+    return braid4(24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
+                  diameter=0.5).program  # fmt: skip
 
 
 @contextmanager

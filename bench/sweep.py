@@ -8,7 +8,9 @@ The candidates are those of examples/braid-angle.sweep.toml with the cycles vari
 baseline is the bare twin run (generate, parse, simulate; no metrics) of the same candidates,
 one after the other in this process; "in-process" adds the metrics, as a worker runs them.
 "No Dask" runs the candidates in 1 and 2 plain processes (multiprocessing), a share each:
-the most the machine's cores give, to read the sweep's scaling against.
+the most the machine's cores give, to read the sweep's scaling against. The last table sets
+the metrics alone (the skeleton read out of the twin and `metrics()` on it, as a worker runs
+them) beside the twin alone (`simulate` of the parsed program), candidate by candidate.
 A sweep's wall time includes starting its local cluster; the sweep reports that start and
 its running time (first task sent to last row logged) apart.
 """
@@ -16,6 +18,7 @@ its running time (first task sent to last row logged) apart.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import multiprocessing
 import os
 import statistics
@@ -33,6 +36,11 @@ import pyarrow.parquet as pq
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bwsd.errors import BwsdError  # noqa: E402
+from bwsd.export.arrays import Arrays  # noqa: E402
+from bwsd.export.formed import takeups_of  # noqa: E402
+from bwsd.export.metrics import metrics, section  # noqa: E402
+from bwsd.export.mixing import section_header, simulate_with_visits  # noqa: E402
 from bwsd.program.generators import GENERATORS  # noqa: E402
 from bwsd.program.parser import parse_program  # noqa: E402
 from bwsd.sweep.candidate import Candidate, evaluate  # noqa: E402
@@ -52,11 +60,53 @@ def spec(size: int, cycles: list[int]) -> Spec:
 
 
 def bare(candidate: Candidate) -> float:
-    """Seconds of the bare twin run: generate, parse, simulate."""
+    """Seconds of the bare twin run: generate, parse, simulate (up to a refusal, if any)."""
     start = time.perf_counter()
     generated = GENERATORS["braid4"](**candidate.params)
-    simulate(generated.machine, parse_program(generated.program))
+    with contextlib.suppress(BwsdError):  # a refused candidate: its time up to the refusal
+        simulate(generated.machine, parse_program(generated.program))
     return time.perf_counter() - start
+
+
+def split(candidate: Candidate) -> tuple[float, float] | None:
+    """Seconds of the twin alone and of the metrics alone for one candidate (None when the
+    twin refuses it)."""
+    generated = GENERATORS["braid4"](**candidate.params)
+    program = parse_program(generated.program)
+    start = time.perf_counter()
+    try:
+        simulate(generated.machine, program)
+    except BwsdError:
+        return None
+    twin_s = time.perf_counter() - start
+    named = section_header(generated.program)
+    assert named is not None
+    twin, visits = simulate_with_visits(generated.machine, program, named.section)
+    start = time.perf_counter()
+    sk = twin.skeleton()
+    arrays = Arrays.of(sk)
+    band = section(sk, arrays)
+    z = None if band is None else (band["z"][0] + band["z"][1]) / 2
+    metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
+            visits=visits, arrays=arrays)  # fmt: skip
+    return twin_s, time.perf_counter() - start
+
+
+def split_table(candidates: list[Candidate], repeat: int) -> None:
+    found = [split(c) for _ in range(repeat) for c in candidates]
+    runs = [f for f in found if f is not None]
+    twin, metric = [r[0] for r in runs], [r[1] for r in runs]
+    print(
+        "| per candidate that runs (the twin refuses "
+        f"{(len(found) - len(runs)) // repeat} of {len(candidates)}) | n | p50 ms | p99 ms |"
+    )
+    print("|---|---:|---:|---:|")
+    print(f"| the twin alone: simulate (baseline) | {len(twin)} | {' | '.join(ms(twin))} |")
+    print(f"| the metrics alone: skeleton, section, metrics() | {len(metric)} | "
+          f"{' | '.join(ms(metric))} |")  # fmt: skip
+    ratio = statistics.median(m / t for t, m in runs)
+    print(f"\n- Metrics over the twin, median of the candidates' own ratios: {ratio:.2f}x "
+          "(target: at most 1x).\n")  # fmt: skip
 
 
 def in_process(candidate: Candidate) -> float:
@@ -134,6 +184,7 @@ def table(size: int, cycles: list[int], repeat: int) -> None:
           f"the bare twin run ({1e3 * bare_s:.2f} ms): {1e3 * (per - bare_s):.2f} ms more "
           f"({per / bare_s:.2f}x), of which the metrics {1e3 * (full_s - bare_s):.2f} ms and "
           f"Dask, pickling and the row log {1e3 * (per - full_s):.2f} ms.\n")  # fmt: skip
+    split_table(candidates, repeat)
 
 
 def main() -> None:

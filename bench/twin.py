@@ -47,8 +47,6 @@ EXAMPLES = [
     "braid-24x24",
 ]
 REFERENCE_CASES = ["twist", "braid-2x2", "weave-plain"]
-PAPER = {"paper-L": ("L-section 4-step braid", 504, 138.15),
-         "paper-U": ("U-section dual-direction 3D weave", 610, 376.0)}  # fmt: skip
 
 
 def load(stem: str) -> tuple[Machine, Program]:
@@ -103,16 +101,6 @@ def examples_table(repeat: int) -> tuple[list[str], dict[str, tuple[int, float]]
     return rows, measured
 
 
-def paper_line(measured: dict[str, tuple[int, float]]) -> str:
-    parts = []
-    for stem, (what, contacts, seconds) in PAPER.items():
-        ours, median = measured[stem]
-        parts.append(f"its {what} took {seconds:g} s for 10 cycles ({contacts} interferences); "
-                     f"our {stem} example (the same 10 cycles, docs/paper.md: {ours} contacts) "
-                     f"takes {median:.3f} s")  # fmt: skip
-    return "For scale, against the published tool: " + "; ".join(parts) + "."
-
-
 def run_reference(machine: Machine, program: Program) -> RefTwin:
     diameter = machine.yarn_diameter if program.diameter is None else program.diameter
     ref = RefTwin(machine, list(program.fill), diameter)
@@ -144,8 +132,8 @@ def reference_table(repeat: int) -> list[str]:
 
 
 def big_braid(cycles: int) -> tuple[Machine, Program]:
-    generated = braid4(24, 24, cycles=cycles, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
-                       diameter=1.5)  # fmt: skip
+    generated = braid4(24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
+                       diameter=0.5)  # fmt: skip
     return generated.machine, parse_program(generated.program)
 
 
@@ -242,9 +230,8 @@ def main() -> None:
           f"switch interval {sys.getswitchinterval() * 1e3:g} ms\n")  # fmt: skip
     if "examples" not in skip:
         print("### Examples\n")
-        rows, measured = examples_table(args.repeat)
+        rows, _ = examples_table(args.repeat)
         print("\n".join(rows) + "\n")
-        print(paper_line(measured) + "\n")
     if "reference" not in skip:
         print("### Against the exact reference (same run)\n")
         print("\n".join(reference_table(args.repeat)) + "\n")

@@ -8,6 +8,7 @@ loom. Every key of every table is documented in docs/config.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import re
 import tomllib
 from collections.abc import Mapping
@@ -96,7 +97,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "heartbeat_ms": Num(int, 0, 65535, 100),
     },
     "controller": {
-        "max_contacts": Num(int, 0, 10_000_000, 0),
+        "max_contacts": Num(int, 0, 10_000_000, 10_000),
         "tensioner_stroke": Num(float, 0.0, 1e5, 0.0),
         "max_instructions": Num(int, 1, 1_000_000, 1_000_000),
         "snapshot_every": Num(int, 0, 1_000_000, 200),
@@ -258,9 +259,13 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
             raise ConfigError("missing table", path=path, table=name)
     tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
     try:
-        machine = Machine(yarn_diameter=tables["yarn"]["diameter"], **tables["machine"])
+        machine = Machine(**tables["machine"])
     except ValueError as exc:  # the segments: each key alone is in range
         raise ConfigError(str(exc), path=path, table="machine", key="segments") from None
+    fault = machine.diameter_fault(tables["yarn"]["diameter"])
+    if fault is not None:
+        raise ConfigError(fault, path=path, table="yarn", key="diameter")
+    machine = dataclasses.replace(machine, yarn_diameter=tables["yarn"]["diameter"])
     _check_geometry(machine, path)
     if tables["fieldbus"]["backend"] == "canopen":
         _check_canopen_ids(tables["fieldbus.canopen"], machine, path)

@@ -48,5 +48,18 @@ class ShedClosedError(TwinError):
     """A weft would pass within one yarn diameter of another yarn."""
 
 
+class JamError(TwinError):
+    """A contact would lie within one yarn diameter of the guides: the yarns would lock there.
+
+    ``yarns`` are the moving and the hit yarn, ``z`` the contact's height (mm, preform frame).
+    """
+
+    def __init__(self, message: str, *, instruction: int = 0, yarns: tuple[int, int] = (-1, -1),
+                 z: float = 0.0) -> None:  # fmt: skip
+        super().__init__(message, instruction=instruction)
+        self.yarns = yarns
+        self.z = z
+
+
 class ExtraMissingError(BwsdError):
     """A command needs an optional library that is not installed: names the extra to install."""

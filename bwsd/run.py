@@ -14,7 +14,7 @@ import numpy as np
 
 from bwsd.config import load_config
 from bwsd.errors import ProgramError, TwinError
-from bwsd.twin import Machine, Program, Twin, simulate
+from bwsd.twin import Machine, Program, Twin, Weft, simulate
 from bwsd.twin.model import ProgressFn
 
 
@@ -47,13 +47,20 @@ def load_and_simulate(
     config = load_config(config_path)
     machine = config.machine
     program = load_program(program_path, machine, config.table("controller")["max_instructions"])
-    try:
+    with refused_at_line(program, program_path):
         twin = simulate(machine, program, progress, timings)
+    return machine, program, twin
+
+
+@contextmanager
+def refused_at_line(program: Program, source: str) -> Iterator[None]:
+    """An instruction the twin refuses in the block, as a ProgramError naming its line."""
+    try:
+        yield
     except TwinError as exc:
         raise ProgramError(f"instruction {exc.instruction}: {exc.reason}",
                            line=program.line_of(exc.instruction), column=1,
-                           source=program_path) from None  # fmt: skip
-    return machine, program, twin
+                           source=source) from None  # fmt: skip
 
 
 @contextmanager
@@ -73,7 +80,8 @@ def _progress(enabled: bool) -> Iterator[ProgressFn | None]:
         yield report
 
 
-def _summary(twin: Twin, seconds: float, timings: list[float]) -> dict[str, Any]:
+def _summary(twin: Twin, seconds: float, timings: list[float],
+             loose: list[tuple[int, int]]) -> dict[str, Any]:  # fmt: skip
     return {
         "yarns": twin.yarn_count,
         "nodes": twin.node_count,
@@ -82,7 +90,26 @@ def _summary(twin: Twin, seconds: float, timings: list[float]) -> dict[str, Any]
         "takeup": twin.takeup,
         "seconds": round(seconds, 6),
         "predict_ms": _percentiles(timings),
+        "loose_wefts": [yarn for yarn, _ in loose],
     }
+
+
+def loose_wefts(twin: Twin, program: Program) -> list[tuple[int, int]]:
+    """The wefts no contact holds, as (yarn, program line): they lie loose in the preform."""
+    sk = twin.skeleton()
+    touched = {y for c in sk.contacts for y in (c.moving_yarn, c.hit_yarn)}
+    inserted = [i for i, ins in enumerate(program.instructions, start=1) if isinstance(ins, Weft)]
+    wefts = [y.id for y in sk.yarns if y.kind == "weft"]
+    return [(yarn, program.line_of(index)) for yarn, index in zip(wefts, inserted, strict=False)
+            if yarn not in touched]  # fmt: skip
+
+
+def _warn_loose(loose: list[tuple[int, int]], source: str) -> None:
+    if loose:
+        shown = ", ".join(f"yarn {yarn} ({source}:{line})" for yarn, line in loose[:10])
+        more = f" and {len(loose) - 10} more" if len(loose) > 10 else ""
+        print(f"bwsd: warning: {len(loose)} weft(s) without any contact lie loose: {shown}{more}",
+              file=sys.stderr)  # fmt: skip
 
 
 def _percentiles(seconds: list[float]) -> dict[str, float]:
@@ -113,14 +140,17 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     timings: list[float] = []
     with _progress(sys.stderr.isatty() and not args.json) as progress:
-        _, _, twin = load_and_simulate(args.program, args.config, progress, timings)
+        _, program, twin = load_and_simulate(args.program, args.config, progress, timings)
     seconds = time.perf_counter() - start
     _write_exports(twin, args.skeleton, args.export)
-    summary = _summary(twin, seconds, timings)
+    loose = loose_wefts(twin, program)
+    _warn_loose(loose, args.program)
+    summary = _summary(twin, seconds, timings, loose)
     if args.json:
         print(json.dumps(summary, allow_nan=False))  # never NaN or Infinity
     else:
         ms = summary.pop("predict_ms")
+        summary.pop("loose_wefts")
         print(", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "
               f"{ms['p50']} p99 {ms['p99']} max {ms['max']}")  # fmt: skip
     return 0

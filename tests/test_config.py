@@ -126,7 +126,7 @@ def test_daemon_tables_defaults_and_flags():
     cfg = parse_config(GOOD)
     assert cfg.table("api")["open_reads"] is False and cfg.table("plc")["enabled"] is True
     assert cfg.table("controller") == {
-        "max_contacts": 0,
+        "max_contacts": 10_000,
         "tensioner_stroke": 0.0,
         "max_instructions": 1_000_000,
         "snapshot_every": 200,
@@ -169,3 +169,17 @@ def test_numbers_the_twin_cannot_keep_are_refused_with_their_key(tmp_path, line,
 def test_a_yarn_diameter_too_fine_for_the_grid_is_refused():
     with pytest.raises(ConfigError, match=r"\[yarn.diameter\]: must be 0 or at least 1e-06 mm"):
         parse_config(_with("yarn", "diameter", 1e-9))
+
+
+def test_a_yarn_too_thick_for_the_gap_at_the_fell_is_refused_at_its_key():
+    """Warps start c_mat x the smaller pitch apart at the fell (0.4 x 10 mm here): d = 20 mm
+    on a 10 mm pitch put contacts 19 mm outside the matrix, d = 1023 mm a metre out."""
+    for diameter in (4, 20.0, 1000):
+        with pytest.raises(ConfigError, match=r"\[yarn.diameter\]: a yarn diameter of [\d.]+ mm "
+                           r"does not fit: it must be less than c_mat x the smaller pitch "
+                           r"\(4 mm\)"):  # fmt: skip
+            parse_config(_with("yarn", "diameter", diameter))
+    assert parse_config(_with("yarn", "diameter", 3.999)).machine.yarn_diameter == 3.999
+    narrow = _with("machine", "pitch_y", 2.5)  # the smaller pitch decides: 0.4 x 2.5 = 1 mm
+    with pytest.raises(ConfigError, match=r"\[yarn.diameter\]: .* \(1 mm\)"):
+        parse_config(narrow)

@@ -161,7 +161,8 @@ def test_needs_names_the_extra_only_for_its_own_modules():
 def test_the_core_requires_none_of_the_extras():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     names = {_name(r) for r in project["dependencies"]}
-    assert names == {"numpy", "pymodbus", "rich", "fastapi", "uvicorn", "prometheus-client"}
+    assert names == {"numpy", "scipy", "pymodbus", "rich", "fastapi", "uvicorn",
+                     "prometheus-client"}  # fmt: skip
     extras = {k: {_name(r) for r in v} for k, v in project["optional-dependencies"].items()}
     assert extras["export"] == {"vtk", "pytexgen", "matplotlib"}
     assert extras["canopen"] == {"canopen", "python-can"}

@@ -158,3 +158,38 @@ def test_simulate_json_refuses_hostile_numbers_at_their_place(tmp_path, line, wh
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith(f"bwsd: error: {program}:{where}: "), done.stderr
     assert done.stderr.count("\n") == 1
+
+
+def test_a_jam_names_its_line_and_writes_nothing(tmp_path):
+    """`bwsd program twist --turns 100` (no take-up) winds the yarns up to the guides: the
+    twin refuses instruction 114 as a jam; simulate and metrics name its line."""
+    from bwsd.program.generators import GENERATORS
+    from bwsd.program.parser import parse_program
+
+    generated = GENERATORS["twist"](turns=100)
+    program = tmp_path / "winds.bws"
+    program.write_text(generated.program)
+    line = parse_program(generated.program).line_of(114)
+    out = tmp_path / "out.json"
+    for command in (["simulate", "--skeleton", str(out)], ["metrics"]):
+        done = bwsd(command[0], str(program), "--config", example("twist")[1], *command[1:])
+        assert done.returncode == 2
+        assert f"{program}:{line}:1: instruction 114: jam: yarn " in done.stderr
+        assert "below the guides" in done.stderr and "within one yarn diameter" in done.stderr
+    assert not out.exists()
+
+
+def test_simulate_warns_about_a_loose_weft(tmp_path):
+    """A hand-written 30 degree weft that nothing touches: accepted, but it lies loose."""
+    program = tmp_path / "loose.bws"
+    program.write_text("YARN diameter=1\nFILL row=0 col=0\nX.\n.X\nEND\nTAKEUP 1\n"
+                       "WEFT x=5 y=5 z=50 angle=30 length=3\nROW 0:+1 1:-1\n")  # fmt: skip
+    done = bwsd("simulate", str(program), "--config", example("twist")[1], "--json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["loose_wefts"] == [2]
+    assert f"warning: 1 weft(s) without any contact lie loose: yarn 2 ({program}:7)" in (
+        done.stderr
+    )
+    weave, config = example("weave-plain")
+    held = bwsd("simulate", weave, "--config", config, "--json")
+    assert json.loads(held.stdout)["loose_wefts"] == [] and "warning" not in held.stderr

@@ -23,7 +23,6 @@ from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
 
 BoolArray = npt.NDArray[np.bool_]
 SAMPLES_PER_DIAMETER = 64  # grid spacing at most d / 64: one disc's area within 1 %
-CHUNK_SAMPLES = 2_000_000  # window samples tested at once (bounds the memory)
 
 
 def crossing_points(sk: SkeletonData, z: float) -> tuple[FloatArray, BoolArray]:
@@ -68,29 +67,43 @@ class Grid:
         return self.hx * self.hy
 
 
+def disc_rows(centres: FloatArray, radius: float, grid: Grid) -> tuple[IntArray, IntArray,
+                                                                         IntArray]:  # fmt: skip
+    """The samples within ``radius`` of a centre (closed discs), as disjoint runs of each
+    sample row: (row j, first i, last i), by row and first i. A disc covers, in each row
+    it reaches, the samples whose x lies within its chord there."""
+    if not len(centres):
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    c = centres - np.array([grid.x0, grid.y0])
+    first = np.ceil((c[:, 1] - radius) / grid.hy - 0.5).astype(np.int64)
+    count = np.floor((c[:, 1] + radius) / grid.hy - 0.5).astype(np.int64) - first + 1
+    disc = np.repeat(np.arange(len(c)), np.maximum(count, 0))
+    row = first[disc] + np.arange(len(disc)) - np.repeat(np.cumsum(count) - count, count)
+    dy = (row + 0.5) * grid.hy - c[disc, 1]
+    half = np.sqrt(np.maximum(radius * radius - dy * dy, 0.0))
+    lo = np.ceil((c[disc, 0] - half) / grid.hx - 0.5).astype(np.int64)
+    hi = np.floor((c[disc, 0] + half) / grid.hx - 0.5).astype(np.int64)
+    keep = (lo <= hi) & (dy * dy <= radius * radius)
+    row, lo, hi = row[keep], lo[keep], hi[keep]
+    order = np.lexsort((lo, row))
+    row, lo, hi = row[order], lo[order], hi[order]
+    # merge each row's runs: with the row as an offset no run reaches into the next row
+    width = int(hi.max() - lo.min()) + 3 if len(row) else 0
+    key_lo, key_hi = lo + row * width, hi + row * width
+    reach = np.maximum.accumulate(key_hi) if len(row) else key_hi
+    start = np.flatnonzero(key_lo > np.concatenate([key_lo[:1] - 2, reach[:-1]]) + 1)
+    last = np.maximum.reduceat(hi, start) if len(start) else hi
+    return row[start], lo[start], last
+
+
 def disc_samples(centres: FloatArray, radius: float, grid: Grid) -> tuple[IntArray, IntArray]:
     """Indices (i, j) of the distinct samples within ``radius`` of a centre (closed discs)."""
-    h = np.array([grid.hx, grid.hy])
-    origin = np.array([grid.x0, grid.y0])
-    width = math.ceil(2 * radius / min(grid.hx, grid.hy)) + 2
-    steps = np.arange(width)
-    chunk = max(1, CHUNK_SAMPLES // (width * width))
-    found: list[IntArray] = []
-    for start in range(0, len(centres), chunk):
-        c = centres[start : start + chunk] - origin
-        first = np.floor((c - radius) / h - 0.5).astype(np.int64)
-        ix, iy = first[:, :1] + steps, first[:, 1:] + steps  # (n, width) each
-        dx2 = ((ix + 0.5) * grid.hx - c[:, :1]) ** 2
-        dy2 = ((iy + 0.5) * grid.hy - c[:, 1:]) ** 2
-        n, i, j = np.nonzero(dx2[:, :, None] + dy2[:, None, :] <= radius * radius)
-        found.append(np.stack([ix[n, i], iy[n, j]], axis=1))
-    if not found:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    both = np.vstack(found)
-    low = both.min(axis=0)
-    span = int(both[:, 1].max() - low[1]) + 1
-    keys = np.unique((both[:, 0] - low[0]) * span + (both[:, 1] - low[1]))
-    return keys // span + low[0], keys % span + low[1]
+    row, lo, hi = disc_rows(centres, radius, grid)
+    size = hi - lo + 1
+    j = np.repeat(row, size)
+    i = np.repeat(lo, size) + np.arange(len(j)) - np.repeat(np.cumsum(size) - size, size)
+    return i, j
 
 
 class Nominal:
@@ -119,14 +132,27 @@ class Nominal:
         start, size = self.origin[axis], self.size[axis]
         return start + self.lo[axis] * size, start + (self.hi[axis] + 1) * size
 
-    def inside(self, ix: IntArray, iy: IntArray, grid: Grid) -> BoolArray:
-        """Which samples (ix, iy) of ``grid`` lie in the shape."""
-        col, row = ix // grid.per_tile[0], iy // grid.per_tile[1]
+    def inside(self, runs: tuple[IntArray, IntArray, IntArray], grid: Grid) -> int:
+        """How many samples of the runs (row j, first i, last i) of ``grid`` lie in the
+        shape: per run, the masked samples before its end less those before its start."""
+        row, lo, hi = runs
+        nx, ny = grid.per_tile
         rows, cols = self.mask.shape
-        ok = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-        found = np.zeros(len(ix), dtype=bool)
-        found[ok] = self.mask[row[ok], col[ok]]
-        return found
+        tile = row // ny
+        ok = (tile >= 0) & (tile < rows)
+        mask = self.mask[tile[ok]]  # (runs, cols): the tile row of each run
+        before = np.concatenate([np.zeros((len(mask), 1), np.int64), np.cumsum(mask, axis=1)],
+                                axis=1)  # fmt: skip
+
+        def masked_below(i: IntArray) -> IntArray:  # masked samples with index < i
+            i = np.clip(i, 0, cols * nx)
+            col = np.minimum(i // nx, cols - 1)
+            part = i - col * nx
+            k = np.arange(len(i))
+            out: IntArray = nx * before[k, col] + part * mask[k, col]
+            return out
+
+        return int((masked_below(hi[ok] + 1) - masked_below(lo[ok])).sum())
 
     def samples(self, grid: Grid) -> int:
         """Samples of ``grid`` in the shape: the same number in every tile."""
@@ -142,10 +168,9 @@ def footprint(sk: SkeletonData, z: float, section: Section | None = None) -> dic
     points, free = crossing_points(sk, z)
     radius = sk.diameter / 2
     grid = Grid.of(sk.machine, sk.diameter) if radius > 0 else None
-    ix = iy = np.zeros(0, dtype=np.int64)
-    if grid is not None and len(points):
-        ix, iy = disc_samples(points, radius, grid)
-    area = len(ix) * grid.cell_area if grid is not None else 0.0
+    empty = np.zeros(0, dtype=np.int64)
+    runs = disc_rows(points, radius, grid) if grid is not None else (empty, empty, empty)
+    area = int((runs[2] - runs[1] + 1).sum()) * grid.cell_area if grid is not None else 0.0
     out: dict[str, Any] = {
         "z": z,
         "crossings": len(points),
@@ -162,17 +187,16 @@ def footprint(sk: SkeletonData, z: float, section: Section | None = None) -> dic
         "outside": None,
     }
     if section is not None:
-        out.update(_against(Nominal(section, sk.machine), ix, iy, grid, area))
+        out.update(_against(Nominal(section, sk.machine), runs, grid, area))
     return out
 
 
-def _against(
-    nominal: Nominal, ix: IntArray, iy: IntArray, grid: Grid | None, area: float
-) -> dict[str, Any]:
+def _against(nominal: Nominal, runs: tuple[IntArray, IntArray, IntArray], grid: Grid | None,
+             area: float) -> dict[str, Any]:  # fmt: skip
     """Nominal shape, measured over nominal area, covered fraction, area outside it."""
     covered, coverage = 0, None
     if nominal.area > 0:
-        covered = int(nominal.inside(ix, iy, grid).sum()) if grid is not None else 0
+        covered = nominal.inside(runs, grid) if grid is not None else 0
         coverage = covered / nominal.samples(grid) if grid is not None else 0.0
     return {
         "nominal": {

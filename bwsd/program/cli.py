@@ -14,6 +14,7 @@ from bwsd.program.braidweave import ANGLES, braid_weave
 from bwsd.program.render import Generated
 from bwsd.program.weave import SHAPES as WEAVE_SHAPES
 from bwsd.program.weave import weave_3d, weave_plain
+from bwsd.twin.exact import decimal_float
 
 
 class GeneratorError(BwsdError):
@@ -28,20 +29,18 @@ def _block(text: str) -> tuple[int, int]:
     return int(rows), int(cols)
 
 
-def _angles(text: str) -> tuple[int, ...]:
-    """Weft angles written 0,90,45,-45."""
+def _angles(text: str) -> tuple[float, ...]:
+    """Weft angles in degrees written 0,90,45,-45 (any angle: 30,-30,22.5)."""
     try:
-        angles = tuple(int(part) for part in text.split(","))
+        angles = tuple(decimal_float(part.strip()) for part in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"expected angles like 0,90,45,-45, got {text!r}"
+            f"expected angles in degrees like 0,90,45,-45, got {text!r}"
         ) from None
-    if not angles or any(a not in ANGLES for a in angles):
-        raise argparse.ArgumentTypeError(f"weft angles are among {', '.join(map(str, ANGLES))}")
     return angles
 
 
-def _section(p: argparse.ArgumentParser, side: int) -> None:
+def _section(p: argparse.ArgumentParser, side: int, takeup: float) -> None:
     """The braided section's options (a rect of ``side`` x ``side`` by default)."""
     p.add_argument("--rows", type=int, default=side, help=f"body rows of a rect section ({side})")
     p.add_argument("--cols", type=int, default=side,
@@ -52,7 +51,8 @@ def _section(p: argparse.ArgumentParser, side: int) -> None:
     p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
                    help="L/T/I: the machine has the corner line segments (the default; "
                    "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
-    p.add_argument("--takeup", type=float, default=3.0, help="take-up per four steps, mm (3)")
+    p.add_argument("--takeup", type=float, default=takeup,
+                   help=f"take-up per four steps, mm ({takeup:g})")  # fmt: skip
 
 
 def _braided(args: argparse.Namespace) -> dict[str, Any]:
@@ -80,13 +80,14 @@ def _kinds(sub: Any) -> None:
                    help="take-up after each turn, mm (0: none, the worked example)")  # fmt: skip
     _common(p, cycles=False)
     p = sub.add_parser("braid4", help="4-step braid of a rectangular, L, T or I section")
-    _section(p, 2)
+    _section(p, 2, 6.0)
     _common(p)
     p = sub.add_parser("braid-weave", help="4-step braid with a layer of wefts every N cycles")
-    _section(p, 3)
+    _section(p, 3, 3.0)
     p.add_argument("--weft-every", type=int, default=2, help="cycles between weft layers (2)")
     p.add_argument("--angles", type=_angles, default=ANGLES,
-                   help="weft angles, taken in turn, layer by layer (0,90,45,-45)")  # fmt: skip
+                   help="weft angles in degrees, any, taken in turn, layer by layer "
+                   "(0,90,45,-45)")  # fmt: skip
     _common(p)
     p.set_defaults(cycles=8)
     p = sub.add_parser("weave-plain", help="plain weave of one warp layer")

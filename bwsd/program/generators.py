@@ -24,19 +24,24 @@ GENERATORS: dict[str, Callable[..., Generated]] = {
 # The shipped examples: file stem -> the generator call that prints them.
 EXAMPLES: dict[str, Callable[[], Generated]] = {
     "twist": lambda: twist(turns=4),
-    "braid-2x2": lambda: braid4(2, 2, cycles=10),
+    "braid-2x2": lambda: braid4(2, 2, cycles=10, takeup=3.0, diameter=1.5),
     "braid-L": lambda: braid4(cycles=11, shape="L", flange=(2, 6), web=(4, 2)),
-    "braid-24x24": lambda: braid4(24, 24, cycles=10, d_mat=300.0, c_mat=0.3),
+    # 8 mm a cycle and a 0.5 mm yarn keep this braid's contacts clear of the guides for
+    # 1000 cycles (bench/twin.py)
+    "braid-24x24": lambda: braid4(
+        24, 24, cycles=10, takeup=8.0, d_mat=300.0, c_mat=0.3, diameter=0.5
+    ),
     "weave-plain": lambda: weave_plain(warps=10, cycles=10),
     "weave-U": lambda: weave_3d(5, 6, cycles=10, shape="U", leg=2, base=2),
     # The seed paper's case studies on one machine (docs/paper.md): 5 cycles of the 8-step L
-    # rule are the paper's 10 cycles of 4 steps; take-up 3 mm per four steps, or per pick.
+    # rule are the paper's 10 cycles of 4 steps; take-up 6 mm per four steps (less jams),
+    # 3 mm per pick.
     "paper-L": lambda: braid4(
         cycles=5,
         shape="L",
-        flange=(3, 7),
+        flange=(3, 8),
         web=(7, 3),
-        takeup=3.0,
+        takeup=6.0,
         d_mat=100.0,
         c_mat=0.4,
         diameter=1.0,

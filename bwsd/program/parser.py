@@ -23,11 +23,13 @@ class SourceMap:
     ``fill`` gives (line, column) of each filled cell in fill order; ``keywords`` the
     column of each instruction's keyword; ``entries`` the column of each ROW/COL entry
     of each instruction (empty for other instructions). Lines are in ``Program.lines``.
+    ``diameter`` is (line, column) of the YARN statement's value, (0, 0) without one.
     """
 
     fill: tuple[tuple[int, int], ...]
     keywords: tuple[int, ...]
     entries: tuple[tuple[int, ...], ...]
+    diameter: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class _Parser:
         self.source = source
         self.diameter: float | None = None
         self.diameter_line = 0
+        self.diameter_column = 0
         self.fills: dict[tuple[int, int], tuple[int, int]] = {}
         self.stack: list[_Repeat] = [_Repeat(1, 0, 0)]
         self.block: _FillBlock | None = None
@@ -109,7 +112,7 @@ class _Parser:
         value = number(text, column, where, "diameter")
         if value < 0:
             raise where.error("diameter must not be negative", column)
-        self.diameter, self.diameter_line = value, where.line
+        self.diameter, self.diameter_line, self.diameter_column = value, where.line, column
 
     def _fill(self, where: Where, keyword: Token, rest: list[Token]) -> None:
         self._before_instructions(where, keyword)
@@ -334,6 +337,7 @@ def parse_program_with_positions(
         fill=tuple(parser.fills[c] for c in cells),
         keywords=tuple(s.column for s in flat),
         entries=tuple(s.entries for s in flat),
+        diameter=(parser.diameter_line, parser.diameter_column),
     )
     return program, where
 

@@ -115,6 +115,16 @@ def _check_fill(
             raise ProgramError(reason, line=line, column=column, source=source)
 
 
+def _check_diameter(
+    program: Program, machine: Machine, positions: SourceMap | None, source: str
+) -> None:
+    """A YARN diameter the machine cannot hold is refused at the YARN statement."""
+    fault = None if program.diameter is None else machine.diameter_fault(program.diameter)
+    if fault is not None:
+        line, column = positions.diameter if positions is not None else (0, 0)
+        raise ProgramError(fault, line=line, column=column, source=source)
+
+
 def _check_shift(shift: Shift, grid: Occupancy, machine: Machine) -> tuple[int, str] | None:
     """Apply one ROW/COL to the grid; returns (entry, reason) of the first fault."""
     size = grid.line_size(shift.axis)
@@ -143,6 +153,7 @@ def validate(
     Runs the fill and every ROW/COL on the occupancy grid only (no geometry). Errors name
     the line (from ``program.lines``) and, when ``positions`` is given, the column.
     """
+    _check_diameter(program, machine, positions, source)
     grid = Occupancy(machine)
     _check_fill(program, grid, positions, source)
     for i, instruction in enumerate(program.instructions):

@@ -12,12 +12,12 @@ section forms at the fell's scale, as on a loom (docs/program.md, "Where the wef
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bwsd.errors import ShedClosedError
+from bwsd.errors import JamError, ShedClosedError
 from bwsd.program import render
 from bwsd.program.render import num
 from bwsd.twin import Program, Twin
@@ -54,10 +54,12 @@ def _grid(value: float) -> float:
 
 
 def heights(machine: Machine) -> list[float]:
-    """The heights tried, lowest first, up to the guides."""
+    """The heights tried, lowest first, up to one yarn diameter below the guides (a contact
+    any closer would jam)."""
     step = GRID * machine.yarn_diameter or GRID_CENTRELINE * min(machine.pitch_x, machine.pitch_y)
     count = int(machine.d_mat / step)
-    return [round(step * j, 6) for j in range(1, count)]
+    found = (round(step * j, 6) for j in range(1, count))
+    return [z for z in found if z < machine.d_mat - machine.yarn_diameter]
 
 
 class Placer:
@@ -79,7 +81,7 @@ class Placer:
         contacts would stay loose. It lies on the warps' cone (where they would run without
         contacts) if it can, else through the middle of the shed. ValueError if no height
         below the guides will do. Only heights over ``above`` are tried."""
-        lowest = max(self._lowest_fixed(shed), above + 1e-9)
+        lowest = max(self.lowest_fixed(shed), above + 1e-9)
         for z in self.heights:
             if z < lowest:
                 continue  # below every warp's last fixed node: no move can catch it
@@ -90,7 +92,7 @@ class Placer:
                          "shed is open and its closing catches the weft (raise the take-up or "
                          "the pitch)")  # fmt: skip
 
-    def _lowest_fixed(self, shed: Shed) -> float:
+    def lowest_fixed(self, shed: Shed) -> float:
         """The lowest last fixed node of the shed's warps, above the fell: a move that closes
         the shed sweeps them across the weft, each in a triangle from that node up."""
         one, other = self._free_segments(shed)
@@ -123,18 +125,31 @@ class Placer:
         self.twin.restore(before)
         return caught
 
+    def insert(self, weft: Weft) -> int | None:
+        """Insert ``weft`` and give its yarn id, or None (and nothing inserted) where the
+        shed is closed."""
+        try:
+            inserted = self.twin.predict(weft)
+        except ShedClosedError:
+            return None
+        self.twin.commit(inserted)
+        return inserted.new_yarns[0]
+
     def _inserted(self, weft: Weft, closing: Sequence[Instruction]) -> bool:
         """Insert ``weft`` if the shed lets it in and one of ``closing`` catches it."""
         try:
             inserted = self.twin.predict(weft)
-        except ShedClosedError:
+        except (ShedClosedError, JamError):
             return False
         before = self.twin.snapshot()
         self.twin.commit(inserted)
         yarn = inserted.new_yarns[0]
         after = self.twin.snapshot()
         for move in closing:
-            moved = self.twin.predict(move)
+            try:
+                moved = self.twin.predict(move)
+            except JamError:
+                break
             table = moved.contact_table
             if ((table[:, 1] == yarn) | (table[:, 3] == yarn)).any():
                 self.twin.restore(after)
@@ -198,10 +213,16 @@ Item = Instruction | Shed  # a move, or a weft to place
 Cycle = list[Item]
 
 
+Pick = list[tuple[int, Shed]]  # the wefts of one pick, with their places in the cycle
+PlacePick = Callable[[Placer, Pick, Sequence[Instruction]], list[str]]
+
+
 def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
-          cycles: Sequence[Cycle | Sequence[Cycle]], comment: str) -> list[str]:  # fmt: skip
-    """The program lines of ``cycles`` (their moves and wefts), each weft placed on the twin
-    at its lowest open height; identical consecutive cycles share one REPEAT.
+          cycles: Sequence[Cycle | Sequence[Cycle]], comment: str,
+          place: PlacePick | None = None, unit: str = "cycle") -> list[str]:  # fmt: skip
+    """The program lines of ``cycles`` (their moves and wefts), each pick's wefts placed on
+    the twin by ``place`` (default: each weft at its own lowest open height); identical
+    consecutive cycles share one REPEAT. Errors name a cycle as ``unit`` and its number.
 
     A cycle may be given as alternatives (a sequence of cycles): the first one whose every
     weft can be placed is used; when none can, the error of the first is raised.
@@ -210,19 +231,21 @@ def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
     bodies = []
     for n, given in enumerate(cycles, start=1):
         options = [given] if given and not isinstance(given[0], list) else given
-        bodies.append(_first_that_places(placer, n, options))  # type: ignore[arg-type]
+        bodies.append(_first_that_places(placer, f"{unit} {n}", options,  # type: ignore[arg-type]
+                                         place or _place_pick))  # fmt: skip
     lines: list[str] = []
     for count, body in group_cycles(bodies):
         lines += render.repeat(count, body, comment)
     return lines
 
 
-def _first_that_places(placer: Placer, n: int, options: Sequence[Cycle]) -> list[str]:
+def _first_that_places(placer: Placer, n: str, options: Sequence[Cycle],
+                       place: PlacePick) -> list[str]:  # fmt: skip
     start = placer.twin.snapshot()
     failure: ValueError | None = None
     for cycle in options:
         try:
-            return _place_cycle(placer, n, cycle)
+            return _place_cycle(placer, n, cycle, place)
         except ValueError as exc:
             failure = failure or exc
             placer.twin.restore(start)
@@ -230,29 +253,32 @@ def _first_that_places(placer: Placer, n: int, options: Sequence[Cycle]) -> list
     raise failure
 
 
-def _place_cycle(placer: Placer, n: int, cycle: Cycle) -> list[str]:
-    """The cycle's lines, its wefts placed, pick by pick (a run of wefts between moves)."""
+def _place_cycle(placer: Placer, n: str, cycle: Cycle, place: PlacePick) -> list[str]:
+    """The cycle's lines, its wefts placed, pick by pick (a run of wefts between moves); a
+    move that jams refuses the cycle (ValueError)."""
     closing = _closing(cycle)
     body: list[str] = []
     i = 0
     while i < len(cycle):
         item = cycle[i]
         if not isinstance(item, Shed):
-            placer.run(item)
+            try:
+                placer.run(item)
+            except JamError as exc:
+                raise ValueError(f"{n}: {exc}") from None
             body.append(item.text() if isinstance(item, Shift) else text(item))
             i += 1
             continue
         end = next((j for j in range(i, len(cycle)) if not isinstance(cycle[j], Shed)),
                    len(cycle))  # fmt: skip
-        pick = [(j, replace(s, name=f"cycle {n}, {s.name}")) for j, s in enumerate(cycle[i:end], i)
+        pick = [(j, replace(s, name=f"{n}, {s.name}")) for j, s in enumerate(cycle[i:end], i)
                 if isinstance(s, Shed)]  # fmt: skip
-        body += _place_pick(placer, pick, closing[end - 1])
+        body += place(placer, pick, closing[end - 1])
         i = end
     return body
 
 
-def _place_pick(placer: Placer, pick: list[tuple[int, Shed]],
-                closing: Sequence[Instruction]) -> list[str]:  # fmt: skip
+def _place_pick(placer: Placer, pick: Pick, closing: Sequence[Instruction]) -> list[str]:
     """Place a pick's wefts one after the other; then the moves that close the shed must catch
     each of them. A weft a later one shields from those moves goes in again, higher, with
     the rest of its pick."""

@@ -18,6 +18,8 @@ from typing import Any
 
 from bwsd.config import parse_config
 from bwsd.errors import BwsdError, TwinError
+from bwsd.export.arrays import Arrays
+from bwsd.export.formed import takeups_of
 from bwsd.export.metrics import metrics, section
 from bwsd.export.mixing import NamedSection, ZoneVisits, section_header, simulate_with_visits
 from bwsd.program.generators import GENERATORS
@@ -153,9 +155,11 @@ def measure(candidate: Candidate) -> Row:
     twin, program, visits, named = _run(machine, text, name)
     sk = twin.skeleton()
     with stage("metrics"):
-        band = section(sk)
+        arrays = Arrays.of(sk)
+        band = section(sk, arrays)
         z = None if band is None else (band["z"][0] + band["z"][1]) / 2
-        found = metrics(sk, program.cycle_length, z=z, named=named, visits=visits)
+        found = metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
+                        visits=visits, arrays=arrays)  # fmt: skip
     return flatten(found, z)
 
 
@@ -181,12 +185,50 @@ def flatten(found: Mapping[str, Any], z: float | None) -> Row:
         "width": band.get("width"),
         "thickness": band.get("thickness"),
     }
-    for family, numbers in found["angles"].items():
-        row[f"angle_{family}"] = numbers["mean"]
-        row[f"angle_{family}_std"] = numbers["std"]
+    row.update(_formed(found))
+    for family, numbers in found["skeleton_angles"].items():
+        row[f"skeleton_angle_{family}"] = numbers["mean"]
+        row[f"skeleton_angle_{family}_std"] = numbers["std"]
+    row.update(_wefts(found["wefts"]))
     row.update(_footprint(found["footprint"], z))
     row.update(_mixing(found["mixing"]))
     return row
+
+
+def _formed(found: Mapping[str, Any]) -> Row:
+    """The formed zone, its angles per family (all, interior, surface), interpenetration and
+    yarn volume fraction; empty where there is no formed zone."""
+    zone = found["formed"]
+    cycles, z = zone["cycles"] or (None, None), zone["z"] or (None, None)
+    row: Row = {"formed_z_low": z[0], "formed_z_high": z[1], "formed_first_cycle": cycles[0],
+                "formed_last_cycle": cycles[1]}  # fmt: skip
+    for family, parts in (found["angles"] or {}).items():
+        row[f"angle_{family}"] = parts["all"]["mean"]
+        row[f"angle_{family}_std"] = parts["all"]["std"]
+        row[f"angle_{family}_interior"] = parts["interior"]["mean"]
+        row[f"angle_{family}_surface"] = parts["surface"]["mean"]
+    for where, prefix in (("formed", "overlap"), ("skeleton", "skeleton_overlap")):
+        measured = found["interpenetration"][where]
+        row[prefix] = measured["all"]["share"]
+        row[f"{prefix}_worst"] = measured["all"]["worst"]
+        row[f"{prefix}_p95"] = measured["all"]["p95"]
+        for family, numbers in measured.items():
+            if family != "all":
+                row[f"{prefix}_{family}"] = numbers["share"]
+    fractions = [h["fraction"] for h in found["volume_fraction"] or () if h["fraction"]]
+    row["volume_fraction"] = sum(fractions) / len(fractions) if fractions else None
+    row["volume_fraction_min"] = min(fractions, default=None)
+    row["volume_fraction_max"] = max(fractions, default=None)
+    return row
+
+
+def _wefts(found: Mapping[str, Any]) -> Row:
+    spread = found["contacts"]
+    return {
+        "wefts_loose": len(found["loose"]) if found["count"] else None,
+        "weft_contacts_min": spread["min"] if spread else None,
+        "weft_contacts_median": spread["median"] if spread else None,
+    }
 
 
 def _footprint(found: Mapping[str, Any] | None, z: float | None) -> Row:

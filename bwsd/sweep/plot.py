@@ -17,14 +17,15 @@ from bwsd.sweep.errors import MATPLOTLIB, PYARROW, SweepError
 
 Row = Mapping[str, Any]
 MM = ("takeup", "pitch", "pitch_x", "pitch_y", "d_mat", "diameter", "width", "thickness",
-      "takeup_total", "footprint_z")  # fmt: skip
+      "takeup_total", "footprint_z", "formed_z_low", "formed_z_high", "overlap_worst",
+      "overlap_p95", "skeleton_overlap_worst", "skeleton_overlap_p95")  # fmt: skip
 
 
 def axis_label(column: str) -> str:
     """An axis label: the column's name and its unit, when it has one."""
     if column in MM:
         return f"{column} (mm)"
-    if column.startswith("angle_"):
+    if column.startswith(("angle_", "skeleton_angle_")):
         return f"{column} (degrees)"
     if column in ("footprint_area", "footprint_outside"):
         return f"{column} (mm²)"

@@ -10,6 +10,7 @@ E_MOVE_OUT: int
 E_MOVE_BUSY: int
 E_LINE: int
 E_MOVE_SPAN: int
+E_JAM: int
 
 class KernelError(Exception): ...
 

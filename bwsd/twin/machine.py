@@ -7,6 +7,8 @@ from dataclasses import asdict, dataclass
 from itertools import pairwise
 from typing import Any, Literal
 
+from bwsd.twin.exact import exact
+
 
 @dataclass(frozen=True, order=True)
 class Segment:
@@ -57,6 +59,9 @@ class Machine:
             raise ValueError("c_mat must lie in [0, 1]")
         if self.yarn_diameter < 0:
             raise ValueError("yarn diameter must not be negative")
+        fault = self.diameter_fault(self.yarn_diameter)
+        if fault is not None:
+            raise ValueError(fault)
         object.__setattr__(self, "segments", tuple(self.segments))
         for seg in self.segments:
             self._check_segment(seg)
@@ -71,6 +76,20 @@ class Machine:
                              f"matrix (0 to {lines - 1})")  # fmt: skip
         if not 0 <= seg.lo < seg.hi < along:
             raise ValueError(f"segment {seg.text()}: needs 0 <= first < last <= {along - 1}")
+
+    def diameter_fault(self, diameter: float) -> str | None:
+        """Why yarns of ``diameter`` cannot fit this machine, or None (docs/twin.md).
+
+        Neighbouring warps start c_mat x pitch apart at the fell, so a diameter of that or
+        more makes them overlap from the start; compared on the exact decimals. A diameter
+        of 0 (centrelines only) always fits.
+        """
+        d, gap = exact(diameter), exact(self.c_mat) * min(exact(self.pitch_x), exact(self.pitch_y))
+        if d == 0 or d < gap:
+            return None
+        return (f"a yarn diameter of {diameter:g} mm does not fit: it must be less than c_mat x "
+                f"the smaller pitch ({float(gap):g} mm), where neighbouring yarns start at the "
+                "fell")  # fmt: skip
 
     def as_dict(self) -> dict[str, Any]:
         """The machine as plain data (snapshots, skeleton JSON); ``segments`` only when it

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from bwsd.errors import MoveError, ShedClosedError, TwinError
+from bwsd.errors import JamError, MoveError, ShedClosedError, TwinError
 from bwsd.twin import _kernel
 from bwsd.twin.exact import MAX_DIAMETER, MIN_LENGTH, SCALE, as_bytes, exact
 from bwsd.twin.geometry import Geometry, Point, weft_ends
@@ -47,6 +47,9 @@ class Twin:
         if not (d == 0 or MIN_LENGTH <= d < MAX_DIAMETER):
             raise TwinError(f"yarn diameter {self.diameter:g} mm: it must be 0 or lie in "
                             f"[{float(MIN_LENGTH):g}, {MAX_DIAMETER}) mm")  # fmt: skip
+        fault = machine.diameter_fault(self.diameter)
+        if fault is not None:
+            raise TwinError(fault)
         self._geo = Geometry(machine)
         grid_d = d * SCALE
         self._kernel = _kernel.Kernel(
@@ -140,7 +143,7 @@ class Twin:
                 result = self._kernel.weft(*p0, *p1, predict)
                 angles = (instruction.angle,)
         except _kernel.KernelError as exc:
-            raise _refusal(exc.args, instruction, index) from None
+            raise _refusal(exc.args, instruction, index, self.diameter) from None
         except TwinError as exc:
             if exc.instruction:
                 raise
@@ -280,9 +283,12 @@ def _load(snapshot: Snapshot) -> Any:
         raise TwinError(str(exc)) from None
 
 
-def _refusal(args: tuple[int, ...], instruction: Instruction, index: int) -> TwinError:
+def _refusal(args: tuple[int, ...], instruction: Instruction, index: int,
+             diameter: float) -> TwinError:  # fmt: skip
     """The error of a refused instruction, from the kernel's code and details."""
     code, a, b, c, d = args
+    if code == _kernel.E_JAM:
+        return jam_error(a, b, c, d, diameter, index)
     if code == _kernel.E_LINE:
         axis = instruction.axis.upper() if isinstance(instruction, Shift) else "LINE"
         return MoveError(f"{axis} {b} is outside the matrix", instruction=index)
@@ -304,6 +310,19 @@ def _refusal(args: tuple[int, ...], instruction: Instruction, index: int) -> Twi
         return TwinError(f"yarn {a}: more than 100000 contacts in one sweep", instruction=index)
     return TwinError(f"the twin's kernel failed (code {code}): please report it",
                      instruction=index)  # fmt: skip
+
+
+def jam_error(moving: int, hit: int, z: int, guides: int, diameter: float,
+              index: int) -> JamError:  # fmt: skip
+    """A jam (docs/twin.md): the contact of ``moving`` on ``hit`` at grid height ``z``, too
+    close to the guides at grid height ``guides``."""
+    at, below = z / SCALE, (guides - z) / SCALE
+    where = f"{below:.4g} mm below the guides" if below > 0 else "at or above the guides"
+    return JamError(f"jam: yarn {moving} would rest on yarn {hit} at z = {at:.4f} mm, {where} "
+                    f"(z = {guides / SCALE:.4f} mm), within one yarn diameter ({diameter:g} mm) "
+                    "of them: the yarns would lock at the guides (more take-up per cycle moves "
+                    "the contacts down)", instruction=index, yarns=(moving, hit),
+                    z=at)  # fmt: skip
 
 
 ProgressFn = Callable[[int, int], None]

@@ -8,8 +8,10 @@ import math
 import numpy as np
 import pytest
 
+from bwsd.export.angles import skeleton_angles
+from bwsd.export.arrays import Arrays
 from bwsd.export.errors import ExportError
-from bwsd.export.metrics import angles, contact_zone, contacts_per_cycle, metrics, section
+from bwsd.export.metrics import contact_zone, contacts_per_cycle, metrics, section, weft_contacts
 
 from .conftest import build, warp, weft
 
@@ -22,6 +24,11 @@ def inclined(start, degrees, lengths, azimuth=0.0):
     for length in lengths:
         points.append(points[-1] + length * step)
     return [tuple(p) for p in points]
+
+
+def angles(sk):
+    """The whole skeleton's angles per family."""
+    return skeleton_angles(Arrays.of(sk))
 
 
 def test_angles_of_thirty_degree_yarns():
@@ -124,3 +131,16 @@ def test_metrics_is_plain_json(small):
     assert (result["nodes"], result["contacts"], result["instructions"]) == (13, 2, 6)
     assert result["cycles"]["counts"] == [1, 1]
     assert result["section"]["width"] == pytest.approx(21.0)
+
+
+def test_weft_contacts_name_the_loose_wefts_and_those_held_once():
+    sk = build(
+        [warp([(0, 0, 0), (0, 0, 9), (0, 0, 99)]), weft([(0, 0, 3), (9, 0, 3)]),
+         weft([(0, 0, 5), (9, 0, 5)]), weft([(0, 0, 7), (9, 0, 7)], angle=30)],
+        [(1, 0, 0, 1, 3), (2, 0, 1, 1, 4), (3, 0, 1, 2, 5)],
+    )  # fmt: skip
+    found = weft_contacts(sk)
+    assert found["count"] == 3 and found["per_weft"] == [2, 1, 0]
+    assert (found["loose"], found["held_once"]) == ([3], [2])
+    assert found["contacts"] == {"min": 0, "median": 1.0, "max": 2}
+    assert weft_contacts(build([warp([(0, 0, 0), (0, 0, 9)])]))["contacts"] is None

@@ -10,8 +10,11 @@ from pathlib import Path
 import pytest
 
 from bwsd.errors import ShedClosedError
+from bwsd.export.metrics import weft_contacts
 from bwsd.program import parse_program, validate
-from bwsd.program.braidweave import ANGLES, braid_weave, sheds
+from bwsd.program.braidweave import ANGLES, braid_weave, opening, sheds
+from bwsd.program.layers import HELD
+from bwsd.program.layers import _try as try_layer
 from bwsd.program.render import Generated
 from bwsd.program.sections import parse_section
 from bwsd.program.wefts import Placer, Shed
@@ -58,8 +61,48 @@ def test_shaped_braid_weaves_take_wefts_across_the_junction(shape, flange, web):
     assert gen.machine.segments  # the corner lines' segments
 
 
-def test_each_weft_sits_at_the_lowest_height_where_it_is_open_and_caught():
-    """Replayed on a twin: one grid step lower, every candidate line is closed or loose."""
+def _layers(program: Program) -> list[tuple[int, list[Weft]]]:
+    """Each run of consecutive WEFTs (a layer): its first instruction's index and the wefts."""
+    found: list[tuple[int, list[Weft]]] = []
+    items = program.instructions
+    for i, item in enumerate(items):
+        if isinstance(item, Weft):
+            if i and isinstance(items[i - 1], Weft):
+                found[-1][1].append(item)
+            else:
+                found.append((i, [item]))
+    return found
+
+
+def test_each_layer_lies_at_one_height_and_each_weft_is_held_twice():
+    """A weaver's layer: one plane, every weft held by at least two contacts. Before this
+    rule the median weft had one contact and the wefts of a layer spread over 14 mm."""
+    gen = braid_weave(3, 3, cycles=8, weft_every=2)
+    program = _parsed(gen)
+    layers = _layers(program)
+    assert len(layers) == 4
+    for _, wefts in layers:
+        assert len({w.z for w in wefts}) == 1, wefts
+    sk = simulate(gen.machine, program).skeleton()
+    held = weft_contacts(sk)
+    assert held["count"] == sum(len(w) for _, w in layers)
+    assert held["contacts"]["min"] >= HELD
+    assert held["loose"] == held["held_once"] == []
+
+
+def _shed_of(gen: Generated, placer: Placer, weft: Weft) -> Shed:
+    """The generator's shed for ``weft``: the one of its angle whose line lies nearest."""
+    section = parse_section(next(line.split(": ", 1)[1] for line in gen.program.splitlines()
+                                 if line.startswith("# section: ")))  # fmt: skip
+    options = sheds(section, weft.angle)
+    lines = [(abs(c.x - weft.x) + abs(c.y - weft.y), s)
+             for s in options for c in placer.candidates(s, weft.z)]  # fmt: skip
+    return min(lines, key=lambda pair: pair[0])[1]
+
+
+def test_each_layer_sits_at_the_lowest_height_that_holds_it():
+    """Replayed on a twin: one grid step lower, some weft of the layer is not let in, a
+    closing move jams, or some weft is held fewer than twice."""
     gen = braid_weave(3, 3, cycles=4, weft_every=2, angles=(0, 90))
     program = _parsed(gen)
     placer = Placer(gen.machine, program.fill)
@@ -67,35 +110,62 @@ def test_each_weft_sits_at_the_lowest_height_where_it_is_open_and_caught():
     items = list(program.instructions)
     checked = 0
     for i, item in enumerate(items):
-        if isinstance(item, Weft) and item.z - step >= placer.heights[0]:
-            shed = _shed_of(gen, placer, item)
-            closing = [x for x in items[i + 1 :] if not isinstance(x, Weft)][:8]
+        if isinstance(item, Weft) and not isinstance(items[i - 1], Weft):
+            count = next(k for k, w in enumerate(items[i:]) if not isinstance(w, Weft))
+            wefts = [w for w in items[i : i + count] if isinstance(w, Weft)]
+            sheds_ = [_shed_of(gen, placer, w) for w in wefts]
+            closing = [x for x in items[i + len(wefts) :] if not isinstance(x, Weft)][:8]
             lower = item.z - step
-            for weft in placer.candidates(shed, lower):
-                assert not placer.would_catch(weft, closing), (i, weft)
-            checked += 1
+            if lower >= min(placer.lowest_fixed(s) for s in sheds_):
+                before = placer.twin.snapshot()
+                tried = try_layer(placer, sheds_, closing, lower)
+                placer.twin.restore(before)
+                assert tried.held is None or min(tried.held) < HELD, (i, tried)
+                checked += 1
         placer.twin.apply(item)
-    assert checked >= 2
+    assert checked >= 1
 
 
-def _shed_of(gen: Generated, placer: Placer, weft: Weft) -> Shed:
-    """The generator's shed for ``weft``: the one of its angle whose line lies nearest."""
-    section = parse_section(next(line.split(": ", 1)[1] for line in gen.program.splitlines()
-                                 if line.startswith("# section: ")))  # fmt: skip
-    options = sheds(section, int(weft.angle))
-    lines = [(abs(c.x - weft.x) + abs(c.y - weft.y), s)
-             for s in options for c in placer.candidates(s, weft.z)]  # fmt: skip
-    return min(lines, key=lambda pair: pair[0])[1]
+def test_any_angle_goes_in():
+    gen = braid_weave(3, 3, cycles=6, weft_every=2, angles=(30, -30, 60))
+    program = _parsed(gen)
+    assert {w.angle for _, ws in _layers(program) for w in ws} == {30, -30, 60}
+    assert "--angles=30,-30,60" in gen.command
+    held = weft_contacts(simulate(gen.machine, program).skeleton())
+    assert held["contacts"]["min"] >= HELD
+
+
+def test_the_lines_of_an_angle():
+    """0, 90 and 45 keep their rows, columns and diagonals; another angle has lines one row
+    (or column) apart across it, and opens after the step nearer to it."""
+    section = parse_section("rect:3x3")
+    assert len(sheds(section, 0)) == len(sheds(section, 90)) == 2
+    thirty = sheds(section, 30)
+    assert thirty and all(shed.angle == 30 for shed in thirty)
+    assert (opening(30), opening(-30), opening(60), opening(120), opening(45)) == (
+        "row",
+        "row",
+        "col",
+        "col",
+        "row",
+    )
 
 
 @pytest.mark.parametrize(
     ("call", "message"),
     [
         (lambda: braid_weave(cycles=5, weft_every=2), "must be a multiple of weft-every"),
-        (lambda: braid_weave(angles=(30,)), "weft angles are among 0, 90, 45, -45"),
+        (lambda: braid_weave(angles=(float("nan"),)), "a finite number of degrees"),
         (lambda: braid_weave(2, 2, cycles=4, angles=(45,)), "no two neighbouring lines"),
         (lambda: braid_weave(3, 3, cycles=2, diameter=6.0),
-         "no height between the fell and the guides where the shed is open"),
+         "a yarn diameter of 6 mm does not fit: it must be less than c_mat x the smaller"),
+        # the L sizes whose diagonal layer used to be refused as a bare shed error: now the
+        # generator names the weft whose shed no height opens
+        (lambda: braid_weave(shape="L"), r"layer 3, 45 degree weft between lines -4 and -3 "
+         r"\(cells \(4, 1\) to \(6, 2\)\): no height below the guides lets the whole 45 "
+         "degree layer in: this weft's shed is closed"),
+        (lambda: braid_weave(shape="L", flange=(3, 7), web=(7, 3)), "45 degree weft between "
+         "lines -8 and -7 .*: no height below the guides lets the whole 45 degree layer in"),
     ],
 )  # fmt: skip
 def test_what_cannot_be_woven_is_refused_saying_why(call, message):
@@ -122,6 +192,6 @@ def test_the_command_line_prints_what_the_generator_makes(tmp_path):
                           text=True, timeout=120, check=False)  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert done.stdout == braid_weave(cycles=4, angles=(0, 90)).program
-    bad = subprocess.run([BWSD, "program", "braid-weave", "--angles", "0,30"],
+    bad = subprocess.run([BWSD, "program", "braid-weave", "--angles", "0,x"],
                          capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
-    assert bad.returncode == 2 and "weft angles are among 0, 90, 45, -45" in bad.stderr
+    assert bad.returncode == 2 and "expected angles in degrees" in bad.stderr

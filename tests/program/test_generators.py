@@ -295,9 +295,11 @@ def test_u_section_wefts_stop_at_the_opening():
     assert across.count(True) == 2 * 2 and across.count(False) == 2 * 3 * 2
 
 
-def test_a_shed_too_narrow_for_the_yarn_is_refused_naming_the_weft():
-    with pytest.raises(ValueError, match=r"cycle 1, the weft of the first pick: no height "
-                       "between the fell and the guides where the shed is open"):  # fmt: skip
+def test_a_yarn_too_thick_for_the_machine_is_refused_by_the_generator():
+    """Warps start c_mat x pitch (5 mm here) apart at the fell: a 10 mm yarn cannot fit,
+    which the generator says (it used to search for an open shed and report none)."""
+    with pytest.raises(ValueError, match=r"a yarn diameter of 10 mm does not fit: it must be "
+                       r"less than c_mat x the smaller pitch \(5 mm\)"):  # fmt: skip
         weave_plain(4, cycles=1, diameter=10.0)
 
 

@@ -29,6 +29,11 @@ def test_worked_example_is_valid():
     validate(parse_program(WORKED), M2)
 
 
+def test_a_yarn_just_thinner_than_the_gap_at_the_fell_is_valid():
+    validate(parse_program("YARN diameter=4.999\nFILL row=0 col=0\nX\nEND"), M3)
+    validate(parse_program("YARN diameter=0\nFILL row=0 col=0\nX\nEND"), M3)
+
+
 FAULTS = [
     # (program, machine, line, column, part of the message)
     ("FILL row=0 col=0\nX.\n.X..X\nEND", M3, 3, 5, "outside"),
@@ -38,6 +43,14 @@ FAULTS = [
     ("FILL row=0 col=0\nX\nEND\nCOL 0:-1", M3, 4, 5, "leave the matrix"),
     ("FILL row=0 col=0\n.XX\nEND\nROW 0:+1 1:+1\n ROW 1:-1   0:+1", M3, 5, 13, "instruction 2"),
     ("FILL row=0 col=0\nX\nEND\nREPEAT 5\n  COL 0:+1\nEND", M3, 5, 7, "instruction 3"),
+    # a YARN the machine cannot hold: c_mat 0.5 x pitch 10 = 5 mm between neighbours at the fell
+    (
+        "# thick\nYARN  diameter=5\nFILL row=0 col=0\nX\nEND",
+        M3,
+        2,
+        16,
+        "a yarn diameter of 5 mm does not fit: it must be less than c_mat x the smaller pitch",
+    ),
 ]
 
 

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from bwsd.export.formed import takeups_of
 from bwsd.export.metrics import metrics, section
 from bwsd.export.mixing import section_header, simulate_with_visits
 from bwsd.program.generators import GENERATORS
@@ -17,17 +18,19 @@ ROOT = Path(__file__).resolve().parents[2]
 WEAVE = ROOT / "examples" / "weave-plain.bws"
 WEAVE_CONFIG = ROOT / "config" / "weave-plain.toml"
 
-# 20 candidates: 5 take-ups x 2 convergence ratios x 2 cycle counts of an 8-carrier braid.
+# 20 candidates: 5 take-ups x 2 convergence ratios x 2 cycle counts of a 3 x 3 braid, each
+# long enough for a formed zone.
 BRAID_SPEC = """
 [sweep]
 generator = "braid4"
 [fixed]
-rows = 2
-cols = 2
+rows = 3
+cols = 3
+diameter = 0.5
 [vary]
-takeup = [1, 2.0, 3.0, 4.5, 6.0]
+takeup = [2, 3.0, 4.5, 6.0, 8.0]
 c_mat = [0.3, 0.6]
-cycles = [3, 4]
+cycles = [12, 14]
 """
 
 # A fixed program on its config: a pitch of 5 mm closes the shed (the twin refuses it), two
@@ -58,7 +61,8 @@ def reference(kind: str, params: dict[str, Any]) -> dict[str, Any]:
     sk = twin.skeleton()
     band = section(sk)
     z = None if band is None else (band["z"][0] + band["z"][1]) / 2
-    return metrics(sk, program.cycle_length, z=z, named=named, visits=visits)
+    return metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
+                   visits=visits)  # fmt: skip
 
 
 def bwsd(*args: str, cwd: Path, timeout: float = 180) -> subprocess.CompletedProcess[str]:

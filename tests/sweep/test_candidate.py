@@ -15,8 +15,24 @@ def test_a_row_holds_the_metrics_of_the_candidate_run_on_its_own(tmp_path):
     found = reference("braid4", dict(candidate.params))
     assert row["status"] == "ok" and row["reason"] is None
     assert row["id"] == candidate.id and row["takeup"] == candidate.params["takeup"]
-    assert row["angle_warp"] == found["angles"]["warp"]["mean"]
-    assert row["angle_warp_std"] == found["angles"]["warp"]["std"]
+    assert row["formed_first_cycle"] == found["formed"]["cycles"][0] is not None
+    assert row["formed_z_high"] == found["formed"]["z"][1]
+    warp = found["angles"]["warp"]
+    assert row["angle_warp"] == warp["all"]["mean"]
+    assert row["angle_warp_std"] == warp["all"]["std"]
+    assert row["angle_warp_interior"] == warp["interior"]["mean"]
+    assert row["angle_warp_surface"] == warp["surface"]["mean"]
+    assert row["skeleton_angle_warp"] == found["skeleton_angles"]["warp"]["mean"]
+    overlap = found["interpenetration"]
+    assert row["overlap"] == overlap["formed"]["all"]["share"] > 0
+    assert row["overlap_worst"] == overlap["formed"]["all"]["worst"]
+    assert row["skeleton_overlap_p95"] == overlap["skeleton"]["all"]["p95"]
+    fractions = [h["fraction"] for h in found["volume_fraction"]]
+    assert row["volume_fraction"] == sum(fractions) / 3
+    assert (row["volume_fraction_min"], row["volume_fraction_max"]) == (
+        min(fractions),
+        max(fractions),
+    )
     assert row["width"] == found["section"]["width"]
     assert row["thickness"] == found["section"]["thickness"]
     assert row["contacts"] == found["contacts"] > 0
@@ -26,7 +42,7 @@ def test_a_row_holds_the_metrics_of_the_candidate_run_on_its_own(tmp_path):
     assert row["footprint_area"] == found["footprint"]["measured"]["area"] > 0
     assert row["footprint_coverage"] == found["footprint"]["coverage"]
     assert row["mixed_by_cycle"] == found["mixing"]["k"]
-    assert row["section"] == "rect:2x2"
+    assert row["section"] == "rect:3x3"
     assert math.isfinite(row["seconds"]) and row["seconds"] > 0
 
 

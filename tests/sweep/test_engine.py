@@ -11,7 +11,7 @@ def test_batches_follow_the_candidates_times_and_shrink_at_the_end(tmp_path):
     todo = load_spec(
         write(
             tmp_path,
-            BRAID_SPEC.replace("cycles = [3, 4]", "cycles = [3, 4, 5, 6, 7, 8, 9, 10, 11, 12]"),
+            BRAID_SPEC.replace("cycles = [12, 14]", "cycles = [3, 4, 5, 6, 7, 8, 9, 10, 11, 12]"),
         )
     ).candidates()
     assert len(todo) == 100

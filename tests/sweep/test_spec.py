@@ -29,8 +29,9 @@ def test_a_grid_is_every_combination_in_order_with_stable_ids(tmp_path):
     first = spec.candidates()
     assert len(first) == 20
     assert [c.index for c in first] == list(range(20))
-    assert first[0].columns == {"rows": 2, "cols": 2, "takeup": 1.0, "c_mat": 0.3, "cycles": 3}
-    assert isinstance(first[0].params["takeup"], float)  # 1 in TOML, a float parameter
+    assert first[0].columns == {"rows": 3, "cols": 3, "diameter": 0.5, "takeup": 2.0,
+                                "c_mat": 0.3, "cycles": 12}  # fmt: skip
+    assert isinstance(first[0].params["takeup"], float)  # 2 in TOML, a float parameter
     again = load_spec(write(tmp_path, BRAID_SPEC, "again.toml")).candidates()
     assert [c.id for c in again] == [c.id for c in first]
     assert len({c.id for c in first}) == 20

@@ -20,6 +20,8 @@ Model conventions (where docs/twin.md leaves the choice to the implementation):
   start node then its end node. A warp's free node keeps its id and moves with its guide.
 - A contact is recorded as (instruction, moving yarn, X node, hit yarn, Y node), in the order
   made; instructions count from 1.
+- The guides' height during a TAKEUP is the one it moves them to: the take-up so far includes
+  its own length (the guides are at their new height when its sweeps run).
 """
 
 from __future__ import annotations
@@ -45,6 +47,15 @@ class ShedClosed(ValueError):
 
 class MoveRefused(ValueError):
     """A case would leave the matrix or land on an occupied cell (nothing has moved)."""
+
+
+class Jam(ValueError):
+    """A contact node would lie within one diameter of the guide plane, or above it: the
+    yarns would lock at the guides (nothing of the instruction is applied)."""
+
+    def __init__(self, moving: int, hit: int, z: int) -> None:
+        super().__init__(f"jam: yarn {moving} on yarn {hit} at z = {math.ldexp(z, -32)!r} mm")
+        self.moving, self.hit, self.z = moving, hit, z
 
 
 # --- numbers ------------------------------------------------------------------------------
@@ -253,6 +264,8 @@ class RefTwin:
         self.diameter = exact(diameter)
         if self.diameter < 0:
             raise ValueError("yarn diameter must not be negative")
+        if self.diameter != 0 and self.diameter >= self.c_mat * min(self.pitch_x, self.pitch_y):
+            raise ValueError("yarns of this diameter overlap where they start at the fell")
         self.origin = (
             Fraction(machine.cols - 1, 2) * self.pitch_x,
             Fraction(machine.rows - 1, 2) * self.pitch_y,
@@ -463,6 +476,9 @@ class RefTwin:
             c, d = self.nodes[hit_ids[i]], self.nodes[hit_ids[i + 1]]
             y = (_round_units(p[0]), _round_units(p[1]), _round_units(p[2]))
             x = rest_point(y, _sub(a2, a1), _sub(d, c), self.diameter)
+            top = max(y[2], x[2])
+            if top >= self._guide_z() - self.diameter * SCALE:
+                raise Jam(moving, yarn, top)
             y_id = self._new_node(y)
             hit_ids.insert(i + 1, y_id)
             x_id = self._new_node(x)

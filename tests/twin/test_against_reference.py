@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from bwsd.errors import ShedClosedError
+from bwsd.errors import JamError, ShedClosedError
 from bwsd.twin import Machine, Shift, TakeUp, Weft
 from bwsd.twin.machine import Segment
 from tests.twin.conftest import BRAID_CYCLE, BRAID_FILL, assert_same, run_both
-from tests.twin.reference import ShedClosed
+from tests.twin.reference import Jam, ShedClosed
 
 SETTINGS = settings(
     max_examples=60,
@@ -65,6 +66,12 @@ def _entry(draw, machine: Machine, axis: str, line: int) -> tuple[int, ...]:
     return (line, k)
 
 
+def _fitting(machine: Machine, share: float) -> float:
+    """A diameter of ``share`` of the largest that fits ``machine`` (0 below 1e-3 mm)."""
+    d = share * machine.c_mat * min(machine.pitch_x, machine.pitch_y)
+    return d if d >= 1e-3 else 0.0
+
+
 @st.composite
 def programs(draw, degenerate: bool):
     rows, cols = draw(st.integers(2, 4)), draw(st.integers(2, 4))
@@ -78,13 +85,13 @@ def programs(draw, degenerate: bool):
             draw(st.sampled_from([2.0, 4.0, 8.0])),
             draw(st.sampled_from([0.0, 0.5, 1.0])),
         )
-        diameter = draw(st.sampled_from([0.0, 0.0, 0.5]))
+        diameter = draw(st.sampled_from([0.0, 0.0, 0.25])) if machine.c_mat else 0.0
     else:
         f = st.floats(0.5, 20.0, allow_nan=False)
         machine = Machine(
             rows, cols, draw(f), draw(f), draw(st.floats(5.0, 200.0)), draw(st.floats(0.0, 1.0))
         )
-        diameter = draw(st.one_of(st.just(0.0), st.floats(1e-3, 2.0)))
+        diameter = _fitting(machine, draw(st.one_of(st.just(0.0), st.floats(0.0, 0.99))))
     machine = draw(segments(machine))
     cells = [(r, c) for r in range(rows) for c in range(cols)]
     fill = sorted(
@@ -130,10 +137,12 @@ def programs(draw, degenerate: bool):
     return machine, fill, diameter, instructions
 
 
-def _compare(case) -> None:
-    """Kernel and reference side by side: the same refusals, then the same skeleton."""
+def _compare(case) -> int:
+    """Kernel and reference side by side: the same refusals (a jam by the same yarns at the
+    same height), then the same skeleton. Returns the number of jams."""
     machine, fill, diameter, instructions = case
     twin, ref = run_both(machine, fill, diameter, [])
+    jams = 0
     for ins in instructions:
         try:
             twin.apply(ins)
@@ -141,8 +150,17 @@ def _compare(case) -> None:
             with pytest.raises(ShedClosed):
                 ref.run(ins)
             continue
+        except JamError as exc:
+            with pytest.raises(Jam) as found:
+                ref.run(ins)
+            assert exc.yarns == (found.value.moving, found.value.hit)
+            assert exc.z == math.ldexp(found.value.z, -32)
+            assert exc.instruction == ref.done + 1
+            jams += 1
+            continue
         ref.run(ins)
     assert_same(twin, ref)
+    return jams
 
 
 @SETTINGS
@@ -186,14 +204,15 @@ def braids(draw):
             draw(st.sampled_from([4.0, 10.0, 100.0])),
             draw(st.sampled_from([0.0, 0.25, 0.5, 1.0])),
         )
-        diameter = draw(st.sampled_from([0.0, 0.5, 1.0]))
+        fits = [d for d in (0.0, 0.5, 1.0) if d < machine.c_mat * pitch] or [0.0]
+        diameter = draw(st.sampled_from(fits))
         takeup = st.sampled_from([0.5, 1.0, 2.0])
     else:
         f = st.floats(1.0, 20.0)
         machine = Machine(
             4, 4, draw(f), draw(f), draw(st.floats(20.0, 200.0)), draw(st.floats(0.05, 0.95))
         )
-        diameter = draw(st.one_of(st.just(0.0), st.floats(1e-3, 1.5)))
+        diameter = _fitting(machine, draw(st.one_of(st.just(0.0), st.floats(0.0, 0.99))))
         takeup = st.floats(0.1, 5.0)
     instructions = []
     for _ in range(draw(st.integers(1, 3))):

@@ -361,10 +361,10 @@ def test_contact_points_exist_sized_by_the_diameter(runs: Runs, page: Browsing):
         mid = [(a[i] + b[i]) / 2 for i in range(3)]
         assert math.dist(shown[3 * k : 3 * k + 3], mid) < 1e-3  # midway between X and Y
     d = run.skeleton["diameter"]
-    assert _view(page, "v => v.contactMaterial.userData.diameter") == d == 1.5
+    assert _view(page, "v => v.contactMaterial.userData.diameter") == d == 1.0
     _preset(page, "front")
-    # zoomed in 4x (as the wheel does), so that the points are well above their 3 px floor
-    _view(page, "v => { v.camera.zoom = 4; v.rig.applySoft(); v.invalidate(true); }")
+    # zoomed in 6x (as the wheel does), so that the points are well above their 3 px floor
+    _view(page, "v => { v.camera.zoom = 6; v.rig.applySoft(); v.invalidate(true); }")
     page.until("() => !window.bwsd.view.needsRender")
     size = _view(page, "v => v.contactMaterial.size")  # CSS px in an orthographic view
     assert size > 6

@@ -295,3 +295,15 @@ int ratio_cmp_exact(const big *a1, const big *b1, const big *a2, const big *b2, 
     *out = big_cmp(&l, &r);
     return E_OK;
 }
+
+int within_diameter(int64_t gap, const Diam *d, int *out) {
+    if (d->zero) return *out = gap <= 0, E_OK;
+    double g = (double)gap; /* exact: |gap| < 2^53 */
+    if (!exact_only && g > d->f * (1 + 4 * EPS)) return *out = 0, E_OK;
+    if (!exact_only && g < d->f * (1 - 4 * EPS)) return *out = 1, E_OK;
+    big gb, lhs; /* gap <= num / den  <=>  gap * den <= num (den > 0) */
+    big_from_i64(&gb, gap);
+    if (big_mul(&lhs, &gb, &d->den)) return E_ARITH;
+    *out = big_cmp(&lhs, &d->num) <= 0;
+    return E_OK;
+}

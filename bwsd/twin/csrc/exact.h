@@ -29,6 +29,7 @@ enum {
     E_MOVE_BUSY = 6,
     E_LINE = 7,     /* a line index outside the matrix */
     E_MOVE_SPAN = 8, /* a case would leave the segment it is moved on */
+    E_JAM = 9,       /* a contact node within one diameter of the guide plane, or above it */
 };
 
 /* A signed value as the filter saw it: float value, its error bound, the exact sign, and
@@ -81,6 +82,8 @@ int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b,
 /* X = round(y - d n / |n|), n = m with its component along u removed. */
 int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d,
                int64_t *out);
+/* Whether gap <= d exactly (gap in grid units, |gap| < 2^53; d the diameter). */
+int within_diameter(int64_t gap, const Diam *d, int *out);
 /* Compare the ratios |a1| / (|a1| + |b1|) and |a2| / (|a2| + |b2|) exactly: -1, 0, 1. */
 int ratio_cmp_exact(const big *a1, const big *b1, const big *a2, const big *b2, int *out);
 int round_ratio(const big *num, const big *den, int64_t *out);

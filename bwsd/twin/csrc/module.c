@@ -528,7 +528,8 @@ PyMODINIT_FUNC PyInit__kernel(void) {
         PyModule_AddIntConstant(m, "E_MOVE_OUT", E_MOVE_OUT) < 0 ||
         PyModule_AddIntConstant(m, "E_MOVE_BUSY", E_MOVE_BUSY) < 0 ||
         PyModule_AddIntConstant(m, "E_LINE", E_LINE) < 0 ||
-        PyModule_AddIntConstant(m, "E_MOVE_SPAN", E_MOVE_SPAN) < 0) {
+        PyModule_AddIntConstant(m, "E_MOVE_SPAN", E_MOVE_SPAN) < 0 ||
+        PyModule_AddIntConstant(m, "E_JAM", E_JAM) < 0) {
         Py_XDECREF(m);
         return NULL;
     }

@@ -206,6 +206,20 @@ static int make_contact(State *s, int32_t w, const Hit *h, const int64_t *b, con
     return err;
 }
 
+/* A contact whose node Y or X lies within one diameter of the guide plane, or above it, is
+ * a jam (docs/twin.md): the yarns would lock at the guides. err: moving yarn, hit yarn, the
+ * higher node's z, the guides' z. */
+static int jam_check(State *s, int32_t w, int32_t hit, const int64_t *y, const int64_t *x) {
+    int64_t z = y[2] > x[2] ? y[2] : x[2];
+    int jam = 0, err = within_diameter(s->gz - z, &s->d, &jam);
+    if (err || !jam) return err;
+    s->err[0] = w;
+    s->err[1] = hit;
+    s->err[2] = z;
+    s->err[3] = s->gz;
+    return E_JAM;
+}
+
 /* Move warp w's free node to target, inserting a node pair at every contact on the way. */
 static int sweep(State *s, int32_t w, const int64_t *target, int32_t instr) {
     int64_t a1[3], a2[3], b[3], y[3], x[3], r[3], m[3], u[3];
@@ -229,6 +243,7 @@ static int sweep(State *s, int32_t w, const int64_t *target, int32_t instr) {
             u[k] = h->d[k] - h->c[k];
         }
         if (!err) err = rest_round(y, m, u, &s->d, x);
+        if (!err) err = jam_check(s, w, h->yarn, y, x);
         if (!err) err = lerp_round(a1, a2, &h->w2, &h->w1, exact_t, &ex, r);
         if (!err) err = make_contact(s, w, h, b, y, x, instr);
         if (err) return err;
