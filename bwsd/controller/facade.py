@@ -42,7 +42,7 @@ from bwsd.controller.status import (
 from bwsd.controller.supervisor import Supervisor
 from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import BoolGrid, Fieldbus, FieldbusError, MachineState
-from bwsd.journal import ENDED, Journal, ProgramRecord
+from bwsd.journal import COMPLETE, ENDED, Journal, JournalError, ProgramRecord
 from bwsd.twin import Machine, Program, Twin
 
 log = logging.getLogger("bwsd.controller")
@@ -96,6 +96,9 @@ class Controller:
         self.broken = ""  # why the active program could not be restored ("" when it was)
         self.restoring: ProgramRecord | None = None  # the program a restart restores
         self._checking = asyncio.Lock()  # one program check at a time
+        self.mode_requested = UnitMode.PRODUCTION  # the unit mode last asked for
+        self.good = 0  # programs that reached Complete (the doors' production counts)
+        self.defective = 0  # programs left unfinished after they ran: another loaded instead
 
     # ----- what the doors read -----
     @property
@@ -162,6 +165,9 @@ class Controller:
             recovering=self.recovering or self.broken,
             next=None if ended or job is None else job.next_step(),
             resumable=self.resumable(),
+            mode_requested=self.mode_requested,
+            good=self.good,
+            defective=self.defective,
         )
 
     def next_step(self) -> dict[str, Any] | None:
@@ -212,6 +218,9 @@ class Controller:
             pid: int = await self.recorder.write(
                 self.journal.add_program, name, text, len(program.instructions)
             )
+            old = self.job
+            if old is not None and old.ended != COMPLETE and (old.done or old.pending):
+                self.defective += 1  # it ran and can no longer be finished
             self.job, self.restoring, self.broken = Job(program, pid, name, twin, totals), None, ""
             log.info(
                 "program %d %r loaded by %s: %d instructions",
@@ -223,6 +232,26 @@ class Controller:
             self.events.publish(ProgramLoaded(pid, name, len(program.instructions)))
             self.seen.compare(self.at_rest())
         return pid
+
+    async def load_stored(self, program_id: int, who: str = "") -> int:
+        """Load again a program the journal holds (its text checked against its sha256), as
+        ``load`` does: the journal's new id."""
+        try:
+            record = await self.recorder.write(self.journal.program, program_id)
+            text = await self.recorder.write(self.journal.program_text, program_id)
+        except JournalError as exc:
+            raise ControllerError(f"program {program_id}: {exc.reason}") from None
+        return await self.load(record.name, text, who)
+
+    async def history(self, limit: int = 50, before: int | None = None) -> list[ProgramRecord]:
+        """The journal's programs, newest first (read in a worker thread)."""
+        return await asyncio.to_thread(self.journal.history, limit, before)
+
+    async def program_record(self, program_id: int) -> tuple[ProgramRecord, str]:
+        """One program of the journal and its text (JournalError for an unknown id)."""
+        record = await asyncio.to_thread(self.journal.program, program_id)
+        text = await asyncio.to_thread(self.journal.program_text, program_id)
+        return record, text
 
     def _refuse_load(self) -> None:
         if self.recovering:
@@ -250,6 +279,7 @@ class Controller:
 
     async def set_mode(self, mode: UnitMode, who: str = "") -> None:
         """Change the unit mode (where PackML allows it), journaled and published."""
+        self.mode_requested = mode
         async with self.lock:
             old = self.packml.mode
             try:
@@ -331,6 +361,8 @@ class Controller:
             f"state {new.label}", self.journal.log_state, int(new), new.label, reason, event.at
         )
         self.events.publish(event)
+        if new is State.COMPLETE and self.job is not None and self.job.complete:
+            self.good += 1
         if new in (
             State.IDLE,
             State.HELD,
