@@ -116,7 +116,7 @@ async def get_programs(
     ctx: Ctx, limit: Limit = 50, before: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None
 ) -> list[ProgramOut]:
     """Programs loaded, newest first; page with ``before`` (the last id seen)."""
-    records = await asyncio.to_thread(ctx.controller.journal.history, limit, before)
+    records = await ctx.controller.history(limit, before)
     return [ProgramOut(**asdict(r)) for r in records]
 
 
@@ -126,12 +126,10 @@ async def get_program(
     ctx: Ctx, program_id: Annotated[int, PathParam(ge=1, le=MAX_ID)]
 ) -> ProgramDetailOut:
     """One program's record and its text."""
-    journal = ctx.controller.journal
-    found = await asyncio.to_thread(journal.history, 1, program_id + 1)
-    if not found or found[0].id != program_id:
+    found = await ctx.controller.program_record(program_id)
+    if found is None:
         raise ApiError(404, f"no program {program_id}")
-    text = await asyncio.to_thread(journal.program_text, program_id)
-    return ProgramDetailOut(**asdict(found[0]), text=text)
+    return ProgramDetailOut(**asdict(found[0]), text=found[1])
 
 
 @router.get("/history", response_model=HistoryOut, dependencies=READ,
@@ -140,9 +138,7 @@ async def get_history(
     ctx: Ctx, after_state: After = 0, after_event: After = 0, limit: Limit = 100
 ) -> HistoryOut:
     """The journal's PackML state changes and events, oldest first, after the ids given."""
-    journal = ctx.controller.journal
-    states = await asyncio.to_thread(journal.states, after_state, limit)
-    events = await asyncio.to_thread(journal.events, after_event, limit)
+    states, events = await ctx.controller.records(after_state, after_event, limit)
     return HistoryOut(states=[StateRecordOut(**asdict(s)) for s in states],
                       events=[EventRecordOut(**asdict(e)) for e in events])  # fmt: skip
 

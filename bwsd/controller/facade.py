@@ -42,13 +42,33 @@ from bwsd.controller.status import (
 from bwsd.controller.supervisor import Supervisor
 from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import BoolGrid, Fieldbus, FieldbusError, MachineState
-from bwsd.journal import COMPLETE, ENDED, Journal, JournalError, ProgramRecord
+from bwsd.journal import (
+    COMPLETE,
+    ENDED,
+    EventRecord,
+    Journal,
+    JournalError,
+    ProgramRecord,
+    StateRecord,
+)
 from bwsd.twin import Machine, Program, Twin
 
 log = logging.getLogger("bwsd.controller")
 Publish = Callable[[dict[str, Any]], None]
 _LOADABLE = frozenset({State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED})
 _ENDS = frozenset({Command.ABORT, Command.STOP})
+
+
+@dataclass(frozen=True)
+class TwinView:
+    """What the doors show of the twin: the matrix, its occupancy row by row, the take-up
+    (mm) and the contacts so far."""
+
+    rows: int
+    cols: int
+    occupancy: list[bool]
+    takeup: float
+    contacts: int
 
 
 @dataclass(frozen=True)
@@ -247,11 +267,30 @@ class Controller:
         """The journal's programs, newest first (read in a worker thread)."""
         return await asyncio.to_thread(self.journal.history, limit, before)
 
-    async def program_record(self, program_id: int) -> tuple[ProgramRecord, str]:
-        """One program of the journal and its text (JournalError for an unknown id)."""
-        record = await asyncio.to_thread(self.journal.program, program_id)
+    async def program_record(self, program_id: int) -> tuple[ProgramRecord, str] | None:
+        """One program of the journal and its text; None when the journal has no such id
+        (JournalError when its text no longer matches its sha256)."""
+        found = await asyncio.to_thread(self.journal.history, 1, program_id + 1)
+        if not found or found[0].id != program_id:
+            return None
         text = await asyncio.to_thread(self.journal.program_text, program_id)
-        return record, text
+        return found[0], text
+
+    async def records(self, after_state: int = 0, after_event: int = 0,
+                      limit: int = 100) -> tuple[list[StateRecord], list[EventRecord]]:  # fmt: skip
+        """The journal's state changes and events after the ids given, oldest first."""
+        states = await asyncio.to_thread(self.journal.states, after_state, limit)
+        events = await asyncio.to_thread(self.journal.events, after_event, limit)
+        return states, events
+
+    async def twin_view(self) -> TwinView:
+        """The machine's size and the twin's occupancy, take-up and contacts (copied in a
+        worker thread: it takes the twin's lock)."""
+        twin, m = self.twin, self.machine
+        if twin is None:
+            return TwinView(m.rows, m.cols, [], 0.0, 0)
+        occupancy = await asyncio.to_thread(lambda: twin.occupancy.ravel().tolist())
+        return TwinView(m.rows, m.cols, occupancy, twin.takeup, twin.contact_count)
 
     def _refuse_load(self) -> None:
         if self.recovering:

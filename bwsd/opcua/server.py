@@ -141,10 +141,10 @@ class OpcUaServer:
         await self._listen(server)
         if not self.allow_none:
             close_unsecured(server)
-        self._tally = Tally(time.monotonic(), self.controller.packml.state)
+        self._tally = Tally(time.monotonic(), self.controller.status().state)
         self._events = asyncio.Queue()
         self._values = {}  # a new address space: nothing written to it yet
-        await self._write("Command/UnitMode", int(self.controller.packml.mode))
+        await self._write("Command/UnitMode", int(self.controller.status().mode))
         self._read_live(server)
         await self._refresh()
         self.controller.events.subscribe(self._on_event)
@@ -288,21 +288,17 @@ class OpcUaServer:
         values = status_values(self.controller.status(), self._tally, now)
         values.update(await self._twin_values())
         if history:
-            records = await asyncio.to_thread(self.controller.journal.history, HISTORY)
+            records = await self.controller.history(HISTORY)
             values["Admin/ProgramHistory"] = history_lines(records)
         for path, value in values.items():
             await self._write(path, value)
 
     async def _twin_values(self) -> dict[str, Any]:
-        """The twin's occupancy, take-up and contacts (read in a worker: it takes a lock)."""
-        twin, machine = self.controller.twin, self.controller.machine
-        values: dict[str, Any] = {"Machine/Rows": machine.rows, "Machine/Cols": machine.cols}
-        if twin is None:
-            return {**values, "Machine/TwinOccupancy": [], "Machine/TakeUp": 0.0,
-                    "Machine/Contacts": 0}  # fmt: skip
-        occupancy = await asyncio.to_thread(lambda: twin.occupancy.ravel().tolist())
-        return {**values, "Machine/TwinOccupancy": occupancy, "Machine/TakeUp": twin.takeup,
-                "Machine/Contacts": twin.contact_count}  # fmt: skip
+        """The twin's occupancy, take-up and contacts, and the matrix's size."""
+        view = await self.controller.twin_view()
+        return {"Machine/Rows": view.rows, "Machine/Cols": view.cols,
+                "Machine/TwinOccupancy": view.occupancy, "Machine/TakeUp": view.takeup,
+                "Machine/Contacts": view.contacts}  # fmt: skip
 
     async def _write(self, path: str, value: Any, at: float | None = None) -> None:
         """Write (and notify) ``value`` at ``path`` unless it is there already; ``at``: when

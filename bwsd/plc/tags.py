@@ -127,7 +127,7 @@ class PlcTags:
         self.device_id = device_id
         self.heartbeat_period = heartbeat_period
         self._cntrl_cmd = 0
-        self._unit_mode = int(controller.packml.mode)
+        self._unit_mode = int(controller.status().mode)
         self._resume = 0  # Command.Resume as the PLC wrote it
         self._program = 0  # Command.ProgramId as the PLC wrote it
         self.gate = gate or Gate(controller)
