@@ -16,13 +16,17 @@ a unit mode change: admin; a read: viewer.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.errors import BwsdError
+from bwsd.fieldbus.base import FieldbusError
+from bwsd.journal import JournalError
 from bwsd.tokens import RANK, Role, TokenStore
 
 if TYPE_CHECKING:
@@ -134,7 +138,8 @@ class Gate:
         except Refused as exc:
             log.info("%s: load refused: %s", caller.said, exc)
             raise
-        return await self.controller.load(program, source, caller.who, cancel)
+        with _logged(caller, f"load of {program!r}"):
+            return await self.controller.load(program, source, caller.who, cancel)
 
     async def check(self, caller: Caller, name: Any, text: Any,
                     cancel: threading.Event | None = None) -> DryRun:  # fmt: skip
@@ -146,7 +151,8 @@ class Gate:
         except Refused as exc:
             log.info("%s: check refused: %s", caller.said, exc)
             raise
-        _, totals = await self.controller.check(program, source, cancel)
+        with _logged(caller, f"check of {program!r}"):
+            _, totals = await self.controller.check(program, source, cancel)
         return totals
 
     async def load_stored(self, caller: Caller, program_id: Any) -> int:
@@ -157,8 +163,23 @@ class Gate:
         except Refused as exc:
             log.info("%s: load refused: %s", caller.said, exc)
             raise
-        loaded: int = await self.controller.load_stored(number, caller.who)
+        with _logged(caller, f"load of program {number}"):
+            loaded: int = await self.controller.load_stored(number, caller.who)
         return loaded
+
+
+@contextlib.contextmanager
+def _logged(caller: Caller, what: str) -> Iterator[None]:
+    """Log the controller's refusal of a load or check (a routine refusal: INFO; the journal
+    or the bus failing: ERROR); the command refusals are logged by the controller itself."""
+    try:
+        yield
+    except (JournalError, FieldbusError) as exc:
+        log.error("%s: %s failed: %s", caller.said, what, exc)
+        raise
+    except BwsdError as exc:
+        log.info("%s: %s refused: %s", caller.said, what, exc)
+        raise
 
 
 # ----- the wire's values, typed (pure) -----

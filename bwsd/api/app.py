@@ -210,10 +210,9 @@ async def _deny(websocket: WebSocket, exc: ApiError) -> None:
 
 
 def _hello(ctx: Context) -> dict[str, Any]:
-    ctl = ctx.controller
-    state = ctl.packml.state
-    return {"event": "hello", "state": int(state), "name": state.label,
-            "program_id": ctl.program_id, "index": ctl.index}  # fmt: skip
+    st = ctx.controller.status()
+    return {"event": "hello", "state": int(st.state), "name": st.state.label,
+            "program_id": st.program_id, "index": st.index}  # fmt: skip
 
 
 async def _serve(websocket: WebSocket, sub: Subscriber, still: Callable[[], object]) -> None:

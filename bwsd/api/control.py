@@ -103,7 +103,6 @@ async def get_whoami(who: Viewer) -> WhoOut:
 async def get_machine(ctx: Ctx) -> MachineOut:
     """The axes, occupancy sensors and e-stop as the bus reports them now."""
     ctl = ctx.controller
-    bus = ctl.bus
     try:
         state = await ctl.read_machine()
     except ControllerError as exc:
@@ -118,7 +117,7 @@ async def get_machine(ctx: Ctx) -> MachineOut:
             fault=got.fault,
             fault_name=FAULT_NAMES.get(got.fault, f"fault {got.fault}"),
         )
-        for axis, got in zip(bus.axes, state.axes, strict=True)
+        for axis, got in zip(ctl.axes, state.axes, strict=True)
     ]
     sk = await ctx.view.current()
     return MachineOut(
@@ -146,7 +145,7 @@ async def post_command(name: CommandName, ctx: Ctx, who: Operator, request: Requ
     except InvalidCommand as exc:
         raise _refused(str(exc), exc.state, ctl.allowed()) from None
     except (ControllerError, JournalError) as exc:
-        raise _refused(describe(exc), ctl.packml.state, ctl.allowed()) from None
+        raise _refused(describe(exc), ctl.status().state, ctl.allowed()) from None
     return _command_out(ctl)
 
 
@@ -162,7 +161,8 @@ async def put_mode(body: ModeIn, ctx: Ctx, who: Admin, request: Request) -> Mode
         raise refused(exc) from None
     except PackMLError as exc:
         raise ApiError(409, str(exc)) from None
-    return ModeOut(mode=int(ctl.packml.mode), mode_name=ctl.packml.mode.label)
+    mode = ctl.status().mode
+    return ModeOut(mode=int(mode), mode_name=mode.label)
 
 
 def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError:
@@ -170,9 +170,9 @@ def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError
 
 
 def _command_out(ctl: Controller) -> CommandOut:
-    pk = ctl.packml
-    return CommandOut(state=int(pk.state), name=pk.state.label, reason=pk.reason,
-                      allowed=command_names(ctl.allowed()))  # fmt: skip
+    st = ctl.status()
+    return CommandOut(state=int(st.state), name=st.state.label, reason=st.reason,
+                      allowed=command_names(st.allowed))  # fmt: skip
 
 
 @router.post("/preview", response_model=PreviewOut, dependencies=WRITE,

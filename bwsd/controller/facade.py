@@ -41,6 +41,7 @@ from bwsd.controller.status import (
 )
 from bwsd.controller.supervisor import Supervisor
 from bwsd.errors import BwsdError
+from bwsd.fieldbus.axes import Axis
 from bwsd.fieldbus.base import BoolGrid, Fieldbus, FieldbusError, MachineState
 from bwsd.journal import (
     COMPLETE,
@@ -140,6 +141,11 @@ class Controller:
     @property
     def twin(self) -> Twin | None:
         return self.job.twin if self.job else None
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        """The machine's axes, in the bus's order."""
+        return tuple(self.bus.axes)
 
     @property
     def dry_run(self) -> DryRun | None:
@@ -324,7 +330,7 @@ class Controller:
             try:
                 self.packml.set_mode(mode)
             except BwsdError as exc:
-                log.warning("mode %s from %s refused: %s", mode.label, who or "?", exc)
+                log.info("mode %s from %s refused: %s", mode.label, who or "?", exc)
                 raise
             if mode is not old:
                 log.info("mode %s -> %s by %s", old.label, mode.label, who or "?")
