@@ -16,7 +16,7 @@ from pymodbus.exceptions import ModbusException
 
 from bwsd.config import parse_config
 from bwsd.controller.facade import Controller
-from bwsd.controller.packml import PackML, State, UnitMode
+from bwsd.controller.packml import State, UnitMode
 from bwsd.controller.plan import Limits
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
@@ -279,14 +279,16 @@ def test_a_restart_reads_stop_reason_7(mock, tmp_path):
     run(scenario())
 
 
-def test_plc_tags_follow_the_config_table():
+def test_plc_tags_follow_the_config_table(tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"port": 0, "device_id": 7}})
-    controller = SimpleNamespace(packml=PackML())  # the tags only read it before start
+    journal = Journal.open(tmp_path / "journal.db")
+    controller = Controller(config.machine, open_bus(config), journal)  # not connected: unused
     tags = plc_tags(controller, config)
     assert isinstance(tags, PlcTags)
     assert (tags.host, tags.port, tags.device_id) == ("127.0.0.1", 0, 7)
     off = parse_config({"machine": MACHINE, "plc": {"enabled": False}})
     assert plc_tags(controller, off) is None
+    journal.close()
 
 
 def test_a_port_in_use_is_a_plc_error_naming_it(mock, tmp_path):
