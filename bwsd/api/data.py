@@ -132,6 +132,30 @@ async def get_program(
     return ProgramDetailOut(**asdict(found[0]), text=found[1])
 
 
+@router.post("/programs/{program_id}/load", status_code=201, response_model=LoadedOut,
+             responses={**AUTH_ERRORS, **INVALID, 409: {"model": Error},
+                        422: {"model": ProgramErrorOut | InvalidOut}})  # fmt: skip
+async def load_stored(
+    ctx: Ctx, request: Request, who: Operator,
+    program_id: Annotated[int, PathParam(ge=1, le=MAX_ID)],
+) -> LoadedOut:  # fmt: skip
+    """Load again a program the journal stores, by its id, as the PLC's ``LoadRequest``
+    does; the load is stored under a new id, which the answer gives."""
+    gate: Gate = request.app.state.gate
+    caller = Caller("rest", who.name, who.token, who.role)
+    try:
+        pid = await gate.load_stored(caller, program_id)
+    except Refused as exc:
+        raise refused(exc) from None
+    except ProgramError as exc:
+        raise _program_error(exc) from None
+    except ControllerError as exc:
+        raise ApiError(409, str(exc)) from None
+    ctl = ctx.controller
+    assert ctl.dry_run is not None
+    return LoadedOut(id=pid, name=ctl.status().program_name or "", **asdict(ctl.dry_run))
+
+
 @router.get("/history", response_model=HistoryOut, dependencies=READ,
             responses={**AUTH_ERRORS, **INVALID})  # fmt: skip
 async def get_history(

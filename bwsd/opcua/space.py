@@ -198,11 +198,10 @@ async def _variable(parent: Node, idx: int, tag: Tag) -> Node:
     name = tag.path.rpartition("/")[2]
     node = await parent.add_variable(node_id(idx, tag.path), ua.QualifiedName(name, idx),
                                      ua.Variant(tag.start, tag.kind))  # fmt: skip
-    if isinstance(tag.start, list):  # an array: one dimension, of any length
-        await node.write_attribute(ua.AttributeIds.ValueRank,
-                                   ua.DataValue(ua.Variant(1, V.Int32)))  # fmt: skip
-        await node.write_attribute(ua.AttributeIds.ArrayDimensions,
-                                   ua.DataValue(ua.Variant([0], V.UInt32)))  # fmt: skip
+    if isinstance(tag.start, list):  # an array: one dimension, its length where fixed (else 0)
+        rank, length = ua.Variant(1, V.Int32), ua.Variant([len(tag.start)], V.UInt32)
+        await node.write_attribute(ua.AttributeIds.ValueRank, ua.DataValue(rank))
+        await node.write_attribute(ua.AttributeIds.ArrayDimensions, ua.DataValue(length))
     await node.write_attribute(ua.AttributeIds.Description,
                                ua.DataValue(ua.Variant(ua.LocalizedText(tag.about))))  # fmt: skip
     if tag.writer:

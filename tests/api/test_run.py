@@ -377,3 +377,19 @@ def test_a_lone_surrogate_is_refused_not_a_server_error(live: Live):
         answer = operator.post(path, content=body, headers={"Content-Type": "application/json"})
         assert answer.status_code in (409, 422), (body, answer.status_code, answer.text)
         assert answer.json()["error"]
+
+
+def test_a_stored_program_loads_again_by_its_id_with_the_refusals_of_an_upload(live: Live):
+    operator, viewer = live.client("operator"), live.client("viewer")
+    assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
+    again = operator.post("/programs/1/load")
+    assert again.status_code == 201, again.text
+    assert (again.json()["id"], again.json()["name"]) == (2, "b.bws")
+    assert operator.get("/programs/2").json()["text"] == BRAID  # stored again, the same text
+    assert live.controller.status().program_id == 2
+    unknown = operator.post("/programs/9/load")
+    assert (unknown.status_code, unknown.json()["error"]) == (409, "program 9: no such program")
+    assert operator.post("/programs/0/load").status_code == 422
+    assert viewer.post("/programs/1/load").status_code == 403
+    assert [p["id"] for p in viewer.get("/programs").json()] == [2, 1]  # refusals stored nothing
+    assert live.controller.status().program_id == 2
