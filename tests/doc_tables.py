@@ -17,8 +17,9 @@ def doc_table(doc: str, *header: str, after: str = "") -> list[dict[str, str]]:
     whose header row begins with the cells ``header``, as {column: cell} (code quotes
     stripped). A missing table is an AssertionError naming what was looked for."""
     lines = (DOCS / doc).read_text().splitlines()
-    start = next((i for i, line in enumerate(lines) if line.startswith(after)), None) if after \
-        else 0  # fmt: skip
+    start = (
+        next((i for i, line in enumerate(lines) if line.startswith(after)), None) if after else 0
+    )
     assert start is not None, f"docs/{doc}: no line starting {after!r}"
     for at in range(start, len(lines) - 1):
         cells = _cells(lines[at])

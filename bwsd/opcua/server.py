@@ -186,8 +186,9 @@ class OpcUaServer:
         self._snapshot = None
 
     def _user_access(self, server: Server, rules: Ruleset) -> None:
-        """Each writable variable's UserAccessLevel is the reading user's: writable only for
-        a role that may write it (asyncua keeps one attribute for every user)."""
+        """Each writable variable's UserAccessLevel and each method's UserExecutable are the
+        reading user's: writable (callable) only for a role that may write (call) it; asyncua
+        keeps one attribute for every user."""
         assert self._space is not None
         for tag in space.TAGS:
             if tag.writer is None:
@@ -202,6 +203,17 @@ class OpcUaServer:
 
             nodeid = self._space.variables[tag.path].nodeid
             server.set_attribute_value_callback(nodeid, level, ua.AttributeIds.UserAccessLevel)
+        for method, needs in space.needs(self._space.idx).items():
+            if method in self._paths:
+                continue  # a variable, done above
+
+            def executable(nodeid: ua.NodeId, attr: ua.AttributeIds, n: Role = needs
+                           ) -> ua.DataValue:  # fmt: skip
+                return ua.DataValue(
+                    ua.Variant(rules.may(current_user(), n), ua.VariantType.Boolean)
+                )
+
+            server.set_attribute_value_callback(method, executable, ua.AttributeIds.UserExecutable)
 
     async def _drop_revoked(self) -> None:
         """Close, within REVOKED_EVERY, every session whose token was removed or whose role

@@ -58,13 +58,15 @@ class Mock:
 
 
 def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | None = None, *,
-               machine: dict[str, Any] = MACHINE, program: str = PROGRAM) -> Mock:  # fmt: skip
-    """The mock loom in its own process; ``program`` gives its FILL (the cases' places)."""
+               machine: dict[str, Any] = MACHINE, program: str = PROGRAM,
+               tables: dict[str, dict[str, Any]] | None = None) -> Mock:  # fmt: skip
+    """The mock loom in its own process; ``program`` gives its FILL (the cases' places),
+    ``tables`` more of its config (``{"fieldbus.modbus": {"map": 2}}``)."""
     ports = ports or {"modbus": 0, "socketcand": 0, "control": 0}
     sim = {"modbus_port": ports["modbus"], "socketcand_port": ports["socketcand"],
            "control_port": ports["control"], "heartbeat_ms": 50, **simulator}  # fmt: skip
     config_path = tmp / "mock.toml"
-    config_path.write_text(toml({"machine": machine, "simulator": sim}))
+    config_path.write_text(toml({"machine": machine, "simulator": sim, **(tables or {})}))
     program_path = tmp / "fill.bws"
     program_path.write_text(program)
     proc = subprocess.Popen(

@@ -25,8 +25,10 @@ TAG_FIELDS: dict[str, tuple[str | None, int]] = {
     "Command.CntrlCmd": ("cntrl_cmd", registers.REG_CNTRL_CMD),
     "Command.CmdChangeRequest": ("cmd_change_request", registers.REG_CMD_CHANGE_REQUEST),
     "Command.UnitMode": ("unit_mode", registers.REG_UNIT_MODE),
-    "Command.UnitModeChangeRequest": ("unit_mode_change_request",
-                                      registers.REG_UNIT_MODE_CHANGE_REQUEST),
+    "Command.UnitModeChangeRequest": (
+        "unit_mode_change_request",
+        registers.REG_UNIT_MODE_CHANGE_REQUEST,
+    ),
     "Status.StateCurrent": ("state_current", registers.REG_STATE_CURRENT),
     "Status.UnitModeCurrent": ("unit_mode_current", registers.REG_UNIT_MODE_CURRENT),
     "Status.CmdInvalid": ("cmd_invalid", registers.REG_CMD_INVALID),
@@ -41,7 +43,7 @@ TAG_FIELDS: dict[str, tuple[str | None, int]] = {
     "Command.ProgramId (bwsd)": ("program", registers.REG_PROGRAM),
     "Command.LoadRequest (bwsd)": ("load_request", registers.REG_LOAD_REQUEST),
     "Status.ProgramId (bwsd)": ("program_id", registers.REG_PROGRAM_ID),
-}  # fmt: skip
+}
 MAP = doc_table("plc.md", "address", "tag", "type", "access", after="## The map")
 
 

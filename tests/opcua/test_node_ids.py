@@ -1,0 +1,126 @@
+"""The OPC UA address space checked against docs/opcua.md's node id table: the code's tags
+and methods, and a live server browsed by users of each role.
+
+The node ids, types, access and arguments come from the doc: a node renamed, retyped or
+added in the code without the doc fails here.
+"""
+
+from __future__ import annotations
+
+import re
+
+from asyncua import Client, ua
+
+from bwsd.opcua import space
+from tests.doc_tables import doc_table
+from tests.opcua.conftest import NAMESPACE, rig, run
+
+TABLE = doc_table("opcua.md", "node id (ns=2;s=...)", "type", "access", "meaning")
+NODES = {row["node id (ns=2;s=...)"]: row for row in TABLE}
+VARIABLES = {
+    n: r
+    for n, r in NODES.items()
+    if r["type"] not in ("object",) and not r["type"].startswith("method")
+}
+METHODS = {n: r for n, r in NODES.items() if r["type"].startswith("method")}
+RANK = {"viewer": 0, "operator": 1, "admin": 2}
+PROPERTIES = tuple(
+    ua.QualifiedName(name, 0) for name in ("EngineeringUnits", "InputArguments", "OutputArguments")
+)
+
+
+def documented_type(tag: space.Tag) -> str:
+    """A tag's type as the doc writes it: ``Int32``, ``String[]``, ``Double[18]``."""
+    if not isinstance(tag.start, list):
+        return tag.kind.name
+    return f"{tag.kind.name}[{len(tag.start) or ''}]"
+
+
+def arguments(text: str) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """``method (Name: String, Text: String) -> ProgramId: UInt32`` as (inputs, outputs)."""
+    found = re.fullmatch(r"method \((.*)\)(?: -> (.*))?", text)
+    assert found, text
+
+    def pairs(part: str | None) -> list[tuple[str, str]]:
+        return [tuple(p.split(": ")) for p in (part or "").split(", ") if p]  # type: ignore[misc]
+
+    return pairs(found[1]), pairs(found[2])
+
+
+def test_the_code_declares_exactly_the_documented_nodes():
+    tags = {"Loom." + t.path.replace("/", "."): t for t in space.TAGS}
+    assert set(tags) == set(VARIABLES), "a variable the doc lacks, or one the code lacks"
+    for node, tag in tags.items():
+        row = VARIABLES[node]
+        assert row["type"] == documented_type(tag), node
+        assert row["access"] == ("R" if tag.writer is None else f"RW {tag.writer}"), node
+    needs = {str(n.Identifier): role for n, role in space.needs(2).items()}
+    methods = {f"Loom.{c.label}" for c in space.COMMAND_METHODS}
+    methods |= {f"Loom.{space.RESUME}", f"Loom.{space.LOAD_PROGRAM}", f"Loom.{space.SET_UNIT_MODE}"}
+    assert methods == set(METHODS)
+    for node, row in METHODS.items():
+        assert needs[node] == row["access"], node
+    for node, row in VARIABLES.items():
+        writer = row["access"].removeprefix("RW ") if row["access"] != "R" else None
+        assert needs.get(node) == writer, node
+
+
+async def browse(client: Client, node: ua.NodeId) -> set[str]:
+    """Every object, variable and method under ``node`` (properties left out), by id."""
+    found: set[str] = set()
+    for child in await client.get_node(node).get_children():
+        if await child.read_browse_name() in PROPERTIES:
+            continue
+        found.add(str(child.nodeid.Identifier))
+        found |= await browse(client, child.nodeid)
+    return found
+
+
+def test_a_live_server_serves_every_documented_node_as_documented(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path) as r:
+            for role in RANK:
+                async with r.session(role) as client:
+                    idx = await client.get_namespace_index(NAMESPACE)
+                    assert idx == 2  # as the doc's node ids write it
+                    root = ua.NodeId("Loom", idx)
+                    assert {"Loom"} | await browse(client, root) == set(NODES)
+                    for name, row in NODES.items():
+                        await check_node(client, ua.NodeId(name, idx), row, role)
+
+    run(scenario())
+
+
+async def check_node(client: Client, node_id: ua.NodeId, row: dict[str, str], role: str) -> None:
+    node = client.get_node(node_id)
+    kind = await node.read_node_class()
+    typed = row["type"]
+    if typed == "object":
+        assert kind == ua.NodeClass.Object, row
+        return
+    if typed.startswith("method"):
+        assert kind == ua.NodeClass.Method, row
+        inputs, outputs = arguments(typed)
+        for prop, expected in (("InputArguments", inputs), ("OutputArguments", outputs)):
+            try:
+                held = await (await node.get_child(f"0:{prop}")).read_value()
+            except ua.UaStatusCodeError:
+                held = []
+            got = [(a.Name, ua.ObjectIdNames[a.DataType.Identifier]) for a in held]
+            assert got == expected, (row, prop)
+        executable = await node.read_attribute(ua.AttributeIds.UserExecutable)
+        assert executable.Value.Value is (RANK[role] >= RANK[row["access"]]), (row, role)
+        return
+    assert kind == ua.NodeClass.Variable, row
+    base, _, length = typed.partition("[")
+    data_type = await node.read_data_type()
+    assert ua.ObjectIdNames[data_type.Identifier] == base, row
+    rank = (await node.read_attribute(ua.AttributeIds.ValueRank)).Value.Value
+    assert rank == (1 if length else -1), row
+    if length:
+        dims = (await node.read_attribute(ua.AttributeIds.ArrayDimensions)).Value.Value
+        assert dims == [int(length.rstrip("]") or 0)], row
+    level = (await node.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value
+    writes = bool(level & ua.AccessLevel.CurrentWrite.mask)
+    writer = row["access"].removeprefix("RW ") if row["access"] != "R" else None
+    assert writes is (writer is not None and RANK[role] >= RANK[writer]), (row, role)
