@@ -120,6 +120,7 @@ def test_abort_reaches_aborted_while_another_process_holds_the_journal(tmp_path)
             await ctl.wait()
             await ctl.command(Command.CLEAR)  # the outcome is written before it, at the latest
             assert rig.journal.program(1).outcome == "aborted"
+            await ctl.recorder.catch_up()  # the state history is written behind the commands
             names = [s.name for s in rig.journal.states()]
             assert "Aborting" in names and "Aborted" in names  # the history misses nothing
         finally:

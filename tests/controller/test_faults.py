@@ -172,6 +172,7 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
         await ctl.wait()
         assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
         assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))
+        await ctl.recorder.catch_up()  # the state history is written behind the run
         record = journal.program(pid)
         assert (record.outcome, record.done) == ("complete", 15) and journal.pending(pid) is None
         names = [state.name for state in journal.states()]

@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser
 
+from bwsd.controller import resting
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
 from tests.fieldbus.conftest import Mock
 from tests.web.conftest import MS, Browsing
@@ -207,7 +208,7 @@ def test_log_out_clears_the_picture(live: Live, page: Browsing):
 def _watch(live: Live) -> Callable[[], None]:
     """Start the daemon's watch task (reading the machine at rest, as `bwsd serve` does) on
     the live loop; the function that cancels it."""
-    task = asyncio.run_coroutine_threadsafe(live.controller.watch(), live.loop)
+    task = asyncio.run_coroutine_threadsafe(resting.watch(live.controller), live.loop)
     return lambda: live.loop.call_soon_threadsafe(task.cancel)
 
 

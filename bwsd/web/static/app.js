@@ -146,6 +146,7 @@ const commands = new Commands({
   state: () => live.state,
   index: currentIndex,
   may: mayCommand,
+  mayMode: mayChangeMode,
   answered: (body) => {
     if (live.state) showState({ ...live.state, name: body.name, reason: body.reason, allowed: body.allowed });
   },
@@ -481,10 +482,15 @@ function mayCommand() {
   return session.mayCommand() && online() === true;
 }
 
+/** The token may change the unit mode and the daemon answers. */
+function mayChangeMode() {
+  return session.mayChangeMode() && online() === true;
+}
+
 function drawButtons() {
   const may = mayCommand();
   hooks.allowed = commands.drawButtons(live.state?.allowed, may);
-  commands.drawMode(live.state, may);
+  commands.drawMode(live.state, mayChangeMode());
   const state = live.state;
   const loadable = Boolean(state) && LOADABLE.has(state.name) && !state.recovering;
   programs.setAllowed({

@@ -17,7 +17,8 @@ export class Commands {
   /**
    * @param page what the commands need of the page: `state()` (the last /state, or null),
    *   `index()` (instructions done, as shown), `may()` (the token may command and the
-   *   daemon answers), `answered(answer)` (a command's answer, to show at once),
+   *   daemon answers), `mayMode()` (the token may change the unit mode: admin),
+   *   `answered(answer)` (a command's answer, to show at once),
    *   `refreshState()`, `heard()`, `unreachable(error)`, `loggedOut()`,
    *   `forbidden(answer, what)`
    */
@@ -41,7 +42,7 @@ export class Commands {
     return enabled;
   }
 
-  /** The mode in force; the switch open to an operator where PackML allows a change. */
+  /** The mode in force; the switch open to an admin where PackML allows a change. */
   drawMode(state, may) {
     const select = $('mode-select');
     if (!this.modeBusy) select.value = String(state?.mode_name ?? 'production').toLowerCase();
@@ -101,7 +102,7 @@ export class Commands {
     const page = this.page;
     const message = $('mode-message');
     this.modeBusy = true;
-    this.drawMode(page.state(), page.may());
+    this.drawMode(page.state(), page.mayMode());
     message.textContent = `asking for ${mode}…`;
     message.dataset.kind = 'pending';
     try {
@@ -122,7 +123,7 @@ export class Commands {
     } finally {
       this.modeBusy = false;
       await page.refreshState(); // the mode the daemon has, whatever it answered
-      this.drawMode(page.state(), page.may());
+      this.drawMode(page.state(), page.mayMode());
     }
   }
 }

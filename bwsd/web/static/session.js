@@ -35,6 +35,11 @@ export class Session {
     return Boolean(getToken()) && COMMANDING_ROLES.has(this.role);
   }
 
+  /** The token's role may change the unit mode (admin, as on every door of the daemon). */
+  mayChangeMode() {
+    return Boolean(getToken()) && this.role === 'admin';
+  }
+
   /** Keep `token` (for the session, or beyond with `remember`); its role is not known yet. */
   keep(token, remember) {
     setToken(token, remember);
