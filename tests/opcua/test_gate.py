@@ -6,13 +6,21 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
+import socket
+import sys
 import time
+from typing import Any
 
 import pytest
 from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
+from cryptography import x509
 
 from bwsd.controller.packml import Command, State, UnitMode
+from bwsd.opcua.security import CERT_FILE
+from bwsd.opcua.space import TAGS
+from bwsd.opcua.values import requested
 from tests.opcua.conftest import NAMESPACE, TEXT, loom, rig, run, var
 from tests.opcua.test_server import read
 
@@ -179,3 +187,57 @@ def test_a_program_is_loaded_over_opc_ua_with_the_refusals_of_rest(mock, tmp_pat
             assert r.controller.program is None
 
     run(scenario())
+
+
+def test_the_server_certificate_names_the_machine_and_the_address_it_listens_on(mock, tmp_path):
+    """A client that checks the host name finds it: the machine's name, localhost and the
+    listening address (here loopback) are in the certificate's subject alternative names."""
+
+    async def scenario() -> None:
+        async with rig(mock, tmp_path) as r:
+            der = (r.folder / CERT_FILE).read_bytes()
+            names = (
+                x509.load_der_x509_certificate(der)
+                .extensions.get_extension_for_class(x509.SubjectAlternativeName)
+                .value
+            )
+            assert socket.gethostname() in names.get_values_for_type(x509.DNSName)
+            assert "localhost" in names.get_values_for_type(x509.DNSName)
+            assert ipaddress.ip_address("127.0.0.1") in names.get_values_for_type(x509.IPAddress)
+
+    run(scenario())
+
+
+def test_a_read_of_every_tag_takes_one_status_snapshot(mock, tmp_path):
+    """A PLC's Read of all the tags is answered from one status of the controller, not one
+    per variable (each would rebuild the whole status)."""
+
+    async def scenario() -> None:
+        async with rig(mock, tmp_path) as r, r.session("viewer") as client:
+            nodes = [await var(client, tag.path) for tag in TAGS]
+            ctl = r.controller
+            calls: list[float] = []
+            status = ctl.status
+
+            def counted() -> Any:
+                if sys._getframe(1).f_code.co_name == "_status_values":  # a Read, not the tick
+                    calls.append(time.monotonic())
+                return status()
+
+            ctl.status = counted  # type: ignore[method-assign]
+            values = await client.read_values(nodes)
+            assert len(values) == len(TAGS) and values[0] == State.STOPPED
+            assert len(calls) == 1
+            await client.read_values(nodes)
+            assert len(calls) == 2  # a new Read, a new snapshot: never a stale one
+
+    run(scenario())
+
+
+def test_the_state_requested_is_where_an_acting_state_ends():
+    assert requested(State.RESETTING) is State.IDLE
+    assert requested(State.HOLDING) is State.HELD
+    assert requested(State.STARTING) is State.EXECUTE
+    assert requested(State.ABORTING) is State.ABORTED
+    assert requested(State.EXECUTE) is State.EXECUTE  # not acting: where it is
+    assert requested(State.STOPPED) is State.STOPPED
