@@ -192,7 +192,7 @@ def test_demo_port_options_take_0_to_65535(tmp_path):
 
 
 def test_the_demo_points_the_daemon_at_the_mock_loom_where_it_listens():
-    from bwsd.daemon_cli import demo_config
+    from bwsd.demo import demo_config
 
     config = load_config(ROOT / "config/loom.toml")
     mock = {"modbus": 41001, "socketcand": 41002, "control": 41003}

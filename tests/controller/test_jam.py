@@ -7,7 +7,7 @@ import asyncio
 import pytest
 
 from bwsd.controller.errors import ControllerError
-from bwsd.controller.runner import Controller
+from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from simulator_hw.control import request
