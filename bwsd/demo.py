@@ -178,8 +178,8 @@ def _ready(
         status: int | None = process.wait(timeout=10)
     except subprocess.TimeoutExpired:
         status = None
-    relay.join(timeout=5)  # every line it wrote before it ended
-    reason = " / ".join(text for text in said if text) or line.strip()
+    relay.join(timeout=5)  # every line it wrote before it ended (passed on above)
+    reason = next((text.strip() for text in reversed(said) if text.strip()), line.strip())
     if not reason:
         ended = "it is still running" if status is None else f"it ended with status {status}"
         reason = f"{ended} without a word on stdout or stderr"

@@ -22,7 +22,7 @@ from bwsd.errors import ConfigError
 def configured_state_folder(config: Config) -> Path:
     """The config's ``[daemon] state_dir``, relative to the config file's folder."""
     given = Path(config.table("daemon")["state_dir"])
-    return given if given.is_absolute() else Path(config.path).absolute().parent / given
+    return Path(os.path.abspath(Path(config.path).parent / given))  # ".." resolved as written
 
 
 def state_folder(

@@ -41,7 +41,8 @@ def test_the_default_lies_beside_the_config_not_in_the_current_folder(tmp_path, 
 
 
 def test_state_dir_in_the_config_is_taken_from_the_config_folder(tmp_path):
-    assert state_folder(_config(tmp_path, 'state_dir = "../var/x"')) == tmp_path / ".." / "var/x"
+    up = _config(tmp_path / "etc", 'state_dir = "../var/x"')
+    assert state_folder(up, create=False) == tmp_path / "var" / "x"
     absolute = _config(tmp_path / "a", f'state_dir = "{tmp_path}/abs"')
     assert state_folder(absolute) == tmp_path / "abs"
 
