@@ -52,8 +52,10 @@ def upload(where: tuple[str, int], token: str | None, chunk: int,
     socket, seconds until the server closed it, or inf while it stays open)."""
     sock = socket.create_connection(where, timeout=10, source_address=(f"127.0.1.{client}", 0))
     auth = f"Authorization: Bearer {token}\r\n" if token else ""
-    head = (f"POST /api/v1/programs HTTP/1.1\r\nHost: x\r\n{auth}Content-Type: application/json"
-            "\r\nTransfer-Encoding: chunked\r\n\r\n").encode()  # fmt: skip
+    head = (
+        "POST /api/v1/programs HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+        f"{auth}Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n"
+    ).encode()
     start = time.perf_counter()
     try:
         sock.sendall(head + f"{chunk:x}\r\n".encode() + b"x" * chunk + b"\r\n")
@@ -71,7 +73,7 @@ def upload(where: tuple[str, int], token: str | None, chunk: int,
 
 
 def state_latency(where: tuple[str, int], token: str, n: int) -> list[float]:
-    request = (f"GET /api/v1/state HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {token}"
+    request = (f"GET /api/v1/state HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {token}"
                "\r\n\r\n").encode()  # fmt: skip
     times = []
     with socket.create_connection(where, timeout=10) as sock:

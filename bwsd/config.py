@@ -111,6 +111,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "tokens_file": Text("tokens.json"),
         "open_reads": Flag(False),
         "origins": Text(""),
+        "hosts": Text(""),
         "web_root": Text(""),
         "max_connections": Num(int, 1, 100_000, 64),
         "max_connections_per_client": Num(int, 1, 100_000, 16),

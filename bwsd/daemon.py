@@ -31,9 +31,11 @@ from bwsd.controller.plan import Limits
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
 from bwsd.fieldbus.owner import BusLock, daemon_owner_id
+from bwsd.gate import Gate
 from bwsd.journal import Journal
 from bwsd.notify import notify, watchdog_interval
 from bwsd.paths import journal_file, tokens_file
+from bwsd.tokens import TokenStore
 
 log = logging.getLogger("bwsd")
 STOP_HOLD = 30.0  # s a stopping daemon waits for the running instruction to end
@@ -47,6 +49,7 @@ class Daemon:
     state_dir: Path
     controller: Controller
     journal: Journal
+    gate: Gate
     bus_lock: BusLock | None = None
     urls: dict[str, str] = field(default_factory=dict)
     _tasks: list[asyncio.Task[Any]] = field(default_factory=list)
@@ -74,7 +77,8 @@ async def start(config: Config, state_dir: Path) -> Daemon:
     limits = Limits(table["max_contacts"], table["tensioner_stroke"])
     settings = Settings(table["max_instructions"], table["snapshot_every"])
     controller = Controller(config.machine, bus, journal, limits, settings=settings)
-    daemon = Daemon(config, state_dir, controller, journal, lock)
+    tokens = TokenStore.load(tokens_file(config, state_dir))  # one store: every door's users
+    daemon = Daemon(config, state_dir, controller, journal, Gate(controller, tokens), lock)
     try:
         log.info("%s", controller.begin_recovery())
         await _serve_api(daemon)
@@ -102,17 +106,20 @@ def _warn_damaged(journal: Journal) -> None:
 
 async def _serve_api(daemon: Daemon) -> None:
     from bwsd.api.app import create_app
-    from bwsd.api.auth import TokenStore
     from bwsd.api.doors import Doors, check_tls, server_config
+    from bwsd.api.hosts import allowed_hosts
     from bwsd.api.web import WEB_ROOT
 
     table = daemon.config.table("api")
-    tokens = TokenStore.load(tokens_file(daemon.config, daemon.state_dir))
     web_root = daemon.state_dir / table["web_root"] if table["web_root"] else WEB_ROOT
     doors = Doors.from_table(table, Path(daemon.config.path).parent)
     check_tls(doors)
+    hosts = allowed_hosts(table["host"], table["hosts"])
+    tokens = daemon.gate.tokens
+    assert tokens is not None
     app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root,
-                     origins=table["origins"].split(), doors=doors)  # fmt: skip
+                     origins=table["origins"].split(), doors=doors, hosts=hosts,
+                     gate=daemon.gate)  # fmt: skip
     server = uvicorn.Server(server_config(app, doors, host=table["host"], port=table["port"],
                                           log_level="warning", lifespan="off"))  # fmt: skip
     where = f"{table['host']}:{table['port']}"
@@ -141,7 +148,7 @@ async def _serve_plc(daemon: Daemon) -> None:
     from bwsd.plc.tags import plc_tags
 
     table = daemon.config.table("plc")
-    tags = plc_tags(daemon.controller, daemon.config)
+    tags = plc_tags(daemon.controller, daemon.config, daemon.gate)
     if tags is None:
         return
     await tags.start()
@@ -152,7 +159,7 @@ async def _serve_plc(daemon: Daemon) -> None:
 async def _serve_opcua(daemon: Daemon) -> None:
     from bwsd.opcua import opcua_server
 
-    server = opcua_server(daemon.controller, daemon.config, daemon.state_dir)
+    server = opcua_server(daemon.controller, daemon.config, daemon.state_dir, daemon.gate)
     if server is None:
         return
     daemon._closers.append(server.stop)  # a start that fails half way is stopped too

@@ -21,12 +21,14 @@ from fastapi.responses import JSONResponse, Response
 
 from bwsd import __version__
 from bwsd.controller.facade import Controller
+from bwsd.gate import Gate
 
 from . import control, data, problems, web
 from .auth import Auth, TokenStore, refused_token, require
 from .context import Context
 from .doors import DEFAULT_DOORS, LOGINS, BodyDeadline, Doors, TokenFirst, server_config
 from .events import QUEUE_SIZE, EventHub, Subscriber
+from .hosts import HostCheck, default_hosts, origin_allowed
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer
 from .models import MAX_BODY_BYTES, Error, Health
 from .problems import ApiError, error_body
@@ -43,9 +45,10 @@ operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the 
 def create_app(
     controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
     queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT, origins: Iterable[str] = (),
-    doors: Doors = DEFAULT_DOORS,
+    doors: Doors = DEFAULT_DOORS, hosts: Iterable[str] | None = None, gate: Gate | None = None,
 ) -> FastAPI:  # fmt: skip
-    """The API of ``controller`` and the page at ``/`` (from ``web_root``).
+    """The API of ``controller`` and the page at ``/`` (from ``web_root``); requests must
+    name one of ``hosts`` (by default ``default_hosts`` of loopback) as their Host.
 
     Subscribes to the controller's event stream (until the app's lifespan ends).
     """
@@ -60,12 +63,15 @@ def create_app(
     app.state.ctx = ctx
     app.state.auth = Auth(tokens, open_reads)
     app.state.origins = frozenset(o.rstrip("/") for o in origins)
+    app.state.hosts = frozenset(hosts) if hosts is not None else default_hosts("127.0.0.1")
+    app.state.gate = gate or Gate(controller, tokens)  # the daemon's one gate, every door's
     problems.install(app, refused_token)
     # Outermost last: time it, check the token, then judge the body's size and pace.
     app.add_middleware(BodyDeadline, seconds=doors.body_timeout)
     app.add_middleware(problems.BodyLimit, limit=MAX_BODY_BYTES)
     app.add_middleware(TokenFirst, routes=app.router.routes)
     app.add_middleware(RequestTimer, metrics=metrics)
+    app.add_middleware(HostCheck, hosts=app.state.hosts)  # outermost: another name, no answer
     control.router.install(app, PREFIX, ["machine"], MAX_BODY_BYTES)
     data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
     app.add_api_websocket_route(f"{PREFIX}/events", _events(ctx))
@@ -165,7 +171,7 @@ def _events(ctx: Context) -> Callable[[WebSocket], Any]:
         sub = ctx.hub.subscribe()
         try:
             await websocket.send_text(json.dumps(_hello(ctx)))
-            await _serve(websocket, sub)
+            await _serve(websocket, sub, lambda: auth.authorize(token, "viewer"))
         finally:
             ctx.hub.unsubscribe(sub)
 
@@ -173,16 +179,16 @@ def _events(ctx: Context) -> Callable[[WebSocket], Any]:
 
 
 def _check_origin(websocket: WebSocket) -> None:
-    """A browser's handshake must come from the page's own origin or one the config lists
-    (``[api] origins``): otherwise a page on any origin could read the events (and with
-    ``open_reads`` it would need no token). Clients that send no ``Origin`` are not browsers."""
+    """A browser's handshake must come from a page of one of the daemon's own names
+    (``[api] hosts``) or an origin the config lists (``[api] origins``): never from the Host
+    the request itself gives, which a rebinding page chooses. Clients that send no
+    ``Origin`` are not browsers."""
     origin = websocket.headers.get("origin")
     if origin is None:
         return
-    host = websocket.headers.get("host", "")
-    if origin.rstrip("/") in {f"http://{host}", f"https://{host}"} | websocket.app.state.origins:
-        return
-    raise ApiError(403, f"origin {origin[:100]!r} is not allowed ([api] origins)")
+    state = websocket.app.state
+    if not origin_allowed(origin, state.hosts, state.origins):
+        raise ApiError(403, f"origin {origin[:100]!r} is not allowed ([api] hosts, origins)")
 
 
 def _bearer(websocket: WebSocket) -> str | None:
@@ -204,15 +210,16 @@ async def _deny(websocket: WebSocket, exc: ApiError) -> None:
 
 
 def _hello(ctx: Context) -> dict[str, Any]:
-    ctl = ctx.controller
-    state = ctl.packml.state
-    return {"event": "hello", "state": int(state), "name": state.label,
-            "program_id": ctl.program_id, "index": ctl.index}  # fmt: skip
+    st = ctx.controller.status()
+    return {"event": "hello", "state": int(st.state), "name": st.state.label,
+            "program_id": st.program_id, "index": st.index}  # fmt: skip
 
 
-async def _serve(websocket: WebSocket, sub: Subscriber) -> None:
-    """Send the queue while reading (and ignoring) what the client says, until it leaves."""
-    tasks = {asyncio.create_task(_pump(websocket, sub)), asyncio.create_task(_drain(websocket))}
+async def _serve(websocket: WebSocket, sub: Subscriber, still: Callable[[], object]) -> None:
+    """Send the queue while reading (and ignoring) what the client says, until it leaves, or
+    until its token no longer allows it (``still`` raises: removed, or its role changed)."""
+    tasks = {asyncio.create_task(_pump(websocket, sub)), asyncio.create_task(_drain(websocket)),
+             asyncio.create_task(_recheck(websocket, still))}  # fmt: skip
     try:
         await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
     finally:
@@ -221,6 +228,21 @@ async def _serve(websocket: WebSocket, sub: Subscriber) -> None:
         for task in tasks:
             with suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError, OSError):
                 await task
+
+
+RECHECK = 0.5  # s between checks of an open event stream's token
+
+
+async def _recheck(websocket: WebSocket, still: Callable[[], object]) -> None:
+    """Close the stream (1008, policy) within RECHECK of its token's removal or demotion."""
+    while True:
+        await asyncio.sleep(RECHECK)
+        try:
+            still()
+        except ApiError as exc:
+            LOGINS.note("closed an event stream: %s", exc.detail)
+            await websocket.close(code=1008, reason=str(exc.detail)[:120])
+            return
 
 
 async def _pump(websocket: WebSocket, sub: Subscriber) -> None:

@@ -5,13 +5,14 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Annotated, Any
 
-from fastapi import Depends
+from fastapi import Depends, Request
 
 from bwsd.controller.errors import ControllerError
 from bwsd.controller.facade import Controller
-from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State, UnitMode
+from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State
 from bwsd.controller.programs import instruction_dict, step_dict
 from bwsd.fieldbus.base import FAULT_NAMES
+from bwsd.gate import Caller, Gate, Refused
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction
 
@@ -40,13 +41,14 @@ from .models import (
     StateOut,
     WhoOut,
 )
-from .problems import ApiError, describe
+from .problems import ApiError, describe, refused
 from .routing import RouteTable
 
 router = RouteTable()
 READ = [Depends(require("viewer"))]
 WRITE = [Depends(require("operator"))]
 Operator = Annotated[Principal, Depends(require("operator"))]
+Admin = Annotated[Principal, Depends(require("admin"))]
 Viewer = Annotated[Principal, Depends(require("viewer"))]
 
 
@@ -101,7 +103,6 @@ async def get_whoami(who: Viewer) -> WhoOut:
 async def get_machine(ctx: Ctx) -> MachineOut:
     """The axes, occupancy sensors and e-stop as the bus reports them now."""
     ctl = ctx.controller
-    bus = ctl.bus
     try:
         state = await ctl.read_machine()
     except ControllerError as exc:
@@ -116,7 +117,7 @@ async def get_machine(ctx: Ctx) -> MachineOut:
             fault=got.fault,
             fault_name=FAULT_NAMES.get(got.fault, f"fault {got.fault}"),
         )
-        for axis, got in zip(bus.axes, state.axes, strict=True)
+        for axis, got in zip(ctl.axes, state.axes, strict=True)
     ]
     sk = await ctx.view.current()
     return MachineOut(
@@ -130,31 +131,38 @@ async def get_machine(ctx: Ctx) -> MachineOut:
 @router.post("/commands/{name}", response_model=CommandOut,
              responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS,
                         409: {"model": CommandErrorOut}})  # fmt: skip
-async def post_command(name: CommandName, ctx: Ctx, who: Operator,
+async def post_command(name: CommandName, ctx: Ctx, who: Operator, request: Request,
                        body: CommandIn | None = None) -> CommandOut:  # fmt: skip
     """Send a PackML command; answers once the acting state it enters has done its work."""
     ctl = ctx.controller
-    command = Command[name.upper()]
+    gate: Gate = request.app.state.gate
+    reason, resume = (body.reason, body.resume) if body is not None else ("", False)
     try:
-        await ctl.command(command, body.reason if body is not None else "", who.name,
-                          resume=body is not None and body.resume)  # fmt: skip
+        await gate.command(Caller("rest", who.name, who.token, who.role), name,
+                           reason=reason, resume=resume)  # fmt: skip
+    except Refused as exc:
+        raise refused(exc) from None
     except InvalidCommand as exc:
         raise _refused(str(exc), exc.state, ctl.allowed()) from None
     except (ControllerError, JournalError) as exc:
-        raise _refused(describe(exc), ctl.packml.state, ctl.allowed()) from None
+        raise _refused(describe(exc), ctl.status().state, ctl.allowed()) from None
     return _command_out(ctl)
 
 
 @router.put("/mode", response_model=ModeOut,
             responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS, 409: {"model": Error}})  # fmt: skip
-async def put_mode(body: ModeIn, ctx: Ctx, who: Operator) -> ModeOut:
-    """Change the unit mode (PackML allows it in Stopped, Idle and Aborted)."""
+async def put_mode(body: ModeIn, ctx: Ctx, who: Admin, request: Request) -> ModeOut:
+    """Change the unit mode (PackML allows it in Stopped, Idle and Aborted); needs admin."""
     ctl = ctx.controller
+    gate: Gate = request.app.state.gate
     try:
-        await ctl.set_mode(UnitMode[body.mode.upper()], who.name)
+        await gate.set_mode(Caller("rest", who.name, who.token, who.role), body.mode)
+    except Refused as exc:
+        raise refused(exc) from None
     except PackMLError as exc:
         raise ApiError(409, str(exc)) from None
-    return ModeOut(mode=int(ctl.packml.mode), mode_name=ctl.packml.mode.label)
+    mode = ctl.status().mode
+    return ModeOut(mode=int(mode), mode_name=mode.label)
 
 
 def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError:
@@ -162,9 +170,9 @@ def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError
 
 
 def _command_out(ctl: Controller) -> CommandOut:
-    pk = ctl.packml
-    return CommandOut(state=int(pk.state), name=pk.state.label, reason=pk.reason,
-                      allowed=command_names(ctl.allowed()))  # fmt: skip
+    st = ctl.status()
+    return CommandOut(state=int(st.state), name=st.state.label, reason=st.reason,
+                      allowed=command_names(st.allowed))  # fmt: skip
 
 
 @router.post("/preview", response_model=PreviewOut, dependencies=WRITE,

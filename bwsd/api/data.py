@@ -18,10 +18,10 @@ from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
 from bwsd.controller.errors import Busy, ControllerError
-from bwsd.errors import ProgramError, TwinError
+from bwsd.errors import ProgramError
 from bwsd.export import ExportError, export
 from bwsd.export.skeleton_json import skeleton_to_dict
-from bwsd.program import parse_program_with_positions
+from bwsd.gate import Caller, Gate, Refused
 from bwsd.twin import SkeletonData
 
 from .auth import Principal, require
@@ -41,7 +41,7 @@ from .models import (
     ProgramOut,
     StateRecordOut,
 )
-from .problems import ApiError
+from .problems import ApiError, refused
 from .routing import RouteTable
 
 router = RouteTable()
@@ -70,24 +70,27 @@ async def post_program(
     the client goes away.
     """
     ctl = ctx.controller
+    gate: Gate = request.app.state.gate
+    caller = Caller("rest", who.name, who.token, who.role)
     cancel = threading.Event()
     try:
         if dry_run:
-            _, totals = await _until_gone(request, cancel, ctl.check(body.name, body.text, cancel))
+            checking = gate.check(caller, body.name, body.text, cancel)
+            totals = await _until_gone(request, cancel, checking)
             pid = None
             response.status_code = 200
         else:
             pid = await _until_gone(request, cancel,
-                                    ctl.load(body.name, body.text, who.name, cancel))  # fmt: skip
+                                    gate.load(caller, body.name, body.text, cancel))  # fmt: skip
             assert ctl.dry_run is not None
             totals = ctl.dry_run
-    except ProgramError as exc:
+    except Refused as exc:
+        raise refused(exc) from None
+    except ProgramError as exc:  # a refusal names its line and column (ProgramRefused too)
         raise _program_error(exc) from None
     except Busy as exc:
         raise ApiError(429, str(exc), headers={"Retry-After": "1"}) from None
     except ControllerError as exc:
-        if isinstance(exc.__cause__, TwinError):
-            raise _program_error(await _refused_at(exc.__cause__, body)) from None
         raise ApiError(409, str(exc)) from None
     return LoadedOut(id=pid, name=body.name, **asdict(totals))
 
@@ -107,26 +110,13 @@ def _program_error(exc: ProgramError) -> ApiError:
     return ApiError(422, exc.reason, line=exc.line, column=exc.column)
 
 
-async def _refused_at(exc: TwinError, body: ProgramIn) -> ProgramError:
-    """A dry-run refusal as a program error at the refused instruction's keyword."""
-    return await asyncio.to_thread(_refusal_at, exc, body)
-
-
-def _refusal_at(exc: TwinError, body: ProgramIn) -> ProgramError:
-    program, positions = parse_program_with_positions(body.text, body.name)
-    i = exc.instruction - 1
-    column = positions.keywords[i] if 0 <= i < len(positions.keywords) else 0
-    line = program.line_of(exc.instruction)
-    return ProgramError(str(exc), line=line, column=column, source=body.name)
-
-
 @router.get("/programs", response_model=list[ProgramOut], dependencies=READ,
             responses={**AUTH_ERRORS, **INVALID})  # fmt: skip
 async def get_programs(
     ctx: Ctx, limit: Limit = 50, before: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None
 ) -> list[ProgramOut]:
     """Programs loaded, newest first; page with ``before`` (the last id seen)."""
-    records = await asyncio.to_thread(ctx.controller.journal.history, limit, before)
+    records = await ctx.controller.history(limit, before)
     return [ProgramOut(**asdict(r)) for r in records]
 
 
@@ -136,12 +126,10 @@ async def get_program(
     ctx: Ctx, program_id: Annotated[int, PathParam(ge=1, le=MAX_ID)]
 ) -> ProgramDetailOut:
     """One program's record and its text."""
-    journal = ctx.controller.journal
-    found = await asyncio.to_thread(journal.history, 1, program_id + 1)
-    if not found or found[0].id != program_id:
+    found = await ctx.controller.program_record(program_id)
+    if found is None:
         raise ApiError(404, f"no program {program_id}")
-    text = await asyncio.to_thread(journal.program_text, program_id)
-    return ProgramDetailOut(**asdict(found[0]), text=text)
+    return ProgramDetailOut(**asdict(found[0]), text=found[1])
 
 
 @router.get("/history", response_model=HistoryOut, dependencies=READ,
@@ -150,9 +138,7 @@ async def get_history(
     ctx: Ctx, after_state: After = 0, after_event: After = 0, limit: Limit = 100
 ) -> HistoryOut:
     """The journal's PackML state changes and events, oldest first, after the ids given."""
-    journal = ctx.controller.journal
-    states = await asyncio.to_thread(journal.states, after_state, limit)
-    events = await asyncio.to_thread(journal.events, after_event, limit)
+    states, events = await ctx.controller.records(after_state, after_event, limit)
     return HistoryOut(states=[StateRecordOut(**asdict(s)) for s in states],
                       events=[EventRecordOut(**asdict(e)) for e in events])  # fmt: skip
 

@@ -21,7 +21,7 @@ class Metrics:
         self.registry = CollectorRegistry(auto_describe=True)
         r = self.registry
         state = Gauge("bwsd_packml_state", "PackML state number (ISA-TR88.00.02)", registry=r)
-        state.set_function(lambda: float(controller.packml.state))
+        state.set_function(lambda: float(controller.status().state))
         index = Gauge("bwsd_instruction_index", "Instructions done of the loaded program",
                       registry=r)  # fmt: skip
         index.set_function(lambda: float(controller.index))

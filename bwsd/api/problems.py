@@ -14,6 +14,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from bwsd.errors import BwsdError
 from bwsd.fieldbus import FieldbusError
+from bwsd.gate import Refused
 from bwsd.journal import JournalError
 
 
@@ -81,6 +82,18 @@ def _short(error: Any) -> dict[str, Any]:
         out["input"] = text.encode("utf-8", "backslashreplace").decode("utf-8")
     out.pop("ctx", None)
     return out
+
+
+def refused(exc: Refused) -> ApiError:
+    """The gate's refusal as HTTP: a token no longer known 401, a role too low 403, a value
+    of the wrong type or out of range 422 naming the field."""
+    if exc.kind == "who":
+        return ApiError(401, str(exc), headers={"WWW-Authenticate": "Bearer"})
+    if exc.kind == "role":
+        return ApiError(403, str(exc))
+    details = [{"loc": ["body", exc.field] if exc.field else ["body"], "msg": str(exc),
+                "type": exc.kind}]  # fmt: skip
+    return ApiError(422, f"invalid request: {exc}", details=details)
 
 
 def describe(exc: Exception) -> str:

@@ -26,7 +26,7 @@ from bwsd.controller.runloop import Aborted, Ending, Finished, Held, Parts, RunL
 from bwsd.controller.status import Fault, StopCause, cause_of
 from bwsd.errors import BwsdError
 from bwsd.fieldbus.base import FieldbusError
-from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED
+from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, JournalError
 
 if TYPE_CHECKING:
     from bwsd.controller.facade import Controller
@@ -72,8 +72,9 @@ async def _take(ctl: Controller, command: C, reason: str, who: str, resume: bool
         if refused is not None:
             raise ControllerError(refused)
         state = ctl.packml.command(command, reason)
-    except BwsdError as exc:
-        log.warning("command %s refused: %s", text, exc)
+    except BwsdError as exc:  # a refusal is routine (INFO); a bus or journal fault is not
+        failed = isinstance(exc, FieldbusError | JournalError)
+        log.log(logging.ERROR if failed else logging.INFO, "command %s refused: %s", text, exc)
         raise
     if command in (C.HOLD, C.SUSPEND):
         ctl.stop_cause = StopCause.OPERATOR
@@ -198,7 +199,7 @@ async def end_now(
     try:
         state = ctl.packml.command(command, reason)
     except InvalidCommand as exc:
-        log.warning("command %s refused: %s", text, exc)
+        log.info("command %s refused: %s", text, exc)
         raise
     ctl.stop_cause = cause
     loop = ctl.loop

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
-from bwsd.errors import BwsdError
+from bwsd.errors import BwsdError, ProgramError
 
 
 class ControllerError(BwsdError):
     """A request the controller cannot take in its present state (names why)."""
+
+
+class ProgramRefused(ControllerError, ProgramError):
+    """The controller refuses a program at its check: names the instruction, and the line
+    and column where the program writes it."""
+
+    def __init__(self, message: str, *, instruction: int, line: int, column: int,
+                 source: str) -> None:  # fmt: skip
+        ProgramError.__init__(self, message, line=line, column=column, source=source)
+        self.instruction = instruction
 
 
 class Busy(ControllerError):

@@ -41,14 +41,35 @@ from bwsd.controller.status import (
 )
 from bwsd.controller.supervisor import Supervisor
 from bwsd.errors import BwsdError
+from bwsd.fieldbus.axes import Axis
 from bwsd.fieldbus.base import BoolGrid, Fieldbus, FieldbusError, MachineState
-from bwsd.journal import ENDED, Journal, ProgramRecord
+from bwsd.journal import (
+    COMPLETE,
+    ENDED,
+    EventRecord,
+    Journal,
+    JournalError,
+    ProgramRecord,
+    StateRecord,
+)
 from bwsd.twin import Machine, Program, Twin
 
 log = logging.getLogger("bwsd.controller")
 Publish = Callable[[dict[str, Any]], None]
 _LOADABLE = frozenset({State.STOPPED, State.IDLE, State.COMPLETE, State.ABORTED})
 _ENDS = frozenset({Command.ABORT, Command.STOP})
+
+
+@dataclass(frozen=True)
+class TwinView:
+    """What the doors show of the twin: the matrix, its occupancy row by row, the take-up
+    (mm) and the contacts so far."""
+
+    rows: int
+    cols: int
+    occupancy: list[bool]
+    takeup: float
+    contacts: int
 
 
 @dataclass(frozen=True)
@@ -96,6 +117,9 @@ class Controller:
         self.broken = ""  # why the active program could not be restored ("" when it was)
         self.restoring: ProgramRecord | None = None  # the program a restart restores
         self._checking = asyncio.Lock()  # one program check at a time
+        self.mode_requested = UnitMode.PRODUCTION  # the unit mode last asked for
+        self.good = 0  # programs that reached Complete (the doors' production counts)
+        self.defective = 0  # programs left unfinished after they ran: another loaded instead
 
     # ----- what the doors read -----
     @property
@@ -117,6 +141,11 @@ class Controller:
     @property
     def twin(self) -> Twin | None:
         return self.job.twin if self.job else None
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        """The machine's axes, in the bus's order."""
+        return tuple(self.bus.axes)
 
     @property
     def dry_run(self) -> DryRun | None:
@@ -162,6 +191,9 @@ class Controller:
             recovering=self.recovering or self.broken,
             next=None if ended or job is None else job.next_step(),
             resumable=self.resumable(),
+            mode_requested=self.mode_requested,
+            good=self.good,
+            defective=self.defective,
         )
 
     def next_step(self) -> dict[str, Any] | None:
@@ -212,6 +244,9 @@ class Controller:
             pid: int = await self.recorder.write(
                 self.journal.add_program, name, text, len(program.instructions)
             )
+            old = self.job
+            if old is not None and old.ended != COMPLETE and (old.done or old.pending):
+                self.defective += 1  # it ran and can no longer be finished
             self.job, self.restoring, self.broken = Job(program, pid, name, twin, totals), None, ""
             log.info(
                 "program %d %r loaded by %s: %d instructions",
@@ -223,6 +258,45 @@ class Controller:
             self.events.publish(ProgramLoaded(pid, name, len(program.instructions)))
             self.seen.compare(self.at_rest())
         return pid
+
+    async def load_stored(self, program_id: int, who: str = "") -> int:
+        """Load again a program the journal holds (its text checked against its sha256), as
+        ``load`` does: the journal's new id."""
+        try:
+            record = await self.recorder.write(self.journal.program, program_id)
+            text = await self.recorder.write(self.journal.program_text, program_id)
+        except JournalError as exc:
+            raise ControllerError(f"program {program_id}: {exc.reason}") from None
+        return await self.load(record.name, text, who)
+
+    async def history(self, limit: int = 50, before: int | None = None) -> list[ProgramRecord]:
+        """The journal's programs, newest first (read in a worker thread)."""
+        return await asyncio.to_thread(self.journal.history, limit, before)
+
+    async def program_record(self, program_id: int) -> tuple[ProgramRecord, str] | None:
+        """One program of the journal and its text; None when the journal has no such id
+        (JournalError when its text no longer matches its sha256)."""
+        found = await asyncio.to_thread(self.journal.history, 1, program_id + 1)
+        if not found or found[0].id != program_id:
+            return None
+        text = await asyncio.to_thread(self.journal.program_text, program_id)
+        return found[0], text
+
+    async def records(self, after_state: int = 0, after_event: int = 0,
+                      limit: int = 100) -> tuple[list[StateRecord], list[EventRecord]]:  # fmt: skip
+        """The journal's state changes and events after the ids given, oldest first."""
+        states = await asyncio.to_thread(self.journal.states, after_state, limit)
+        events = await asyncio.to_thread(self.journal.events, after_event, limit)
+        return states, events
+
+    async def twin_view(self) -> TwinView:
+        """The machine's size and the twin's occupancy, take-up and contacts (copied in a
+        worker thread: it takes the twin's lock)."""
+        twin, m = self.twin, self.machine
+        if twin is None:
+            return TwinView(m.rows, m.cols, [], 0.0, 0)
+        occupancy = await asyncio.to_thread(lambda: twin.occupancy.ravel().tolist())
+        return TwinView(m.rows, m.cols, occupancy, twin.takeup, twin.contact_count)
 
     def _refuse_load(self) -> None:
         if self.recovering:
@@ -250,12 +324,13 @@ class Controller:
 
     async def set_mode(self, mode: UnitMode, who: str = "") -> None:
         """Change the unit mode (where PackML allows it), journaled and published."""
+        self.mode_requested = mode
         async with self.lock:
             old = self.packml.mode
             try:
                 self.packml.set_mode(mode)
             except BwsdError as exc:
-                log.warning("mode %s from %s refused: %s", mode.label, who or "?", exc)
+                log.info("mode %s from %s refused: %s", mode.label, who or "?", exc)
                 raise
             if mode is not old:
                 log.info("mode %s -> %s by %s", old.label, mode.label, who or "?")
@@ -331,6 +406,8 @@ class Controller:
             f"state {new.label}", self.journal.log_state, int(new), new.label, reason, event.at
         )
         self.events.publish(event)
+        if new is State.COMPLETE and self.job is not None and self.job.complete:
+            self.good += 1
         if new in (
             State.IDLE,
             State.HELD,

@@ -82,6 +82,13 @@ _COMPLETES_TO: dict[State, State] = {
 }
 
 ACTING: frozenset[State] = frozenset(_COMPLETES_TO)
+
+
+def completes_to(state: State) -> State | None:
+    """The state an acting state goes to when its work is done (None for another state)."""
+    return _COMPLETES_TO.get(state)
+
+
 """The "...ing" states: they end by ``state_complete()`` (or a command that leaves them)."""
 
 WAITING: frozenset[State] = frozenset(

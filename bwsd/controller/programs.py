@@ -13,10 +13,11 @@ import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from bwsd.controller.errors import Cancelled, ControllerError
+from bwsd.controller.errors import Cancelled, ProgramRefused
 from bwsd.controller.plan import Limits, RefusedMove, check_limits
 from bwsd.errors import BwsdError, TwinError
 from bwsd.program import parse_program_with_positions, validate
+from bwsd.program.parser import SourceMap
 from bwsd.twin import Machine, Program, Snapshot, Twin
 from bwsd.twin.instructions import Instruction, Shift
 
@@ -83,9 +84,18 @@ def check_program(machine: Machine, limits: Limits, most: int, name: str, text: 
             else:
                 twin.advance(instruction)
     except TwinError as exc:
-        raise ControllerError(f"{name}: {exc}") from exc
+        raise _refused(str(exc), exc.instruction, program, positions, name) from exc
     except RefusedMove as exc:
-        raise ControllerError(f"{name}: {exc}") from TwinError(str(exc), instruction=pred.index)
+        raise _refused(str(exc), pred.index, program, positions, name) from exc
     count = len(program.instructions)
     return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
                            twin.takeup)  # fmt: skip
+
+
+def _refused(message: str, index: int, program: Program, positions: SourceMap, name: str
+             ) -> ProgramRefused:  # fmt: skip
+    """A refusal of instruction ``index`` at the line and column of its keyword."""
+    i = index - 1
+    column = positions.keywords[i] if 0 <= i < len(positions.keywords) else 0
+    return ProgramRefused(message, instruction=index, line=program.line_of(index), column=column,
+                          source=name)  # fmt: skip

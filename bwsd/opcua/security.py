@@ -13,7 +13,10 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import contextvars
 import hashlib
+import ipaddress
 import logging
 import socket
 from dataclasses import dataclass
@@ -32,11 +35,11 @@ from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from bwsd.api.auth import RANK, Role, TokenStore
 from bwsd.errors import BwsdError
 from bwsd.logs import Summary
 from bwsd.opcua.space import standard_id, status
 from bwsd.paths import write_private
+from bwsd.tokens import RANK, Role, TokenStore
 
 log = logging.getLogger(__name__)
 CERT_FILE = "server-cert.der"
@@ -82,19 +85,22 @@ class Certificate:
                 f"{cert.not_valid_after_utc:%Y-%m-%d}")  # fmt: skip
 
 
-def certificate(folder: Path, *, renew: bool = False) -> Certificate:
-    """The server certificate in ``folder``, made when missing (or when ``renew``)."""
+def certificate(folder: Path, *, renew: bool = False, listening: str = "127.0.0.1") -> Certificate:
+    """The server certificate in ``folder``, made when missing, when ``renew``, or when it
+    does not name the address the server listens on (``listening``)."""
     found = Certificate(folder / CERT_FILE, folder / KEY_FILE)
     if found.cert.exists() and found.key.exists() and not renew:
-        return found
+        if _names_host(found, listening):
+            return found
+        log.warning("OPC UA: the server certificate does not name %s, where the server listens: "
+                    "made anew (clients that trusted the old one must trust the new one)",
+                    listening)  # fmt: skip
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         key = cert_gen.generate_private_key()
         host = socket.gethostname()
-        names = [x509.UniformResourceIdentifier(application_uri(host)), x509.DNSName(host),
-                 x509.DNSName("localhost")]  # fmt: skip
         cert = cert_gen.generate_self_signed_app_certificate(
-            key, f"bwsd@{host}", {"organizationName": "bwsd"}, names,
+            key, f"bwsd@{host}", {"organizationName": "bwsd"}, _names(host, listening),
             [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_DAYS,
         )  # fmt: skip
         write_private(found.key, cert_gen.dump_private_key_as_pem(key))
@@ -105,12 +111,62 @@ def certificate(folder: Path, *, renew: bool = False) -> Certificate:
     return found
 
 
+def _names(host: str, listening: str) -> list[x509.GeneralName]:
+    """The certificate's names: the application URI, the machine's name, localhost, the
+    loopback addresses, and the address the server listens on (on every address: the
+    machine's own addresses)."""
+    names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri(host)),
+                                      x509.DNSName(host), x509.DNSName("localhost")]  # fmt: skip
+    addresses = {"127.0.0.1", "::1"}
+    if listening in ("", "0.0.0.0", "::"):
+        with contextlib.suppress(OSError):
+            addresses |= {str(info[4][0]) for info in socket.getaddrinfo(host, None)}
+    else:
+        addresses.add(listening)
+    for address in sorted(addresses):
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(address.split("%", 1)[0])))
+        except ValueError:
+            if address not in (host, "localhost"):
+                names.append(x509.DNSName(address))
+    return names
+
+
+def _names_host(found: Certificate, listening: str) -> bool:
+    """Whether the certificate names ``listening`` (a wildcard needs nothing more)."""
+    if listening in ("", "0.0.0.0", "::"):
+        return True
+    try:
+        alt = found.load().extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    except (x509.ExtensionNotFound, ValueError):
+        return False
+    try:
+        return ipaddress.ip_address(listening) in alt.value.get_values_for_type(x509.IPAddress)
+    except ValueError:
+        return listening in alt.value.get_values_for_type(x509.DNSName)
+
+
 # ----- users -----
 @dataclass
 class LoomUser(User):
-    """An asyncua user carrying the bwsd role (asyncua's own role stays User: no admin)."""
+    """An asyncua user carrying the bwsd role it logged in with and its token, checked again
+    at every write and call (asyncua's own role stays User: no admin)."""
 
     bwsd_role: Role = "viewer"
+    token: str | None = None  # None: anonymous
+
+
+# The user of the request being served: set where asyncua checks a request's permissions,
+# read by the methods (asyncua does not tell a method call's user) and by the per-user
+# access levels, in the same task.
+_CURRENT: contextvars.ContextVar[LoomUser | None] = contextvars.ContextVar(
+    "opcua_user", default=None
+)
+
+
+def current_user() -> LoomUser | None:
+    """The user whose request is being served (None outside a request)."""
+    return _CURRENT.get()
 
 
 class TokenUsers:
@@ -132,7 +188,7 @@ class TokenUsers:
             REFUSED_LOGIN.note("OPC UA: refused user %r: unknown name or token", username)
             return None
         log.info("OPC UA: user %s (%s) logged in", holder[0], holder[1])
-        return LoomUser(UserRole.User, holder[0], holder[1])
+        return LoomUser(UserRole.User, holder[0], holder[1], password)
 
 
 def role_of(user: Any) -> Role | None:
@@ -140,19 +196,33 @@ def role_of(user: Any) -> Role | None:
 
 
 class Ruleset(PermissionRuleset):
-    """Reads for every user; a write or a call needs the role of each node it names."""
+    """Reads for every user; a write or a call needs the role of each node it names, the
+    role the user's token has now (a token removed, or demoted, no longer counts)."""
 
-    def __init__(self, needs: dict[ua.NodeId, Role]) -> None:
+    def __init__(self, needs: dict[ua.NodeId, Role], tokens: TokenStore | None = None) -> None:
         self.needs = needs
+        self.tokens = tokens
 
     def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
+        _CURRENT.set(user if isinstance(user, LoomUser) else None)
         if action_type_id not in _ALLOWED:
             return False  # the address space is never edited from outside
-        role = role_of(user)
-        if role is None:
-            return False
         targets = self._targets(action_type_id, body)
-        return all(RANK[role] >= RANK[self.needs.get(t, "admin")] for t in targets)
+        return all(self.may(user, self.needs.get(t, "admin")) for t in targets)
+
+    def may(self, user: Any, needs: Role) -> bool:
+        """Whether ``user`` holds ``needs`` or above now."""
+        role = self.role_now(user)
+        return role is not None and RANK[role] >= RANK[needs]
+
+    def role_now(self, user: Any) -> Role | None:
+        """The user's role as its token says now (the login's for an anonymous one)."""
+        if not isinstance(user, LoomUser):
+            return None
+        if user.token is None or self.tokens is None:
+            return user.bwsd_role
+        held = self.tokens.check(user.token)
+        return held[1] if held is not None and held[0] == user.name else None
 
     @staticmethod
     def _targets(action: ua.NodeId, body: Buffer) -> list[ua.NodeId]:
@@ -197,6 +267,8 @@ class TrustFolder:
             made.mkdir(mode=0o700, parents=True, exist_ok=True)
 
     async def __call__(self, cert: x509.Certificate, app: ua.ApplicationDescription) -> None:
+        if not any(self.trusted.iterdir()):  # asyncua cannot build a store from none
+            await self._refuse(cert, app, ServiceError(ua.StatusCodes.BadCertificateUntrusted))
         store = TrustStore([self.trusted], [])
         await store.load()
         options = (CertificateValidatorOptions.TRUSTED_VALIDATION
@@ -204,14 +276,19 @@ class TrustFolder:
         try:
             await CertificateValidator(options, store).validate(cert, app)
         except ServiceError as exc:
-            name = status(exc.code).name
-            der = cert.public_bytes(Encoding.DER)
-            thumb = hashlib.sha1(der, usedforsecurity=False).hexdigest()
-            REFUSED_CERT.note("OPC UA: refused client %s (certificate %s): %s",
-                              app.ApplicationUri, thumb, name)  # fmt: skip
-            if exc.code == ua.StatusCodes.BadCertificateUntrusted:
-                await asyncio.to_thread(self._keep, thumb, der)
-            raise
+            await self._refuse(cert, app, exc)
+
+    async def _refuse(self, cert: x509.Certificate, app: ua.ApplicationDescription,
+                      exc: ServiceError) -> None:  # fmt: skip
+        """Log the refusal, keep an untrusted certificate in ``rejected/``, raise ``exc``."""
+        name = status(exc.code).name
+        der = cert.public_bytes(Encoding.DER)
+        thumb = hashlib.sha1(der, usedforsecurity=False).hexdigest()
+        REFUSED_CERT.note("OPC UA: refused client %s (certificate %s): %s",
+                          app.ApplicationUri, thumb, name)  # fmt: skip
+        if exc.code == ua.StatusCodes.BadCertificateUntrusted:
+            await asyncio.to_thread(self._keep, thumb, der)
+        raise exc
 
     def _keep(self, thumb: str, der: bytes) -> None:
         try:

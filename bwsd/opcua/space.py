@@ -15,8 +15,8 @@ from typing import Any
 
 from asyncua import Node, Server, ua
 
-from bwsd.api.auth import Role
 from bwsd.controller.packml import Command, State, UnitMode
+from bwsd.tokens import Role
 
 NAMESPACE = "urn:bwsd:packml"
 ROOT = "Loom"
@@ -50,6 +50,12 @@ TAGS: tuple[Tag, ...] = (
     Tag("Status/CurrentLine", V.UInt32, 0, "its line in the program text (0: none)"),
     Tag("Status/Program", V.String, "", "name of the loaded program"),
     Tag("Status/ProgramId", V.UInt32, 0, "its id in the journal (0: none)"),
+    Tag("Status/StateRequested", V.Int32, int(State.STOPPED),
+        "the state the machine is going to: the one an acting state ends in, else the state"),
+    Tag("Status/StateChangeInProcess", V.Boolean, False,
+        "an acting state (Resetting, Starting, Holding...) is doing its work"),
+    Tag("Status/UnitModeRequested", V.Int32, int(UnitMode.PRODUCTION),
+        "the unit mode last requested (by any door)"),
     Tag("Status/CmdInvalid", V.Boolean, False, "the last command or mode request was refused"),
     Tag("Status/CmdInvalidReason", V.String, "", "why it was refused"),
     Tag("Command/CntrlCmd", V.Int32, 0, "PackML command number (1 Reset .. 9 Clear)",
@@ -87,16 +93,18 @@ TAGS: tuple[Tag, ...] = (
     Tag("Machine/Contacts", V.UInt32, 0, "yarn contacts of the loaded program so far"),
 )  # fmt: skip
 
-# The methods: the PackML commands and Resume (operator), and SetUnitMode (admin).
+# The methods: the PackML commands, Resume and LoadProgram (operator), SetUnitMode (admin).
 COMMAND_METHODS: tuple[Command, ...] = tuple(Command)
 RESUME = "Resume"  # Start, continuing the loaded program where an Abort or a Stop left it
+LOAD_PROGRAM = "LoadProgram"  # (Name: String, Text: String) -> ProgramId: UInt32
 SET_UNIT_MODE = "SetUnitMode"
 MethodCall = Callable[..., Awaitable[Any]]
 
 
 def node_id(idx: int, path: str) -> ua.NodeId:
-    """``Loom.Status.StateCurrent`` in the bwsd namespace."""
-    return ua.NodeId(ua.String(".".join((ROOT, *path.split("/")))), ua.Int16(idx))
+    """``Loom.Status.StateCurrent`` in the bwsd namespace; ``Loom`` for the object itself."""
+    return ua.NodeId(ua.String(".".join((ROOT, *path.split("/"))) if path else ROOT),
+                     ua.Int16(idx))  # fmt: skip
 
 
 def standard_id(number: int) -> ua.NodeId:
@@ -122,6 +130,7 @@ def needs(idx: int) -> dict[ua.NodeId, Role]:
     for command in COMMAND_METHODS:
         table[node_id(idx, command.label)] = "operator"
     table[node_id(idx, RESUME)] = "operator"
+    table[node_id(idx, LOAD_PROGRAM)] = "operator"
     table[node_id(idx, SET_UNIT_MODE)] = "admin"
     return table
 
@@ -134,10 +143,18 @@ class Space:
     variables: dict[str, Node]
 
 
-async def build(server: Server, on_command: Callable[[Command], MethodCall],
-                set_mode: MethodCall, resume: MethodCall) -> Space:  # fmt: skip
-    """Add the PackML object under Objects; methods call ``on_command(c)``, ``set_mode`` and
-    ``resume``."""
+@dataclass(frozen=True)
+class Methods:
+    """What the object's methods call."""
+
+    command: Callable[[Command], MethodCall]
+    set_mode: MethodCall
+    resume: MethodCall
+    load: MethodCall
+
+
+async def build(server: Server, methods: Methods) -> Space:
+    """Add the PackML object under Objects with its variables and methods."""
     idx = await server.register_namespace(NAMESPACE)
     root = await server.nodes.objects.add_object(node_id(idx, ""), ua.QualifiedName(ROOT, idx))
     objects: dict[str, Node] = {"": root}
@@ -147,14 +164,25 @@ async def build(server: Server, on_command: Callable[[Command], MethodCall],
         variables[tag.path] = await _variable(parent, idx, tag)
     for command in COMMAND_METHODS:
         await root.add_method(node_id(idx, command.label), ua.QualifiedName(command.label, idx),
-                              on_command(command), [], [])  # fmt: skip
-    await root.add_method(node_id(idx, RESUME), ua.QualifiedName(RESUME, idx), resume, [], [])
+                              methods.command(command), [], [])  # fmt: skip
+    await root.add_method(node_id(idx, RESUME), ua.QualifiedName(RESUME, idx), methods.resume,
+                          [], [])  # fmt: skip
     about = ua.LocalizedText("1 Production, 2 Maintenance, 3 Manual")
     mode = ua.Argument(Name="UnitMode", DataType=standard_id(ua.ObjectIds.Int32), ValueRank=-1,
                        Description=about)  # fmt: skip
     await root.add_method(node_id(idx, SET_UNIT_MODE), ua.QualifiedName(SET_UNIT_MODE, idx),
-                          set_mode, [mode], [])  # fmt: skip
+                          methods.set_mode, [mode], [])  # fmt: skip
+    load_in = [_argument("Name", ua.ObjectIds.String, "the program's name"),
+               _argument("Text", ua.ObjectIds.String, "the program's .bws text")]  # fmt: skip
+    load_out = [_argument("ProgramId", ua.ObjectIds.UInt32, "its id in the journal")]
+    await root.add_method(node_id(idx, LOAD_PROGRAM), ua.QualifiedName(LOAD_PROGRAM, idx),
+                          methods.load, load_in, load_out)  # fmt: skip
     return Space(idx, variables)
+
+
+def _argument(name: str, kind: int, about: str) -> ua.Argument:
+    return ua.Argument(Name=name, DataType=standard_id(kind), ValueRank=-1,
+                       Description=ua.LocalizedText(about))  # fmt: skip
 
 
 async def _parent(objects: dict[str, Node], idx: int, path: str) -> Node:
@@ -170,6 +198,11 @@ async def _variable(parent: Node, idx: int, tag: Tag) -> Node:
     name = tag.path.rpartition("/")[2]
     node = await parent.add_variable(node_id(idx, tag.path), ua.QualifiedName(name, idx),
                                      ua.Variant(tag.start, tag.kind))  # fmt: skip
+    if isinstance(tag.start, list):  # an array: one dimension, of any length
+        await node.write_attribute(ua.AttributeIds.ValueRank,
+                                   ua.DataValue(ua.Variant(1, V.Int32)))  # fmt: skip
+        await node.write_attribute(ua.AttributeIds.ArrayDimensions,
+                                   ua.DataValue(ua.Variant([0], V.UInt32)))  # fmt: skip
     await node.write_attribute(ua.AttributeIds.Description,
                                ua.DataValue(ua.Variant(ua.LocalizedText(tag.about))))  # fmt: skip
     if tag.writer:

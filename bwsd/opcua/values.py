@@ -1,8 +1,8 @@
 """What the OPC UA variables say, computed from the controller's status and events (pure).
 
-No asyncua here: the door (bwsd.opcua.server) writes these values into its nodes. Counts
-and times are kept by ``Tally`` from the event stream, as the Modbus door keeps its good
-count; everything else is read from the one status snapshot.
+No asyncua here: the door (bwsd.opcua.server) writes these values into its nodes. The times
+and the rate are kept by ``Tally`` from the event stream; everything else, the production
+counts included, is read from the one status snapshot.
 """
 
 from __future__ import annotations
@@ -11,40 +11,30 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from bwsd.controller.packml import State
+from bwsd.controller.packml import ACTING, State, completes_to
 from bwsd.controller.status import StatusSnapshot
 
 RATE_WINDOW = 60.0  # s: CurMachSpeed counts the instructions done in the last minute
 STATES = len(State) + 1  # StateCumulativeTime is indexed by the state's number (0 unused)
-_ENDED = frozenset({State.STOPPED, State.ABORTED})
 
 
 @dataclass
 class Tally:
-    """Products (programs run), time per state and the instruction rate, since the start."""
+    """Time per state and the instruction rate, since the door started."""
 
     started: float  # when the door started (monotonic s)
     state: State = State.STOPPED
     entered: float = 0.0  # when ``state`` was entered (monotonic s)
     cumulative: list[float] = field(default_factory=lambda: [0.0] * STATES)
-    good: int = 0  # programs that reached Complete
-    defective: int = 0  # programs stopped or aborted after they had started
-    _open: bool = False  # a program has entered Execute and not ended
     _done: deque[float] = field(default_factory=deque)  # when each recent instruction ended
 
     def __post_init__(self) -> None:
         self.entered = self.started
 
     def state_changed(self, new: State, now: float) -> None:
-        """A transition: close the old state's time, count a product that ended."""
+        """A transition: close the old state's time."""
         self.cumulative[self.state] += now - self.entered
         self.state, self.entered = new, now
-        if new is State.EXECUTE:
-            self._open = True
-        elif new is State.COMPLETE and self._open:
-            self.good, self._open = self.good + 1, False
-        elif new in _ENDED and self._open:
-            self.defective, self._open = self.defective + 1, False
 
     def instruction_done(self, now: float) -> None:
         self._done.append(now)
@@ -88,6 +78,9 @@ def status_values(st: StatusSnapshot, tally: Tally, now: float) -> dict[str, Any
     step = st.next or {}
     return {
         "Status/StateCurrent": int(st.state),
+        "Status/StateRequested": int(requested(st.state)),
+        "Status/StateChangeInProcess": st.state in ACTING,
+        "Status/UnitModeRequested": int(st.mode_requested),
         "Status/UnitModeCurrent": int(st.mode),
         "Status/CurMachSpeed": tally.speed(now),
         "Status/InstructionsDone": st.index,
@@ -103,9 +96,9 @@ def status_values(st: StatusSnapshot, tally: Tally, now: float) -> dict[str, Any
         "Admin/StateCurrentTime": now - tally.entered,
         "Admin/StateCumulativeTime": tally.times(now),
         "Admin/AccTimeSinceReset": now - tally.started,
-        "Admin/ProdProcessedCount": tally.good + tally.defective,
-        "Admin/ProdGoodCount": tally.good,
-        "Admin/ProdDefectiveCount": tally.defective,
+        "Admin/ProdProcessedCount": st.good + st.defective,
+        "Admin/ProdGoodCount": st.good,
+        "Admin/ProdDefectiveCount": st.defective,
         "Machine/EStop": bool(st.bus.estop),
         "Machine/BusConnected": bool(st.bus.connected),
         "Machine/BusLastError": st.bus.last_error or "",
@@ -119,3 +112,8 @@ def status_values(st: StatusSnapshot, tally: Tally, now: float) -> dict[str, Any
 def history_lines(records: list[Any]) -> list[str]:
     """The program history summary: ``"12 braid.bws complete 20/20"``, newest first."""
     return [f"{r.id} {r.name} {r.outcome} {r.done}/{r.instructions}" for r in records]
+
+
+def requested(state: State) -> State:
+    """Where the machine is going: the state an acting state ends in, else the state."""
+    return completes_to(state) or state

@@ -1,6 +1,6 @@
 """The PackML tags as holding registers (map: docs/plc.md): addresses and the codec (pure).
 
-Nineteen holding registers from address 0, no gaps, so a PLC reads them all in one request.
+Twenty-four holding registers from address 0, no gaps, so a PLC reads them all in one request.
 32-bit values take two registers, high word first, unsigned.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import astuple, dataclass
 
-MAP_VERSION = 3  # 2: the e-stop register (16), stop reason 8; 3: resume (17, 18), reason 9
+MAP_VERSION = 3  # 2: the e-stop register (16), stop reason 8; 3: resume, load (17 .. 23), reason 9
 
 REG_MAP_VERSION = 0
 REG_CNTRL_CMD = 1  # Command.CntrlCmd
@@ -27,19 +27,23 @@ REG_HEARTBEAT = 15
 REG_ESTOP = 16  # 1 while the emergency stop is pressed (as last read)
 REG_RESUME = 17  # Command.Resume (bwsd): 1: a Start request resumes the loaded program
 REG_RESUMABLE = 18  # Status.Resumable (bwsd): 1 while a Start with resume is accepted
-REG_COUNT = 19
+REG_PROGRAM = 19  # 19, 20: Command.ProgramId (bwsd): a stored program to load
+REG_LOAD_REQUEST = 21  # Command.LoadRequest (bwsd): 1 loads Command.ProgramId
+REG_PROGRAM_ID = 22  # 22, 23: Status.ProgramId (bwsd): the loaded program's id
+REG_COUNT = 24
 
-WRITABLE = (*range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1), REG_RESUME)
+WRITABLE = (*range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1), REG_RESUME,
+            *range(REG_PROGRAM, REG_LOAD_REQUEST + 1))  # fmt: skip
 """The command registers the PLC writes; every other register is read-only."""
 
-REQUEST_REGISTERS = (REG_CMD_CHANGE_REQUEST, REG_UNIT_MODE_CHANGE_REQUEST)
+REQUEST_REGISTERS = (REG_CMD_CHANGE_REQUEST, REG_UNIT_MODE_CHANGE_REQUEST, REG_LOAD_REQUEST)
 """The handshake registers: 1 asks, the daemon writes 0 back once it has taken the request."""
 
 U16 = 0xFFFF
 U32 = 0xFFFFFFFF
 
 # The fields of Tags in register order, with the number of registers each takes.
-_WIDTHS = (1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 1, 1, 1, 1, 1)
+_WIDTHS = (1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 1, 1, 1, 1, 1, 2, 1, 2)
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,9 @@ class Tags:
     estop: int = 0
     resume: int = 0
     resumable: int = 0
+    program: int = 0  # Command.ProgramId as the PLC wrote it
+    load_request: int = 0
+    program_id: int = 0  # the loaded program's
 
 
 def u32_words(value: int) -> tuple[int, int]:

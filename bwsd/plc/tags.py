@@ -1,9 +1,11 @@
 """The PackML tags served to the plant PLC over Modbus TCP (map and handshake: docs/plc.md).
 
-bwsd is the server, the PLC the client. pymodbus's action callback sees every access: a
-read is answered from the controller as it is now, a write of a change request queues the
-request. One worker task takes the requests in order, outside the callback, through the
-controller, then writes the request register back to 0.
+bwsd is the server, the PLC the client, on pymodbus's public server API: a ``SimDevice``
+whose action callback sees every access (a read is answered from the controller's status
+as it is now, a write of a change request queues the request), and the ``trace_connect``
+hook, which closes a connection from an address the allow list lacks before it is read.
+One worker task takes the requests in order, outside the callback, through the gate (the
+one every door uses), then writes the request register back to 0.
 """
 
 from __future__ import annotations
@@ -12,26 +14,28 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import weakref
 from collections.abc import Iterable
 from typing import Any, cast
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
-from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimAction, SimData, SimDevice
 
 from bwsd.config import Config
 from bwsd.controller.facade import Controller
-from bwsd.controller.packml import Command, State, UnitMode
-from bwsd.controller.status import Event, StateChanged
+from bwsd.controller.packml import Command
 from bwsd.errors import BwsdError, ConfigError
+from bwsd.gate import Caller, Gate
 from bwsd.logs import Summary
 from bwsd.plc.registers import (
     MAP_VERSION,
     REG_CMD_CHANGE_REQUEST,
     REG_CNTRL_CMD,
     REG_COUNT,
+    REG_LOAD_REQUEST,
     REG_MAP_VERSION,
+    REG_PROGRAM,
     REG_RESUME,
     REG_UNIT_MODE,
     REG_UNIT_MODE_CHANGE_REQUEST,
@@ -41,6 +45,8 @@ from bwsd.plc.registers import (
     WRITABLE,
     Tags,
     encode,
+    u32_words,
+    words_u32,
 )
 
 log = logging.getLogger(__name__)
@@ -83,39 +89,15 @@ def networks(allow: Iterable[str]) -> tuple[Network, ...]:
     return tuple(found)
 
 
-class _Handler(ServerRequestHandler):
-    """One PLC connection; one from an address the allow list lacks is closed at once."""
-
-    server: _Server
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        super().connection_made(transport)
-        peer = transport.get_extra_info("peername")
-        if not self.server.admits(peer[0] if peer else None):
-            REFUSED.note("PLC: refused a connection from %s: not in [plc] allow",
-                         peer[0] if peer else "an unknown address")  # fmt: skip
-            transport.close()
-
-
-class _Server(ModbusTcpServer):
-    """pymodbus's Modbus TCP server, admitting only clients of the allow list."""
-
-    def __init__(self, device: SimDevice, address: tuple[str, int],
-                 allow: tuple[Network, ...]) -> None:  # fmt: skip
-        super().__init__(device, address=address)
-        self.allow = allow
-
-    def admits(self, host: str | None) -> bool:
-        try:
-            address = ipaddress.ip_address((host or "").split("%", 1)[0])
-        except ValueError:
-            return False
-        if address.version == 6 and address.ipv4_mapped is not None:
-            address = address.ipv4_mapped
-        return any(address in network for network in self.allow)
-
-    def callback_new_connection(self) -> Any:
-        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)  # type: ignore[no-untyped-call]
+def admits(allow: tuple[Network, ...], host: str | None) -> bool:
+    """Whether a peer's address is in the allow list (an IPv4-mapped IPv6 as its IPv4)."""
+    try:
+        address = ipaddress.ip_address((host or "").split("%", 1)[0])
+    except ValueError:
+        return False
+    if address.version == 6 and address.ipv4_mapped is not None:
+        address = address.ipv4_mapped
+    return any(address in network for network in allow)
 
 
 class PlcTags:
@@ -135,6 +117,7 @@ class PlcTags:
         allow: Iterable[str] = LOOPBACK,
         read_only: bool = False,
         heartbeat_period: float = HEARTBEAT_PERIOD,
+        gate: Gate | None = None,
     ) -> None:
         self.controller = controller
         self.allow = networks(allow)
@@ -144,15 +127,19 @@ class PlcTags:
         self.device_id = device_id
         self.heartbeat_period = heartbeat_period
         self._cntrl_cmd = 0
-        self._unit_mode = int(controller.packml.mode)
+        self._unit_mode = int(controller.status().mode)
         self._resume = 0  # Command.Resume as the PLC wrote it
+        self._program = 0  # Command.ProgramId as the PLC wrote it
+        self.gate = gate or Gate(controller)
+        # the PLC door has no users: the PLC's role is the door's (a read-only tap: viewer)
+        self.caller = Caller("plc", PLC_WHO, role="viewer" if read_only else "admin")
         self._pending: set[int] = set()  # request registers whose request is not taken yet
         self._invalid = False
-        self._good = 0
         self._beat = 0
         self._closing = False
         self._queue: asyncio.Queue[Request | None] = asyncio.Queue()
-        self._server: _Server | None = None
+        self._server: ModbusTcpServer | None = None
+        self._admitted: weakref.WeakSet[Any] = weakref.WeakSet()  # connections let in
         self._worker: asyncio.Task[None] | None = None
         self._beater: asyncio.Task[None] | None = None
 
@@ -161,17 +148,18 @@ class PlcTags:
         """Listen (the actual port is in ``port`` afterwards), then take requests."""
         if self._server is not None:
             raise RuntimeError(f"the PLC tags on port {self.port} are already served")
-        server = _Server(build_device(self.device_id, self._action), (self.host, self.port),
-                         self.allow)  # fmt: skip
+        device = build_device(self.device_id, self._action)
+        server = ModbusTcpServer(device, address=(self.host, self.port),
+                                 trace_connect=self._connected)  # fmt: skip
+        self._server = server  # the hook below reads its connections
         try:
             await server.serve_forever(background=True)
         except RuntimeError as exc:
+            self._server = None
             raise PlcError(f"the PLC tags cannot listen on {self.host}:{self.port}") from exc
-        self._server = server
         sockets = getattr(server.transport, "sockets", None)
         if sockets:
             self.port = sockets[0].getsockname()[1]
-        self.controller.events.subscribe(self._on_event)
         self._closing, self._queue = False, asyncio.Queue()
         self._pending.clear()
         supervisor = self.controller.supervisor
@@ -183,7 +171,6 @@ class PlcTags:
         server, self._server = self._server, None
         if server is not None:
             await server.shutdown()  # type: ignore[no-untyped-call]
-        self.controller.events.unsubscribe(self._on_event)
         beater, self._beater = self._beater, None
         if beater is not None:
             beater.cancel()
@@ -194,6 +181,26 @@ class PlcTags:
             self._closing = True
             self._queue.put_nowait(None)
             await worker
+
+    def _connected(self, up: bool) -> None:
+        """pymodbus's ``trace_connect`` hook: a new connection is in the server's
+        ``active_connections`` (with its transport) before it reads a byte; one from an
+        address the allow list lacks is closed then (tests/plc/test_pymodbus_contract.py
+        pins the order this relies on)."""
+        server = self._server
+        if not up or server is None:
+            return
+        for protocol in list(server.active_connections.values()):
+            transport = protocol.transport
+            if transport is None or protocol in self._admitted:
+                continue
+            peer = transport.get_extra_info("peername")
+            if admits(self.allow, peer[0] if peer else None):
+                self._admitted.add(protocol)
+            else:
+                REFUSED.note("PLC: refused a connection from %s: not in [plc] allow",
+                             peer[0] if peer else "an unknown address")  # fmt: skip
+                transport.close()
 
     # ----- what the PLC reads -----
     def tags(self) -> Tags:
@@ -209,12 +216,15 @@ class PlcTags:
             cmd_invalid=int(self._invalid),
             instruction_index=st.index,
             instruction_count=st.count,
-            good_count=self._good,
+            good_count=st.good & U32,
             stop_reason=int(st.stop_cause),
             heartbeat=self._beat,
             estop=int(bool(st.bus.estop)),
             resume=self._resume,
             resumable=int(st.resumable),
+            program=self._program,
+            load_request=int(REG_LOAD_REQUEST in self._pending),
+            program_id=st.program_id or 0,
         )
 
     async def _action(
@@ -247,8 +257,12 @@ class PlcTags:
         self._resume = written.get(REG_RESUME, self._resume)
         self._cntrl_cmd = written.get(REG_CNTRL_CMD, self._cntrl_cmd)
         self._unit_mode = written.get(REG_UNIT_MODE, self._unit_mode)
+        high, low = (written.get(REG_PROGRAM + i, word) for i, word in
+                     enumerate(u32_words(self._program)))  # fmt: skip
+        self._program = words_u32(high, low)
         asked = {REG_CMD_CHANGE_REQUEST: self._cntrl_cmd,
-                 REG_UNIT_MODE_CHANGE_REQUEST: self._unit_mode}  # fmt: skip
+                 REG_UNIT_MODE_CHANGE_REQUEST: self._unit_mode,
+                 REG_LOAD_REQUEST: self._program}  # fmt: skip
         for register, number in asked.items():
             # a 1 while the same request is still pending is the same request
             if written.get(register) == 1 and register not in self._pending:
@@ -265,33 +279,24 @@ class PlcTags:
             self._pending.discard(register)
 
     async def _take(self, register: int, number: int) -> bool:
-        """Apply one request through the controller; False when it was refused."""
-        kind = Command if register == REG_CMD_CHANGE_REQUEST else UnitMode
+        """Apply one request through the gate; False when it was refused (the gate and the
+        controller log why, at INFO)."""
         try:
-            wanted = kind(number)
-        except ValueError:
-            log.warning("PLC: %d is not a PackML %s number", number, kind.__name__)
-            return False
-        try:
-            if isinstance(wanted, Command):
-                resume = wanted is Command.START and self._resume == 1
-                await self.controller.command(wanted, PLC_REASON, PLC_WHO, resume=resume)
+            if register == REG_CMD_CHANGE_REQUEST:
+                resume = number == Command.START and self._resume == 1
+                await self.gate.command(self.caller, number, reason=PLC_REASON, resume=resume)
+            elif register == REG_UNIT_MODE_CHANGE_REQUEST:
+                await self.gate.set_mode(self.caller, number)
             else:
-                await self.controller.set_mode(wanted, PLC_WHO)
-        except BwsdError as exc:
-            log.warning("PLC: %s refused: %s", wanted.label, exc)
+                await self.gate.load_stored(self.caller, number)
+        except BwsdError:
             return False
         except Exception:  # the PLC must still see its request answered
-            log.exception("PLC: %s failed", wanted.label)
+            log.exception("PLC: the request of register %d failed", register)
             return False
         return True
 
     # ----- what the daemon keeps -----
-    def _on_event(self, event: Event) -> None:
-        """The good count: programs that reached Complete."""
-        if isinstance(event, StateChanged) and event.new is State.COMPLETE:
-            self._good = (self._good + 1) & U32
-
     async def _beat_forever(self) -> None:
         loop = asyncio.get_running_loop()
         due = loop.time()
@@ -301,10 +306,11 @@ class PlcTags:
             self._beat = (self._beat + 1) & U16
 
 
-def plc_tags(controller: Controller, config: Config) -> PlcTags | None:
+def plc_tags(controller: Controller, config: Config, gate: Gate | None = None) -> PlcTags | None:
     """The tags of the config's ``[plc]`` table, or None when it disables them."""
     table = config.table("plc")
     if not table["enabled"]:
         return None
     return PlcTags(controller, table["host"], table["port"], table["device_id"],
-                   allow=table["allow"].split(), read_only=table["read_only"])  # fmt: skip
+                   allow=table["allow"].split(), read_only=table["read_only"],
+                   gate=gate)  # fmt: skip

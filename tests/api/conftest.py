@@ -41,6 +41,7 @@ class Live:
     app: Any
     tokens: dict[str, str]  # role -> clear token
     loop: asyncio.AbstractEventLoop
+    folder: Path  # the journal and the token file
     clients: list[httpx.Client] = field(default_factory=list)
 
     @property
@@ -105,7 +106,13 @@ class _Thread(threading.Thread):
                 await asyncio.sleep(0.01)
         loop = asyncio.get_running_loop()
         self.live = Live(
-            f"{self.doors.scheme}://127.0.0.1:{port}", controller, journal, app, tokens, loop
+            f"{self.doors.scheme}://127.0.0.1:{port}",
+            controller,
+            journal,
+            app,
+            tokens,
+            loop,
+            self.folder,
         )
         self.ready.set()
         await serving

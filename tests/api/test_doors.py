@@ -37,7 +37,7 @@ def _open(live: Live, source: str = "127.0.0.1") -> socket.socket:
 
 def _head(path: str, token: str | None, extra: str = "") -> bytes:
     auth = f"Authorization: Bearer {token}\r\n" if token else ""
-    return (f"POST /api/v1{path} HTTP/1.1\r\nHost: x\r\n{auth}"
+    return (f"POST /api/v1{path} HTTP/1.1\r\nHost: 127.0.0.1\r\n{auth}"
             f"Content-Type: application/json\r\n{extra}\r\n").encode()  # fmt: skip
 
 
@@ -109,7 +109,7 @@ def test_one_client_may_hold_only_so_many_connections(guarded):
         extra = _open(guarded)
         assert _closed(extra, 2.0), "a connection over the per-client limit stayed open"
         other = _open(guarded, "127.0.0.2")  # another client is still served
-        other.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        other.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
         assert _answer(other).startswith(b"HTTP/1.1 200")
         other.close()
     finally:

@@ -275,7 +275,7 @@ def test_checks_run_one_at_a_time_and_stop_when_their_client_goes(live: Live, ca
     host, port = live.base.removeprefix("http://").split(":")
     caplog.set_level(logging.INFO, logger="bwsd.controller")
     with socket.create_connection((host, int(port))) as raw:
-        raw.sendall(b"POST /api/v1/programs?dry_run=true HTTP/1.1\r\nHost: x\r\n"
+        raw.sendall(b"POST /api/v1/programs?dry_run=true HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                     b"Authorization: Bearer " + token.encode() + b"\r\n"
                     b"Content-Type: application/json\r\n"
                     b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body)  # fmt: skip
@@ -301,17 +301,20 @@ def test_checks_run_one_at_a_time_and_stop_when_their_client_goes(live: Live, ca
 
 
 def test_the_mode_route_changes_the_unit_mode_where_packml_allows_it(live: Live):
-    operator, viewer = live.client("operator"), live.client("viewer")
-    changed = operator.put("/mode", json={"mode": "maintenance"})
+    """A unit mode change needs an admin token, on every door (bwsd.gate)."""
+    admin, operator, viewer = live.client("admin"), live.client("operator"), live.client("viewer")
+    changed = admin.put("/mode", json={"mode": "maintenance"})
     assert changed.status_code == 200 and changed.json() == {"mode": 2, "mode_name": "Maintenance"}
     assert viewer.get("/state").json()["mode_name"] == "Maintenance"
-    assert viewer.put("/mode", json={"mode": "production"}).status_code == 403
-    assert operator.put("/mode", json={"mode": "turbo"}).status_code == 422
+    for who in (viewer, operator):
+        refused = who.put("/mode", json={"mode": "production"})
+        assert refused.status_code == 403 and refused.json()["needs"] == "admin"
+    assert admin.put("/mode", json={"mode": "turbo"}).status_code == 422
     operator.post("/programs", json={"name": "b.bws", "text": BRAID}).raise_for_status()
     operator.post("/commands/reset").raise_for_status()
     operator.post("/commands/start").raise_for_status()
     operator.post("/commands/hold").raise_for_status()
-    refused = operator.put("/mode", json={"mode": "production"})
+    refused = admin.put("/mode", json={"mode": "production"})
     assert refused.status_code == 409 and "not accepted in state Held" in refused.json()["error"]
 
 

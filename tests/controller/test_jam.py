@@ -26,9 +26,11 @@ def test_a_program_that_jams_is_refused_at_load_and_nothing_moves(mock, tmp_path
         await bus.connect()
         journal = Journal.open(tmp_path / "journal.db")
         ctl = Controller(config.machine, bus, journal)
-        with pytest.raises(ControllerError, match=r"winds\.bws: instruction 1\d\d: jam: yarn \d "
-                           r"would rest on yarn \d at z = [\d.]+ mm, [\d.]+ mm below the "
-                           "guides"):  # fmt: skip
+        jam = (
+            r"winds\.bws:10:1: instruction 1\d\d: jam: yarn \d would rest on yarn \d "
+            r"at z = [\d.]+ mm, [\d.]+ mm below the guides"
+        )
+        with pytest.raises(ControllerError, match=jam):
             await ctl.load("winds.bws", WINDS_UP)
         assert ctl.program is None and journal.history() == []
         answer = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})

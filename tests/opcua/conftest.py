@@ -17,12 +17,12 @@ from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from bwsd.api.auth import TokenStore
 from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.opcua.server import OpcUaServer
 from bwsd.opcua.space import NAMESPACE, ROOT
+from bwsd.tokens import TokenStore
 from tests.fieldbus.conftest import client_config, mock, slow_mock
 
 __all__ = ["mock", "slow_mock"]
@@ -112,8 +112,10 @@ class Rig:
 
 
 @asynccontextmanager
-async def rig(mock: Any, tmp_path: Path, **settings: Any) -> AsyncIterator[Rig]:
-    """A controller on the mock loom, its OPC UA server, three users and a trusted client."""
+async def rig(mock: Any, tmp_path: Path, *, trusted: bool = True,
+              **settings: Any) -> AsyncIterator[Rig]:  # fmt: skip
+    """A controller on the mock loom, its OPC UA server, three users and a client (trusted
+    unless ``trusted`` is false: then the state folder is as a fresh install leaves it)."""
     config = client_config("modbus", mock.ports)
     bus = open_bus(config)
     await bus.connect()
@@ -123,7 +125,8 @@ async def rig(mock: Any, tmp_path: Path, **settings: Any) -> AsyncIterator[Rig]:
     users = {role: tokens.add(role, role) for role in ("viewer", "operator", "admin")}
     folder = tmp_path / "opcua"
     cert = client_cert(tmp_path / "client")
-    trust(folder, cert)
+    if trusted:
+        trust(folder, cert)
     server = OpcUaServer(ctl, tokens, folder, {"port": 0, **settings})
     try:
         await server.start()

@@ -163,7 +163,7 @@ def test_unit_mode_changes_need_an_admin(mock, tmp_path):
                 if len(by) == 2:
                     break
                 await asyncio.sleep(0.01)
-            assert by == ["opcua", "opcua:admin"]  # a method's caller is not told, a writer is
+            assert by == ["opcua:admin", "opcua:admin"]  # a method's caller and a writer
 
     run(scenario())
 

@@ -16,7 +16,7 @@ from pymodbus.exceptions import ModbusException
 
 from bwsd.config import parse_config
 from bwsd.controller.facade import Controller
-from bwsd.controller.packml import PackML, State, UnitMode
+from bwsd.controller.packml import State, UnitMode
 from bwsd.controller.plan import Limits
 from bwsd.errors import ConfigError
 from bwsd.fieldbus import open_bus
@@ -25,6 +25,7 @@ from bwsd.plc import REG_COUNT, PlcError, PlcTags, StopReason, Tags, decode, plc
 from bwsd.plc.registers import (
     REG_CMD_CHANGE_REQUEST,
     REG_CNTRL_CMD,
+    REG_PROGRAM,
     REG_RESUME,
     REG_STATE_CURRENT,
     REG_UNIT_MODE,
@@ -131,7 +132,7 @@ def test_a_refused_command_sets_cmd_invalid_and_leaves_the_state(mock, tmp_path)
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
             assert (await plc.command(RESET)).state_current == State.IDLE
-            for refused in (UNHOLD, 42, 0, START):  # Start: no program is loaded
+            for refused in (UNHOLD, 42, 0, 0xFFFF, START):  # 0xFFFF: an INT -1; Start: no program
                 after = await plc.command(refused)
                 assert (after.state_current, after.cmd_invalid) == (State.IDLE, 1), refused
                 assert ctl.packml.state is State.IDLE
@@ -278,14 +279,16 @@ def test_a_restart_reads_stop_reason_7(mock, tmp_path):
     run(scenario())
 
 
-def test_plc_tags_follow_the_config_table():
+def test_plc_tags_follow_the_config_table(tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"port": 0, "device_id": 7}})
-    controller = SimpleNamespace(packml=PackML())  # the tags only read it before start
+    journal = Journal.open(tmp_path / "journal.db")
+    controller = Controller(config.machine, open_bus(config), journal)  # not connected: unused
     tags = plc_tags(controller, config)
     assert isinstance(tags, PlcTags)
     assert (tags.host, tags.port, tags.device_id) == ("127.0.0.1", 0, 7)
     off = parse_config({"machine": MACHINE, "plc": {"enabled": False}})
     assert plc_tags(controller, off) is None
+    journal.close()
 
 
 def test_a_port_in_use_is_a_plc_error_naming_it(mock, tmp_path):
@@ -378,5 +381,53 @@ def test_an_aborted_part_resumes_from_the_plc_with_command_resume(slow_mock, tmp
             assert resumed.cmd_invalid == 0 and resumed.resume == 1 and resumed.resumable == 0
             end = await plc.until(lambda t: t.state_current == State.COMPLETE)
             assert end.instruction_index == 15 and journal.program(pid).outcome == "complete"
+
+    run(scenario())
+
+
+LOADED = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nTAKEUP 1\n"
+
+
+def test_the_plc_loads_a_stored_program_by_its_id_and_is_refused_as_rest_is(slow_mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
+            first = await ctl.load("first.bws", LOADED)
+            second = await ctl.load("second.bws", TEXT)
+            assert (await plc.tags()).program_id == second
+
+            async def load(number: int) -> Tags:
+                high, low = number >> 16, number & 0xFFFF
+                assert await plc.write(REG_PROGRAM, [high, low, 1])
+                return await plc.until(lambda t: t.load_request == 0)
+
+            picked = await load(first)
+            assert picked.cmd_invalid == 0 and picked.program == first
+            assert picked.program_id not in (0, first, second)  # a load is a new record
+            assert journal.program(picked.program_id).name == "first.bws"
+            assert (picked.instruction_index, picked.instruction_count) == (0, 1)
+            for refused in (0, 9999):  # 0 is out of range; 9999 is not in the journal
+                after = await load(refused)
+                assert after.cmd_invalid == 1 and after.program_id == picked.program_id
+            # the same refusal REST gives: no load while a program runs
+            assert (await plc.command(RESET)).state_current == State.IDLE
+            await ctl.load("slow.bws", TEXT)
+            await plc.command(START)
+            running = await load(first)
+            assert (
+                running.cmd_invalid == 1 and journal.program(running.program_id).name == "slow.bws"
+            )
+            await plc.command(ABORT)
+
+    run(scenario())
+
+
+def test_a_read_only_tap_cannot_load(mock, tmp_path):
+    async def scenario() -> None:
+        async with rig(mock, tmp_path, read_only=True) as (ctl, _, plc):
+            first = await ctl.load("first.bws", LOADED)
+            second = await ctl.load("second.bws", LOADED)
+            assert not await plc.write(REG_PROGRAM, [0, first, 1])
+            await asyncio.sleep(0.05)
+            assert (await plc.tags()).program_id == second == ctl.status().program_id
 
     run(scenario())
