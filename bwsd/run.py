@@ -8,6 +8,7 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bwsd.errors import ProgramError, TwinError
@@ -135,6 +136,8 @@ def _write_exports(twin: Twin, skeleton: str | None, exports: list[str]) -> None
     from bwsd.export.skeleton_json import write_skeleton_json
 
     sk = twin.skeleton()
+    for path in ([skeleton] if skeleton else []) + exports:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)  # out/x.json makes out/
     if skeleton:
         write_skeleton_json(sk, skeleton)
     for path in exports:
