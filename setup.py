@@ -3,6 +3,8 @@
 Everything else about the package is in pyproject.toml. The kernel is C11 with GNU
 extensions (128-bit integers), built with floating-point contraction off: a fused
 multiply-add would change the float filters' error bounds (docs/twin.md, "Exactness").
+A build without three.js in bwsd/web/node_modules (`npm ci --prefix bwsd/web` first) warns:
+its live preview page would say that three.js is missing instead of drawing the preform.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from setuptools.command.build_ext import build_ext
 from setuptools.errors import CCompilerError, CompileError, ExecError, PlatformError
 
 SOURCES = sorted(str(p) for p in Path("bwsd/twin/csrc").glob("*.c"))
+THREE = Path("bwsd/web/node_modules/three/build/three.module.js")
 FLAGS = ["-std=gnu11", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fvisibility=hidden"]
 
 NO_COMPILER = """
@@ -22,6 +25,12 @@ bwsd: cannot build its twin kernel (bwsd/twin/csrc), a C extension.
 It needs a C compiler (gcc or clang) and the Python headers. On Debian or Ubuntu:
     sudo apt-get install gcc python3-dev
 then run the install again. ({error})
+"""
+
+
+NO_THREE = """
+bwsd: warning: three.js is not in bwsd/web/node_modules: the live preview page of this build
+cannot draw the preform, and says so. Run `npm ci --prefix bwsd/web` before building.
 """
 
 
@@ -42,6 +51,9 @@ class BuildKernel(build_ext):
             sys.stderr.write(NO_COMPILER.format(error=exc))
             raise SystemExit(1) from exc
 
+
+if not THREE.is_file():
+    sys.stderr.write(NO_THREE)
 
 setup(
     ext_modules=[

@@ -66,7 +66,7 @@ def write_config(path: Path, ports: dict[str, int], plc: bool = True) -> Path:
 def start(tmp: Path, program: str) -> tuple[Mock, Served]:
     mock = loom(tmp, program)
     config = write_config(tmp / "bwsd.toml", mock.ports)
-    state = state_folder(tmp / "state")
+    state = state_folder(load_config(config), tmp / "state")
     token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
     return mock, Served(config, state, token)
 

@@ -96,7 +96,7 @@ def serving(program: str, speed: float) -> Iterator[Served]:
             "fieldbus.modbus": {"port": mock.ports["modbus"]},
             "api": {"port": 0}, "plc": {"port": 0},
         }))  # fmt: skip
-        state = state_folder(tmp / "state")
+        state = state_folder(load_config(config), tmp / "state")
         token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
         served = Served(config, state, token)
         try:

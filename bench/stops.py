@@ -69,7 +69,7 @@ def serving(speeds: dict[str, Any], backend: str = "modbus") -> Iterator[tuple[l
         folder = Path(tmp)
         looms = [start_mock(folder, {**speeds, "state_file": "loom.json"})]
         config = config_file(folder, looms[0], backend)
-        state = state_folder(folder / "state")
+        state = state_folder(load_config(config), folder / "state")
         token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
         served = Served(config, state, token)
         try:

@@ -1,8 +1,9 @@
 """Configuration (TOML): loaded once, every key range-checked, unknown keys refused.
 
 Tables: ``[machine]`` (required) and ``[yarn]`` describe the geometry; ``[fieldbus]`` with
-``[fieldbus.modbus]`` or ``[fieldbus.canopen]`` the actuator bus; ``[simulator]`` the mock
-loom. Every key of every table is documented in docs/config.md.
+``[fieldbus.modbus]`` or ``[fieldbus.canopen]`` the actuator bus; ``[daemon]`` where the
+daemon keeps its state; ``[simulator]`` the mock loom. Every key of every table is
+documented in docs/config.md and set, with a comment, in config/loom.toml.
 """
 
 from __future__ import annotations
@@ -102,6 +103,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "max_instructions": Num(int, 1, 1_000_000, 1_000_000),
         "snapshot_every": Num(int, 0, 1_000_000, 200),
     },
+    "daemon": {"state_dir": Text("state")},
     "journal": {"path": Text("journal.db")},
     "api": {
         "host": Text("127.0.0.1"),
@@ -318,7 +320,10 @@ def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) ->
 
 
 def load_config(path: str | Path) -> Config:
-    """Read and validate a TOML configuration file."""
+    """Read and validate a TOML configuration file (``example:NAME``: a shipped one)."""
+    from bwsd.shipped import resolve
+
+    path = resolve(path)
     text_path = str(path)
     try:
         with open(path, "rb") as fh:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import importlib
 import logging
 import signal
 import socket
@@ -140,6 +141,7 @@ async def _serve_api(daemon: Daemon) -> None:
         await asyncio.sleep(0.02)
     port = server.servers[0].sockets[0].getsockname()[1]
     daemon.urls["api"] = f"{doors.scheme}://{table['host']}:{port}"
+    log.info("REST API and the page on %s", daemon.urls["api"])  # /healthz answers from here
     daemon._tasks.append(task)
     daemon._closers.append(lambda: setattr(server, "should_exit", True))
 
@@ -159,6 +161,12 @@ async def _serve_plc(daemon: Daemon) -> None:
 async def _serve_opcua(daemon: Daemon) -> None:
     from bwsd.opcua import opcua_server
 
+    if not daemon.config.table("opcua")["enabled"]:
+        return
+    # asyncua takes a second or more to import: in a thread, so that the API listening
+    # already answers meanwhile (asyncua fills its address space in a thread too).
+    with contextlib.suppress(ImportError):  # opcua_server says what is missing
+        await asyncio.to_thread(importlib.import_module, "bwsd.opcua.server")
     server = opcua_server(daemon.controller, daemon.config, daemon.state_dir, daemon.gate)
     if server is None:
         return

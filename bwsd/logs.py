@@ -64,8 +64,9 @@ def setup(level: int = logging.INFO) -> None:
     root.handlers[:] = [handler]
     root.setLevel(level)
     # Libraries that narrate their routine work at INFO (asyncua: a line for every node of
-    # the standard address space it builds at start): their warnings and errors only.
-    for name in ("pymodbus", "asyncua"):
+    # the standard address space it builds at start; canopen: every NMT state change of every
+    # node): their warnings and errors only.
+    for name in ("pymodbus", "asyncua", "canopen", "can"):
         logging.getLogger(name).setLevel(logging.WARNING)
 
 

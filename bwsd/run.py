@@ -8,21 +8,21 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from bwsd.config import load_config
 from bwsd.errors import ProgramError, TwinError
-from bwsd.twin import Machine, Program, Twin, Weft, simulate
-from bwsd.twin.model import ProgressFn
+
+if TYPE_CHECKING:
+    from bwsd.twin import Machine, Program, Twin
+    from bwsd.twin.model import ProgressFn
 
 
 def configure(sub: Any) -> None:
     """Register `simulate`."""
     p = sub.add_parser("simulate", help="run a program through the twin")
-    p.add_argument("program", help="a .bws program")
-    p.add_argument("--config", required=True, help="machine config (TOML)")
+    p.add_argument("program", help="a .bws program, or example:NAME (`bwsd examples`)")
+    p.add_argument("--config", required=True, help="machine config (TOML), or example:NAME")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--skeleton", metavar="FILE", help="write the skeleton as JSON")
     p.add_argument(
@@ -42,7 +42,9 @@ def load_and_simulate(
     timings: list[float] | None = None,
 ) -> tuple[Machine, Program, Twin]:
     """Load config and program, run the program; a refused instruction names its line."""
+    from bwsd.config import load_config
     from bwsd.program.validate import load_program
+    from bwsd.twin import simulate
 
     config = load_config(config_path)
     machine = config.machine
@@ -96,6 +98,8 @@ def _summary(twin: Twin, seconds: float, timings: list[float],
 
 def loose_wefts(twin: Twin, program: Program) -> list[tuple[int, int]]:
     """The wefts no contact holds, as (yarn, program line): they lie loose in the preform."""
+    from bwsd.twin import Weft
+
     sk = twin.skeleton()
     touched = {y for c in sk.contacts for y in (c.moving_yarn, c.hit_yarn)}
     inserted = [i for i, ins in enumerate(program.instructions, start=1) if isinstance(ins, Weft)]
@@ -116,6 +120,8 @@ def _percentiles(seconds: list[float]) -> dict[str, float]:
     """p50, p99 and max of per-instruction times, in milliseconds (all 0 for none)."""
     if not seconds:
         return {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    import numpy as np
+
     ms = 1e3 * np.array(seconds)
     p50, p99 = np.percentile(ms, [50, 99])
     return {
@@ -130,6 +136,8 @@ def _write_exports(twin: Twin, skeleton: str | None, exports: list[str]) -> None
     from bwsd.export.skeleton_json import write_skeleton_json
 
     sk = twin.skeleton()
+    for path in ([skeleton] if skeleton else []) + exports:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)  # out/x.json makes out/
     if skeleton:
         write_skeleton_json(sk, skeleton)
     for path in exports:

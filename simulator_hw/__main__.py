@@ -1,4 +1,5 @@
-"""`python -m simulator_hw --config CONFIG [--program PROGRAM]`: run the mock loom until stopped.
+"""`bwsd mock` (or `python -m simulator_hw`) `--config CONFIG [--program PROGRAM]`: run the
+mock loom until stopped.
 
 Prints one line ``ready modbus=P socketcand=P control=P`` on stdout once every server
 listens, then runs until SIGINT or SIGTERM. ``--modbus-port``, ``--socketcand-port`` and
@@ -20,8 +21,6 @@ from collections.abc import Sequence
 
 from bwsd.config import Config, load_config, port_option
 from bwsd.errors import BwsdError
-from bwsd.extras import CANOPEN, missing_message
-from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_ids_problem, canopen_installed
 
 PORT_OPTIONS = ("modbus_port", "socketcand_port", "control_port")
 
@@ -36,6 +35,9 @@ def with_ports(config: Config, ports: dict[str, int]) -> Config:
 
 async def serve(config_path: str, program_path: str | None,
                 ports: dict[str, int] | None = None) -> None:  # fmt: skip
+    from bwsd.extras import CANOPEN, missing_message
+    from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_ids_problem, canopen_installed
+
     config = with_ports(load_config(config_path), ports or {})
     fill: tuple[tuple[int, int], ...] = ()
     if program_path:
@@ -61,28 +63,46 @@ async def serve(config_path: str, program_path: str | None,
         await mock.stop()
 
 
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The mock loom's options, for ``python -m simulator_hw`` and ``bwsd mock``."""
+    parser.add_argument("--config", required=True, help="machine config (TOML), or example:NAME")
+    parser.add_argument(
+        "--program", help="a .bws program (or example:NAME) whose FILL places the cases"
+    )
+    for option in PORT_OPTIONS:
+        parser.add_argument(
+            f"--{option.replace('_', '-')}",
+            type=port_option,
+            metavar="PORT",
+            help=f"instead of [simulator] {option} (0: any free port)",
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the mock loom of parsed arguments until SIGINT or SIGTERM; the exit status.
+
+    It logs as the daemon does (bwsd.logs): one timestamped line a record, the first line
+    only of a library's (pymodbus appends the raw frames of what it could not decode)."""
+    from bwsd import logs
+
+    logs.setup()
+    ports = {k: getattr(args, k) for k in PORT_OPTIONS if getattr(args, k) is not None}
+    try:
+        asyncio.run(serve(args.config, args.program, ports))
+    except (BwsdError, OSError) as exc:
+        print(f"simulator_hw: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m simulator_hw",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--config", required=True, help="machine config (TOML)")
-    parser.add_argument("--program", help="a .bws program whose FILL places the cases")
-    for option in PORT_OPTIONS:
-        parser.add_argument(f"--{option.replace('_', '-')}", type=port_option, metavar="PORT",
-                            help=f"instead of [simulator] {option} (0: any free port)")  # fmt: skip
-    args = parser.parse_args(argv)
-    ports = {k: getattr(args, k) for k in PORT_OPTIONS if getattr(args, k) is not None}
-    try:
-        asyncio.run(serve(args.config, args.program, ports))
-    except BwsdError as exc:
-        print(f"simulator_hw: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"simulator_hw: error: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
 
 
 if __name__ == "__main__":

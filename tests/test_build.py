@@ -71,10 +71,10 @@ def clean_tree(tree: Path) -> Path:
     """A copy of what a checkout holds (no build/ left by an earlier build, no compiled
     kernel), with the three.js files the page needs when ``npm ci`` has installed them."""
     tree.mkdir()
-    for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in"):
+    for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in", "LICENSE"):
         shutil.copy(ROOT / name, tree / name)
     skip = shutil.ignore_patterns("*.so", "node_modules", "__pycache__")
-    for folder in ("bwsd", "simulator_hw", "config", "examples"):
+    for folder in ("bwsd", "simulator_hw", "config", "examples", "systemd"):
         shutil.copytree(ROOT / folder, tree / folder, ignore=skip, symlinks=True)
     for name in THREE:
         if (THREE_ROOT / name).is_file():
@@ -86,13 +86,14 @@ def clean_tree(tree: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The wheel built from a clean copy of the tree, once for this module."""
+    """The wheel built from a clean copy of the tree, once for this module; what the build
+    printed is beside it in build.log."""
     where = tmp_path_factory.mktemp("wheel")
     tree = clean_tree(where / "tree")
-    run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
-                          str(where), str(tree)], capture_output=True, text=True,
-                         timeout=600)  # fmt: skip
+    command = [sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "-w", str(where)]
+    run = subprocess.run([*command, str(tree)], capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
+    (where / "build.log").write_text(run.stdout + run.stderr)
     (built,) = where.glob("bwsd-*.whl")
     return built
 
@@ -150,6 +151,38 @@ def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
 
 
 @pytest.mark.slow
+def test_the_build_warns_of_nothing_and_the_license_is_an_spdx_expression(wheel):
+    """No deprecation (setuptools' table-form license stops building in 2027), the license
+    as its SPDX expression with its file, setuptools bounded both ways."""
+    log = (wheel.parent / "build.log").read_text()
+    assert "Deprecat" not in log, [line for line in log.splitlines() if "eprecat" in line]
+    assert "bwsd: warning" not in log  # three.js was there
+    with zipfile.ZipFile(wheel) as archive:
+        names = archive.namelist()
+        meta = next(n for n in names if n.endswith(".dist-info/METADATA"))
+        metadata = archive.read(meta).decode()
+    assert "License-Expression: Apache-2.0" in metadata.splitlines()
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    requires = tomllib.loads((ROOT / "pyproject.toml").read_text())["build-system"]["requires"]
+    (setuptools,) = [r for r in requires if r.startswith("setuptools")]
+    assert re.fullmatch(r"setuptools>=[\d.]+,<\d+", setuptools), setuptools
+
+
+def test_a_build_without_three_js_warns(tmp_path):
+    """The page cannot draw without it: the build says so (and the page, see tests/web)."""
+    tree = tmp_path / "tree"
+    tree.mkdir()
+    shutil.copy(ROOT / "setup.py", tree / "setup.py")
+    (tree / "bwsd" / "twin" / "csrc").mkdir(parents=True)
+    command = [sys.executable, "setup.py", "--name"]
+    run = subprocess.run(command, cwd=tree, capture_output=True, text=True, timeout=120)
+    assert "bwsd: warning: three.js is not in bwsd/web/node_modules" in run.stderr
+    assert "npm ci --prefix bwsd/web" in run.stderr
+    here = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert "three.js" not in here.stderr  # the source tree's, with three.js installed
+
+
+@pytest.mark.slow
 def test_the_wheel_carries_its_type_information(wheel):
     """``py.typed`` and the kernel's stub ship in the wheel, so the hints reach users."""
     names = set(zipfile.ZipFile(wheel).namelist())
@@ -163,6 +196,7 @@ def test_the_wheel_carries_the_demo_and_the_page(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
     shipped = {f"bwsd/shipped/config/{p.name}" for p in (ROOT / "config").glob("*.toml")}
     shipped |= {f"bwsd/shipped/examples/{p.name}" for p in (ROOT / "examples").glob("*.bws")}
+    shipped |= {f"bwsd/shipped/systemd/{p.name}" for p in (ROOT / "systemd").glob("*.service")}
     assert len(shipped) >= 2 and shipped <= names
     page = {f"bwsd/web/static/{p.name}" for p in (ROOT / "bwsd/web/static").iterdir()}
     assert page | {"bwsd/web/index.html"} <= names

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import socket
@@ -10,13 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import httpx
-
 from bwsd.config import load_config
 from bwsd.program import load_program
 from bwsd.twin import simulate
-from tests.fieldbus.conftest import start_mock
-from tests.test_daemon import daemon_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,11 +20,11 @@ def test_demo_runs_the_example_braid_on_the_mock_loom_to_complete(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
     done = subprocess.run(
-        [bwsd, "demo", "--exit-when-done", "--state-dir", str(tmp_path / "state")],
+        [bwsd, "demo", "--exit-when-done", "--state-dir", str(tmp_path / "state"), *FREE],
         capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path,
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "api: http://127.0.0.1:8080" in done.stdout
+    assert re.search(r"^api: http://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert "operator token: " in done.stdout
     machine = load_config(ROOT / "config/loom.toml").machine
     twin = simulate(machine, load_program(ROOT / "examples/braid-2x2.bws", machine))
@@ -37,67 +32,23 @@ def test_demo_runs_the_example_braid_on_the_mock_loom_to_complete(tmp_path):
     assert (tmp_path / "state" / "journal.db").is_file()
 
 
-def _readme_commands(section: str) -> list[list[str]]:
-    """The README's `bwsd ...` lines (comments dropped) from its ``## section``."""
-    text = (ROOT / "README.md").read_text().split(f"## {section}\n", 1)[1].split("\n## ")[0]
-    return [line.split("#")[0].split() for line in text.splitlines() if line.startswith("bwsd ")]
+OPTIONS = ("--api-port", "--plc-port", "--modbus-port", "--socketcand-port", "--control-port")
+FREE = [word for option in OPTIONS for word in (option, "0")]
+PORT_KEYS = ("port", "modbus_port", "socketcand_port", "control_port")
 
 
-def test_the_readme_token_steps_give_a_token_that_serve_accepts(tmp_path):
-    bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
-    assert bwsd
-    commands = _readme_commands("Commands")
-    serve = next(c for c in commands if c[1] == "serve")
-    add = next(c for c in commands if c[1:3] == ["token", "add"])
-    assert serve[serve.index("--config") + 1] == add[add.index("--config") + 1]
-    assert "--state-dir" not in serve + add  # each finds the state folder on its own
-    work = tmp_path / "work"  # a fresh working folder holding only the config
-    config = work / add[add.index("--config") + 1]
-    config.parent.mkdir(parents=True)
-    mock = start_mock(tmp_path, {})
-    daemon_config(tmp_path, mock, config)
-    env = {k: v for k, v in os.environ.items() if k != "STATE_DIRECTORY"}
-    try:
-        added = subprocess.run([bwsd, *add[1:]], capture_output=True, text=True, timeout=60,
-                               check=False, cwd=work, env=env)  # fmt: skip
-        assert added.returncode == 0, added.stderr
-        token = added.stdout.strip()
-        assert re.fullmatch(r"[A-Za-z0-9_-]{40,}", token), added.stdout
-        served = subprocess.Popen([bwsd, *serve[1:]], stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-                                  cwd=work, env=env)  # fmt: skip
-        try:
-            assert served.stdout is not None
-            line = served.stdout.readline()
-            assert line.startswith("ready "), line + served.communicate(timeout=30)[1]
-            urls = dict(part.split("=", 1) for part in line.split()[1:])
-            answer = httpx.get(f"{urls['api']}/api/v1/state", timeout=30,
-                               headers={"Authorization": f"Bearer {token}"})  # fmt: skip
-            assert answer.status_code == 200, answer.text
-        finally:
-            served.terminate()
-            served.communicate(timeout=30)
-    finally:
-        mock.stop()
-    assert (work / "state" / "tokens.json").is_file()
-    assert sorted(p.name for p in work.iterdir()) == ["config", "state"]
+def _config_on_taken_ports(path: Path) -> tuple[Path, list[socket.socket]]:
+    """The shipped loom config at ``path`` with every port one held here (taken)."""
+    held: list[socket.socket] = []
 
+    def taken(match: re.Match[str]) -> str:
+        held.append(socket.create_server(("127.0.0.1", 0)))
+        return f"{match[1]} = {held[-1].getsockname()[1]}"
 
-FREE = ["--api-port", "0", "--plc-port", "0", "--modbus-port", "0", "--socketcand-port", "0",
-        "--control-port", "0"]  # fmt: skip
-DEFAULT_PORTS = (8080, 15502, 15020, 15021, 29536)  # of config/loom.toml
-
-
-def _hold(port: int) -> socket.socket | None:
-    """A listener on a loopback port, so that nobody else can have it (None: taken already)."""
-    sock = socket.socket()
-    try:
-        sock.bind(("127.0.0.1", port))
-        sock.listen()
-    except OSError:
-        sock.close()
-        return None
-    return sock
+    text = (ROOT / "config/loom.toml").read_text()
+    text = re.sub(rf"^({'|'.join(PORT_KEYS)}) = \d+", taken, text, flags=re.MULTILINE)
+    path.write_text(text)
+    return path, held
 
 
 def _addresses(out: str) -> dict[str, int]:
@@ -110,18 +61,19 @@ def _addresses(out: str) -> dict[str, int]:
     return found
 
 
-def test_demos_run_at_once_on_free_ports_while_the_default_ports_are_taken(tmp_path):
+def test_demos_run_at_once_on_free_ports_while_the_configs_ports_are_taken(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
-    held = [s for s in (_hold(p) for p in DEFAULT_PORTS) if s is not None]
+    config, held = _config_on_taken_ports(tmp_path / "loom.toml")
+    taken = {sock.getsockname()[1] for sock in held}
     demos = []
     try:
         for name in ("a", "b"):
             (tmp_path / name).mkdir()
             demos.append(subprocess.Popen(
-                [bwsd, "demo", "--exit-when-done", *FREE], cwd=tmp_path / name,
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                text=True,
+                [bwsd, "demo", "--exit-when-done", "--config", str(config), *FREE],
+                cwd=tmp_path / name, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                stdin=subprocess.DEVNULL, text=True,
             ))  # fmt: skip
         results = [demo.communicate(timeout=300) for demo in demos]
     finally:
@@ -137,7 +89,7 @@ def test_demos_run_at_once_on_free_ports_while_the_default_ports_are_taken(tmp_p
         assert "Complete: 50 instructions done, 73 contacts" in out
         found = _addresses(out)
         assert set(found) == {"modbus", "socketcand", "control", "api", "plc"}, out
-        assert not set(found.values()) & set(DEFAULT_PORTS)
+        assert not set(found.values()) & taken
         assert f"live preview: http://127.0.0.1:{found['api']}/#token=" in out
         ports.append(found)
     assert not set(ports[0].values()) & set(ports[1].values())
@@ -155,7 +107,8 @@ def test_demo_runs_the_config_and_program_given(tmp_path):
         text = re.sub(rf"^{key} = \d+", f"{key} = 0", text, flags=re.MULTILINE)
     text = re.sub(r"^stroke_speed = [\d.]+", "stroke_speed = 0.0", text, flags=re.MULTILINE)
     config = tmp_path / "mine.toml"
-    config.write_text(text + "\n[api]\nport = 0\n\n[plc]\nenabled = false\n")
+    text = re.sub(r"^port = 8080\b", "port = 0", text, flags=re.MULTILINE)
+    config.write_text(re.sub(r"^enabled = true\b", "enabled = false", text, flags=re.MULTILINE))
     program = tmp_path / "short.bws"
     program.write_text(
         (ROOT / "examples/braid-2x2.bws").read_text().replace("REPEAT 10", "REPEAT 2")
@@ -168,7 +121,6 @@ def test_demo_runs_the_config_and_program_given(tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     found = _addresses(done.stdout)
     assert set(found) == {"modbus", "socketcand", "control", "api"}, done.stdout
-    assert not set(found.values()) & set(DEFAULT_PORTS)
     assert "running short.bws: 10 instructions" in done.stdout
     assert "Complete: 10 instructions done" in done.stdout
 
@@ -192,7 +144,7 @@ def test_demo_port_options_take_0_to_65535(tmp_path):
 
 
 def test_the_demo_points_the_daemon_at_the_mock_loom_where_it_listens():
-    from bwsd.daemon_cli import demo_config
+    from bwsd.demo import demo_config
 
     config = load_config(ROOT / "config/loom.toml")
     mock = {"modbus": 41001, "socketcand": 41002, "control": 41003}
@@ -201,6 +153,6 @@ def test_the_demo_points_the_daemon_at_the_mock_loom_where_it_listens():
     assert mine.table("fieldbus.canopen")["port"] == 41002
     assert mine.table("api")["port"] == 0
     assert mine.table("plc")["port"] == config.table("plc")["port"]
-    assert config.table("fieldbus.modbus")["port"] == 15020  # the config itself is unchanged
+    assert mine.table("fieldbus.modbus") != config.table("fieldbus.modbus")  # a copy changed
     modbus_only = demo_config(config, "127.0.0.1", {"modbus": 41001, "control": 41003}, None, None)
     assert modbus_only.table("fieldbus.canopen") == config.table("fieldbus.canopen")

@@ -3,7 +3,10 @@ and examples shipped with the package are those of the source tree."""
 
 from __future__ import annotations
 
+import ast
+import importlib.metadata
 import re
+import sys
 import tomllib
 from pathlib import Path
 
@@ -26,14 +29,47 @@ def _installed_extras(text: str) -> list[set[str]]:
     return found
 
 
-def test_the_readme_installs_every_extra_but_dev():
+def test_the_readme_installs_every_extra_but_dev_and_bench():
     first_block = (ROOT / "README.md").read_text().split("```sh\n", 1)[1].split("```", 1)[0]
-    assert _installed_extras(first_block) == [EXTRAS - {"dev"}]
+    assert _installed_extras(first_block) == [EXTRAS - {"dev", "bench"}]
     assert {"export", "canopen"} <= EXTRAS
 
 
 def test_ci_installs_every_extra():
     assert _installed_extras((ROOT / ".ci" / "run").read_text()) == [EXTRAS]
+
+
+def _distribution(requirement: str) -> str:
+    return _normal(re.split(r"[\[<>=~!;\s]", requirement, maxsplit=1)[0])
+
+
+def _normal(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _imported(script: Path) -> set[str]:
+    """The top-level modules a script imports, wherever in it."""
+    found = set()
+    for node in ast.walk(ast.parse(script.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {alias.name.partition(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            found.add(node.module.partition(".")[0])
+    return found
+
+
+def test_the_bench_extra_carries_what_the_benchmarks_import():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    offered = {_distribution(r) for r in project["dependencies"]}
+    offered |= {_distribution(r) for r in project["optional-dependencies"]["bench"]}
+    scripts = sorted((ROOT / "bench").glob("*.py"))
+    ours = {"bwsd", "simulator_hw", "tests", "bench", "__future__"} | {p.stem for p in scripts}
+    owners = importlib.metadata.packages_distributions()
+    assert len(scripts) >= 10
+    for script in scripts:
+        for module in _imported(script) - ours - set(sys.stdlib_module_names):
+            dists = {_normal(d) for d in owners.get(module, [])}
+            assert dists & offered, f"{script.name} imports {module} ({dists}), not in bench"
 
 
 def test_the_shipped_configs_and_examples_are_those_of_the_source_tree():

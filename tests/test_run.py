@@ -193,3 +193,16 @@ def test_simulate_warns_about_a_loose_weft(tmp_path):
     weave, config = example("weave-plain")
     held = bwsd("simulate", weave, "--config", config, "--json")
     assert json.loads(held.stdout)["loose_wefts"] == [] and "warning" not in held.stderr
+
+
+def test_simulate_runs_shipped_examples_by_name_and_makes_the_output_folder(tmp_path):
+    """`example:NAME` for the program and the config (it worked for `bwsd sweep` only), and
+    `--skeleton out/...` from a folder without out/ (it failed)."""
+    done = bwsd("simulate", "example:twist.bws", "--config", "example:twist.toml",
+                "--skeleton", "out/twist.json", cwd=tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    written = json.loads((tmp_path / "out" / "twist.json").read_text())
+    machine = load_config(ROOT / "config" / "twist.toml").machine
+    twin = simulate(machine, load_program(ROOT / "examples" / "twist.bws", machine))
+    assert len(written["yarns"]) == twin.yarn_count
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 import signal
 import subprocess
@@ -42,16 +43,22 @@ def test_the_loom_config_drives_the_mock_loom_on_both_buses(tmp_path):
     shifted = {(r, c + 1) if r == 1 else (r, c) for r, c in fill}
     mock = subprocess.Popen(
         [sys.executable, "-m", "simulator_hw", "--config", "config/loom.toml", "--program",
-         "examples/braid-2x2.bws"],
+         "examples/braid-2x2.bws", "--modbus-port", "0", "--socketcand-port", "0",
+         "--control-port", "0"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         assert mock.stdout is not None
-        assert mock.stdout.readline().startswith("ready modbus=15020 socketcand=29536")
-        canopen = tmp_path / "canopen.toml"
+        ready = mock.stdout.readline()
+        ports = dict(re.findall(r"(\w+)=(?:[\d.]+:)?(\d+)", ready))
+        assert ready.startswith("ready ") and {"modbus", "socketcand"} <= set(ports), ready
         text = (ROOT / "config/loom.toml").read_text()
+        text = text.replace("port = 15020", f"port = {ports['modbus']}", 1)
+        text = text.replace("port = 29536", f"port = {ports['socketcand']}", 1)
+        modbus, canopen = tmp_path / "modbus.toml", tmp_path / "canopen.toml"
+        modbus.write_text(text)
         canopen.write_text(text.replace('backend = "modbus"', 'backend = "canopen"'))
-        for config in (str(ROOT / "config/loom.toml"), str(canopen)):
+        for config in (str(modbus), str(canopen)):
             done = _hw(config, "shift", "row", "1", "1")
             assert done.returncode == 0, done.stderr
             assert _grid(shifted, machine.rows, machine.cols) in done.stdout

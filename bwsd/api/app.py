@@ -24,9 +24,9 @@ from bwsd.controller.facade import Controller
 from bwsd.gate import Gate
 
 from . import control, data, problems, web
-from .auth import Auth, TokenStore, refused_token, require
+from .auth import LOGINS, Auth, TokenStore, refused_token, require
 from .context import Context
-from .doors import DEFAULT_DOORS, LOGINS, BodyDeadline, Doors, TokenFirst, server_config
+from .doors import DEFAULT_DOORS, BodyDeadline, Doors, TokenFirst, server_config
 from .events import QUEUE_SIZE, EventHub, Subscriber
 from .hosts import HostCheck, default_hosts, origin_allowed
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer

@@ -3,6 +3,7 @@ request's token and role, and the 401/403 they answer."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Annotated, Any
 
@@ -10,6 +11,7 @@ from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from bwsd.api.problems import ApiError
+from bwsd.logs import Summary
 from bwsd.tokens import (
     RANK,
     ROLES,
@@ -21,8 +23,22 @@ from bwsd.tokens import (
     digest,
 )
 
-__all__ = ["RANK", "ROLES", "Auth", "Principal", "Role", "TokenEntry", "TokenError",
+__all__ = ["LOGINS", "RANK", "ROLES", "Auth", "Principal", "Role", "TokenEntry", "TokenError",
            "TokenStore", "check_role", "digest", "require"]  # fmt: skip
+
+log = logging.getLogger("bwsd.api")
+# Every refused login of the REST API and its event stream, whatever the method: one line,
+# then at most one a minute (a client can repeat them at will).
+LOGINS = Summary(log, "refused logins")
+
+
+def note_refusal(client: str, exc: ApiError) -> None:
+    """Log a refused request (401 or 403) from ``client``, rate-limited."""
+    LOGINS.note("refused a request from %s: %s", client, exc.detail)
+
+
+def client_of(request: Request) -> str:
+    return request.client.host if request.client else "an unknown client"
 
 
 @dataclass(frozen=True)
@@ -86,7 +102,11 @@ def authorize_request(
     request: Request, credentials: HTTPAuthorizationCredentials | None, role: Role
 ) -> Principal:
     auth: Auth = request.app.state.auth
-    return auth.authorize(credentials.credentials if credentials else None, role)
+    try:
+        return auth.authorize(credentials.credentials if credentials else None, role)
+    except ApiError as exc:
+        note_refusal(client_of(request), exc)
+        raise
 
 
 def require(role: Role) -> Require:
@@ -101,7 +121,10 @@ def refused_token(request: Request) -> ApiError | None:
     """
     auth: Auth = request.app.state.auth
     dependant = getattr(request.scope.get("route"), "dependant", None)
-    return refusal(auth, dependant, request.headers.get("authorization", ""))
+    exc = refusal(auth, dependant, request.headers.get("authorization", ""))
+    if exc is not None:
+        note_refusal(client_of(request), exc)
+    return exc
 
 
 def refusal(auth: Auth, dependant: Any, header: str) -> ApiError | None:

@@ -28,7 +28,7 @@ from uvicorn.protocols.http.auto import AutoHTTPProtocol
 from bwsd.errors import ConfigError
 from bwsd.logs import Summary
 
-from .auth import Auth, refusal
+from .auth import Auth, note_refusal, refusal
 from .problems import ApiError, error_body
 
 log = logging.getLogger("bwsd.api")
@@ -95,12 +95,9 @@ class TokenFirst:
                 exc = refusal(auth, getattr(route, "dependant", None), header)
                 if exc is None:
                     return None
-                LOGINS.note("refused a request from %s: %s", _client(scope), exc.detail)
+                note_refusal(_client(scope), exc)
                 return exc
         return None
-
-
-LOGINS = Summary(log, "refused logins")
 
 
 def _client(scope: Scope) -> str:

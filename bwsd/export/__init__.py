@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bwsd.export.errors import ExportError
 from bwsd.extras import VTK, needs
-from bwsd.twin.skeleton import SkeletonData
+
+if TYPE_CHECKING:
+    from bwsd.twin.skeleton import SkeletonData
 
 __all__ = ["FORMATS", "ExportError", "export"]
 

@@ -5,18 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from pathlib import Path
 from typing import TYPE_CHECKING
-
-from rich.console import Console
-
-from bwsd.export.tables import print_metrics
-from bwsd.twin.instructions import Program
-from bwsd.twin.machine import Machine
-from bwsd.twin.skeleton import SkeletonData
 
 if TYPE_CHECKING:
     from bwsd.export.mixing import NamedSection
+    from bwsd.twin.instructions import Program
+    from bwsd.twin.machine import Machine
+    from bwsd.twin.skeleton import SkeletonData
 
 
 def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -34,8 +29,10 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
     p = sub.add_parser(
         "metrics",
-        help="formed zone: yarn angles, interpenetration, volume fraction; weft contacts, "
-        "section, contacts per cycle, contact groups, carrier mixing, footprint",
+        help="formed zone: yarn angles, volume fraction, contacts, section",
+        description="The formed zone's metrics: yarn angles, interpenetration, volume "
+        "fraction; weft contacts, section, contacts per cycle, contact groups, carrier mixing, "
+        "footprint.",
     )
     _common(p)
     p.add_argument(
@@ -75,8 +72,8 @@ def height(text: str) -> float:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("program", help="program file (.bws)")
-    p.add_argument("--config", required=True, help="machine configuration (TOML)")
+    p.add_argument("program", help="program file (.bws), or example:NAME")
+    p.add_argument("--config", required=True, help="machine configuration (TOML), or example:NAME")
 
 
 def load_inputs(config: str, program: str) -> tuple[Machine, Program]:
@@ -140,6 +137,10 @@ def run_metrics(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2, allow_nan=False))  # never NaN or Infinity
     else:
+        from rich.console import Console
+
+        from bwsd.export.tables import print_metrics
+
         print_metrics(result, Console())
     return 0
 
@@ -147,5 +148,6 @@ def run_metrics(args: argparse.Namespace) -> int:
 def _header_section(program: str) -> NamedSection | None:
     """The section named by the program's ``# section:`` line (the program reads as UTF-8)."""
     from bwsd.export.mixing import section_header
+    from bwsd.shipped import resolve
 
-    return section_header(Path(program).read_text(encoding="utf-8"), program)
+    return section_header(resolve(program).read_text(encoding="utf-8"), program)

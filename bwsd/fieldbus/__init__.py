@@ -1,7 +1,9 @@
 """Actuator buses: one async interface (``Fieldbus``), a backend per bus, chosen by config.
 
 The config's ``[fieldbus] backend = "..."`` names the backend; its module is imported only
-when it is used, so a missing bus library only matters to the bus that needs it.
+when it is used, so a missing bus library only matters to the bus that needs it. The
+interface's names (bwsd.fieldbus.base, which needs numpy) are imported when first used, so
+that `bwsd hw --help` stays light.
 """
 
 from __future__ import annotations
@@ -9,20 +11,35 @@ from __future__ import annotations
 import importlib
 from contextlib import nullcontext
 from functools import partial
+from typing import TYPE_CHECKING, Any
 
 from bwsd.config import Config
 from bwsd.errors import ConfigError
 from bwsd.extras import CANOPEN, needs
-from bwsd.fieldbus.base import (
-    AxisMove,
-    BusSettings,
-    DriveFault,
-    EStopError,
-    Fieldbus,
-    FieldbusConnectionError,
-    FieldbusError,
-    FieldbusTimeout,
-    MachineState,
+
+if TYPE_CHECKING:
+    from bwsd.fieldbus.base import (
+        AxisMove,
+        BusSettings,
+        DriveFault,
+        EStopError,
+        Fieldbus,
+        FieldbusConnectionError,
+        FieldbusError,
+        FieldbusTimeout,
+        MachineState,
+    )
+
+_BASE = (
+    "AxisMove",
+    "BusSettings",
+    "DriveFault",
+    "EStopError",
+    "Fieldbus",
+    "FieldbusConnectionError",
+    "FieldbusError",
+    "FieldbusTimeout",
+    "MachineState",
 )
 
 BACKENDS = {"modbus": ("bwsd.fieldbus.modbus", "ModbusBus"),
@@ -47,8 +64,18 @@ __all__ = [
 ]
 
 
+def __getattr__(name: str) -> Any:
+    if name not in _BASE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module("bwsd.fieldbus.base"), name)
+    globals()[name] = value  # found once
+    return value
+
+
 def settings_from_config(config: Config) -> BusSettings:
     """The shared bus settings of the ``[fieldbus]`` table."""
+    from bwsd.fieldbus.base import BusSettings
+
     table = config.table("fieldbus")
     return BusSettings(**{k: table[k] for k in BusSettings.__dataclass_fields__})
 

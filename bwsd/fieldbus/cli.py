@@ -8,8 +8,9 @@
 
 Each exits non-zero with a clear message on any fault (status too, when an axis is faulted
 or the e-stop is pressed). The commands that move (shift, takeup, reset) refuse while a
-`bwsd serve` holds the bus, naming it: its lock in the state folder (``--state-dir``, found
-as `bwsd serve` finds it), and its claim on the loom. ``status`` only reads and stays allowed.
+`bwsd serve` holds the bus, naming it: its lock in the state folder (found as `bwsd serve`
+finds it: ``--state-dir``, else the config's ``[daemon] state_dir``), and its claim on the
+loom. ``status`` only reads and stays allowed.
 """
 
 from __future__ import annotations
@@ -18,27 +19,15 @@ import argparse
 import asyncio
 import re
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
-from rich.markup import escape
-from rich.table import Table
+if TYPE_CHECKING:
+    from rich.console import Console
 
-from bwsd.config import load_config
-from bwsd.fieldbus import AxisMove, Fieldbus, FieldbusError, MachineState, open_bus
-from bwsd.fieldbus.axes import (
-    UM_PER_MM,
-    axis_by_name,
-    machine_axes,
-    segment_axis_name,
-    shift_stroke_um,
-)
-from bwsd.fieldbus.base import FAULT_NAMES
-from bwsd.fieldbus.owner import refuse_if_held
-from bwsd.paths import state_folder
-from bwsd.twin.machine import Machine
+    from bwsd.fieldbus import Fieldbus, MachineState
+    from bwsd.twin.machine import Machine
 
-Action = Callable[[Fieldbus, argparse.Namespace], Awaitable[MachineState]]
+Action = Callable[["Fieldbus", argparse.Namespace], Awaitable["MachineState"]]
 _LINE = re.compile(r"\s*([0-9]{1,6})\s*(?:\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\])?\s*",
                    re.ASCII)  # fmt: skip
 
@@ -73,15 +62,24 @@ def configure(sub: Any) -> None:
     reset = cmds.add_parser("reset", help="clear faults and home the shift and weft axes")
     for parser, action in ((status, _status), (shift, _shift), (takeup, _takeup), (reset, _reset)):
         parser.add_argument("--config", required=True, help="machine config (TOML)")
-        parser.add_argument("--state-dir", help="the daemon's state folder, whose bus lock is "
-                            "checked (default: $STATE_DIRECTORY, else ./state)")  # fmt: skip
+        parser.add_argument(
+            "--state-dir",
+            help="the daemon's state folder, whose bus lock is checked (default: the config's "
+            "[daemon] state_dir)",
+        )
         parser.set_defaults(handler=lambda args, act=action: _run(args, act))
 
 
 def _run(args: argparse.Namespace, action: Action) -> int:
+    from rich.console import Console
+
+    from bwsd.config import load_config
+    from bwsd.fieldbus.owner import refuse_if_held
+    from bwsd.paths import state_folder
+
     config = load_config(args.config)
     if action is not _status:
-        refuse_if_held(state_folder(args.state_dir, create=False))
+        refuse_if_held(state_folder(config, args.state_dir, create=False))
     state = asyncio.run(_session(config, args, action))
     _print(config.machine, state, Console())
     faulted = [i for i, axis in enumerate(state.axes) if axis.fault]
@@ -92,6 +90,8 @@ def _run(args: argparse.Namespace, action: Action) -> int:
 
 
 async def _session(config: Any, args: argparse.Namespace, action: Action) -> MachineState:
+    from bwsd.fieldbus import open_bus
+
     bus = open_bus(config)
     await bus.connect()
     try:
@@ -105,6 +105,9 @@ async def _status(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
 
 
 async def _shift(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
+    from bwsd.fieldbus import AxisMove, FieldbusError
+    from bwsd.fieldbus.axes import segment_axis_name, shift_stroke_um
+
     line, span = args.line
     name = f"{args.axis}{line}" if span is None else segment_axis_name(args.axis, line, span)
     axis = _axis(bus, name)
@@ -115,6 +118,9 @@ async def _shift(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
 
 
 async def _takeup(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
+    from bwsd.fieldbus import AxisMove, FieldbusError
+    from bwsd.fieldbus.axes import UM_PER_MM
+
     if args.mm <= 0:
         raise FieldbusError("the take-up only advances: MM must be positive")
     axis = _axis(bus, "takeup")
@@ -128,6 +134,9 @@ async def _reset(bus: Fieldbus, args: argparse.Namespace) -> MachineState:
 
 
 def _axis(bus: Fieldbus, name: str) -> Any:
+    from bwsd.fieldbus import FieldbusError
+    from bwsd.fieldbus.axes import axis_by_name
+
     try:
         return axis_by_name(bus.machine, name)
     except ValueError as exc:
@@ -135,6 +144,12 @@ def _axis(bus: Fieldbus, name: str) -> Any:
 
 
 def _print(machine: Machine, state: MachineState, console: Console) -> None:
+    from rich.markup import escape
+    from rich.table import Table
+
+    from bwsd.fieldbus.axes import machine_axes
+    from bwsd.fieldbus.base import FAULT_NAMES
+
     table = Table(title="axes")
     for column in ("axis", "position", "busy", "fault", "last stroke"):
         table.add_column(column)

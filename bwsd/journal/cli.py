@@ -6,7 +6,7 @@
 
 WHERE is ``--config F`` and ``--state-dir D`` (the journal is found as `bwsd serve` finds
 it: the config's ``[journal] path``, journal.db without a config, from the state folder
-when relative: ``--state-dir``, else ``$STATE_DIRECTORY``, else ./state), or ``--journal
+when relative: ``--state-dir``, else the config's ``[daemon] state_dir``), or ``--journal
 FILE``. ``check`` and ``export`` read a private copy of the journal and its log
 (files.private_copy), so they never change either, daemon running or not. ``reset`` refuses
 while a daemon has the journal open (its lock), and never deletes a file.
@@ -72,8 +72,10 @@ def configure(sub: Any) -> None:
     for parser in (check, export, reset):
         parser.add_argument("--config", help="the daemon's config (TOML), for its [journal] "
                             "path (default: journal.db)")  # fmt: skip
-        parser.add_argument("--state-dir", help="the daemon's state folder "
-                            "(default: $STATE_DIRECTORY, else ./state)")  # fmt: skip
+        parser.add_argument(
+            "--state-dir",
+            help="the daemon's state folder (default: the config's [daemon] state_dir)",
+        )
         parser.add_argument("--journal", metavar="FILE", help="the journal file itself, "
                             "instead of --config and --state-dir")  # fmt: skip
 
@@ -85,9 +87,14 @@ def locate(args: argparse.Namespace) -> Path:
             raise BwsdError("--journal names the file itself: give it without --config and "
                             "--state-dir")  # fmt: skip
         return Path(args.journal)
-    folder = state_folder(args.state_dir, create=False)
     if args.config:
-        return journal_file(load_config(args.config), folder)
+        config = load_config(args.config)
+        return journal_file(config, state_folder(config, args.state_dir, create=False))
+    if not args.state_dir:
+        raise BwsdError(
+            "which journal? give --config (the daemon's config), --state-dir or --journal"
+        )
+    folder = Path(args.state_dir)
     default = CONFIG_SCHEMA["journal"]["path"]
     assert isinstance(default, Text) and default.default is not None
     return folder / default.default

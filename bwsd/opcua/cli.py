@@ -4,8 +4,9 @@
     bwsd opcua cert --config F [--state-dir D] --renew    a new key and certificate
 
 The certificate is found as `bwsd serve` finds it: ``[opcua] folder`` (``opcua``) in the
-state folder. A renewed certificate takes effect when the daemon restarts; every client
-must then trust the new one (its thumbprint is printed).
+state folder (``--state-dir``, else the config's ``[daemon] state_dir``). A renewed
+certificate takes effect when the daemon restarts; every client must then trust the new one
+(its thumbprint is printed).
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ def configure(sub: Any) -> None:
     cert = cmds.add_parser("cert", help="show the server certificate's thumbprint (made when "
                            "missing); --renew makes a new one")  # fmt: skip
     cert.add_argument("--config", required=True, help="machine config (TOML)")
-    cert.add_argument("--state-dir", help="the daemon's state folder (default: "
-                      "$STATE_DIRECTORY, else ./state)")  # fmt: skip
+    cert.add_argument(
+        "--state-dir", help="the daemon's state folder (default: the config's [daemon] state_dir)"
+    )
     cert.add_argument("--renew", action="store_true", help="make a new key and certificate")
     cert.set_defaults(handler=_cert_cmd)
 
@@ -35,7 +37,7 @@ def _cert_cmd(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     with needs(OPCUA, "bwsd opcua cert"):
         from bwsd.opcua.security import certificate
-    folder = opcua_folder(config, state_folder(args.state_dir))
+    folder = opcua_folder(config, state_folder(config, args.state_dir))
     made = certificate(folder, renew=args.renew)
     print(made.describe())
     if args.renew:

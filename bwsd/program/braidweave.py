@@ -26,12 +26,12 @@ from bwsd.program import render
 from bwsd.program.braid import Block, braid_rule, describe, section
 from bwsd.program.layers import place_layer
 from bwsd.program.render import Generated
-from bwsd.program.sections import Cell, Section
+from bwsd.program.sections import WEFT_ANGLES, Cell, Section
 from bwsd.program.wefts import Item, Shed, woven
 from bwsd.twin.instructions import Shift, TakeUp
 from bwsd.twin.machine import Machine
 
-ANGLES = (0, 90, 45, -45)
+ANGLES = WEFT_ANGLES
 # A line family: the key of a cell's line and its place along the line.
 FAMILY: dict[int, tuple[Callable[[Cell], int], Callable[[Cell], int]]] = {
     0: (lambda c: c[0], lambda c: c[1]),  # rows, along x

@@ -8,12 +8,10 @@ from pathlib import Path
 from typing import Any
 
 from bwsd.errors import BwsdError
-from bwsd.program.braid import SHAPES as BRAID_SHAPES
-from bwsd.program.braid import braid4, twist
-from bwsd.program.braidweave import ANGLES, braid_weave
 from bwsd.program.render import Generated
-from bwsd.program.weave import SHAPES as WEAVE_SHAPES
-from bwsd.program.weave import weave_3d, weave_plain
+from bwsd.program.sections import SHAPES as BRAID_SHAPES
+from bwsd.program.sections import WEAVE_SHAPES
+from bwsd.program.sections import WEFT_ANGLES as ANGLES
 from bwsd.twin.exact import decimal_float
 
 
@@ -122,15 +120,21 @@ def _machine_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def generate(args: argparse.Namespace) -> Generated:
-    """Call the generator the parsed arguments name."""
+    """Call the generator the parsed arguments name (imported here: the weaves need the twin)."""
+    from bwsd.program.braid import braid4, twist
+
     machine = _machine_kwargs(args)
     if args.kind == "twist":
         return twist(args.turns, takeup=args.takeup, **machine)
     if args.kind == "braid4":
         return braid4(args.rows, args.cols, args.cycles, **_braided(args), **machine)
     if args.kind == "braid-weave":
+        from bwsd.program.braidweave import braid_weave
+
         return braid_weave(args.rows, args.cols, args.cycles, weft_every=args.weft_every,
                            angles=args.angles, **_braided(args), **machine)  # fmt: skip
+    from bwsd.program.weave import weave_3d, weave_plain
+
     if args.kind == "weave-plain":
         return weave_plain(args.warps, args.cycles, takeup=args.takeup, **machine)
     return weave_3d(

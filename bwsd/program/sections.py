@@ -26,6 +26,8 @@ from dataclasses import dataclass
 Cell = tuple[int, int]
 Block = tuple[int, int]  # (rows, cols)
 SHAPES = ("rect", "L", "T", "I")
+WEAVE_SHAPES = ("rect", "U")  # of bwsd.program.weave, here for a parser that imports no twin
+WEFT_ANGLES = (0, 90, 45, -45)  # braid-weave's default weft angles, layer by layer
 MARGIN = 1  # the body's first row and column in the matrix: room for the edge carriers
 
 

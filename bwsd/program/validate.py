@@ -164,10 +164,14 @@ def validate(
 
 
 def load_program(path: str | Path, machine: Machine, most: int = MAX_INSTRUCTIONS) -> Program:
-    """Read, parse and validate a .bws file for ``machine`` (at most ``most`` instructions)."""
+    """Read, parse and validate a .bws file (``example:NAME``: a shipped one) for ``machine``
+    (at most ``most`` instructions)."""
+    from bwsd.shipped import resolve
+
+    path = resolve(path)
     name = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ProgramError(f"cannot read: {exc.strerror}", source=name) from exc
     except UnicodeDecodeError as exc:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from bwsd.program import render
 from bwsd.program.render import Cell, Generated
+from bwsd.program.sections import WEAVE_SHAPES
 from bwsd.program.wefts import Item, Shed, woven
 from bwsd.twin.instructions import Axis, Shift, TakeUp, as_moves
 from bwsd.twin.machine import Machine
 
-SHAPES = ("rect", "U")
+SHAPES = WEAVE_SHAPES
 CYCLE_3D = "column shed + wefts along x, row shed + wefts along y, twice"
 
 

@@ -18,7 +18,8 @@ import trustme
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from bwsd.api.doors import LOGINS, Doors
+from bwsd.api.auth import LOGINS
+from bwsd.api.doors import Doors
 from tests.api.conftest import BRAID, Live, Mock, start_live
 
 DOORS = Doors(max_connections=6, max_connections_per_client=3, body_timeout=0.5)
@@ -169,6 +170,19 @@ def test_refused_logins_are_one_info_line_not_an_error_each(live, caplog):
     refused = [r for r in caplog.records if "refused" in r.getMessage()]
     assert 1 <= len(refused) <= 2, [r.getMessage() for r in refused]
     assert all(r.levelno == logging.INFO for r in refused)
+
+
+def test_a_get_with_a_wrong_token_is_logged_as_a_refused_login(live, caplog):
+    """docs/api.md: refused logins are logged; a GET's refusal was not."""
+    LOGINS.reset()
+    caplog.set_level(logging.INFO, logger="bwsd.api")
+    wrong = {"Authorization": "Bearer " + "x" * 43}
+    with httpx.Client(base_url=live.api, timeout=10) as client:
+        assert client.get("/state", headers=wrong).status_code == 401
+        assert client.get("/state").status_code == 401  # no token at all
+    refused = [r.getMessage() for r in caplog.records if r.name == "bwsd.api"]
+    assert len(refused) == 1, refused  # the second is counted, not written
+    assert refused[0] == "refused a request from 127.0.0.1: the bearer token is not known"
 
 
 # ----- TLS -----

@@ -10,6 +10,7 @@ from rich.console import Console
 
 from bwsd.export import cli
 from bwsd.export.metrics import metrics
+from bwsd.export.tables import print_metrics
 
 from .conftest import build, warp
 
@@ -76,7 +77,7 @@ def test_metrics_arguments():
 
 def test_tables_render(small):
     console = Console(record=True, width=120)
-    cli.print_metrics(metrics(small, 3), console)
+    print_metrics(metrics(small, 3), console)
     text = console.export_text()
     for expected in (
         "Skeleton",
@@ -92,7 +93,7 @@ def test_tables_render(small):
 
 def test_tables_without_section():
     console = Console(record=True, width=120)
-    cli.print_metrics(metrics(build([warp([(0, 0, 0), (0, 0, 9)])]), None), console)
+    print_metrics(metrics(build([warp([(0, 0, 0), (0, 0, 9)])]), None), console)
     assert "no contacts" in console.export_text()
 
 

@@ -336,23 +336,28 @@ def test_reset_of_nothing_is_an_error(capsys: pytest.CaptureFixture[str], path: 
 def test_the_journal_is_found_as_serve_finds_it(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    config = tmp_path / "bwsd.toml"
+    config = tmp_path / "etc" / "bwsd.toml"
+    config.parent.mkdir()
     config.write_text("[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\n"
                       "d_mat = 100.0\nc_mat = 0.5\n[journal]\npath = 'loom.db'\n")  # fmt: skip
     Journal.open(tmp_path / "sd" / "loom.db").close()
     Journal.open(tmp_path / "given" / "journal.db").close()
-    Journal.open(tmp_path / "state" / "journal.db").close()
+    Journal.open(tmp_path / "etc" / "state" / "loom.db").close()
+    Journal.open(tmp_path / "state" / "loom.db").close()  # where the current folder's would be
     monkeypatch.chdir(tmp_path)
     assert run(capsys, "check", "--config", str(config), "--state-dir", "sd")[0] == 0
-    monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path / "sd"))
-    status, out, _ = run(capsys, "check", "--config", str(config))
-    assert status == 0 and report(out)["journal"][0].startswith(f"{tmp_path}/sd/loom.db (")
+    status, out, _ = run(capsys, "check", "--config", str(config))  # beside the config
+    assert status == 0 and report(out)["journal"][0].startswith(f"{tmp_path}/etc/state/loom.db (")
     status, out, _ = run(capsys, "check", "--state-dir", "given")  # journal.db by default
     assert status == 0 and report(out)["journal"][0].startswith("given/journal.db (")
+    monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path / "sd"))  # systemd gives another one
+    status, _, err = run(capsys, "check", "--config", str(config))
+    assert status == 2 and f"[daemon.state_dir]: the state folder would be {tmp_path}/etc" in err
+    assert f'set state_dir = "{tmp_path}/sd"' in err
     monkeypatch.delenv("STATE_DIRECTORY")
-    status, out, _ = run(capsys, "check")
-    assert status == 0 and report(out)["journal"][0].startswith("state/journal.db (")
-    assert not (tmp_path / "state" / "journal.db-wal").exists()
+    status, _, err = run(capsys, "check")
+    assert status == 2 and "which journal? give --config" in err
+    assert not (tmp_path / "etc" / "state" / "loom.db-wal").exists()
 
 
 def test_journal_with_config_is_an_error(capsys: pytest.CaptureFixture[str], path: Path) -> None:
