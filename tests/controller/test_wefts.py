@@ -24,9 +24,11 @@ from typing import Any
 
 import pytest
 
+from bwsd.config import parse_config
 from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State
 from bwsd.controller.status import StopCause
+from bwsd.errors import ProgramError
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from bwsd.program import parse_program
@@ -38,7 +40,7 @@ from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_faults import after, poke
 from tests.controller.test_runner import bits
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
 
 Point = tuple[int, int, int]
 Ends = tuple[Point, Point]
@@ -221,3 +223,41 @@ def moving(program: Any, axis: str) -> int:
     wefts = [(i, ins) for i, ins in enumerate(program.instructions, 1) if isinstance(ins, Weft)]
     pairs = itertools.pairwise(wefts)
     return next(i for (_, was), (i, weft) in pairs if getattr(weft, c) != getattr(was, c))
+
+
+def test_on_map_2_a_weft_goes_in_at_the_fixed_position_and_one_elsewhere_is_refused(tmp_path):
+    """Map 2 has no positioning axes: the inserter stands at the fixed position (the
+    matrix's centre, 15 mm, and d_mat / 2 = 50 mm up); a weft there runs and the loom makes
+    it there, a weft elsewhere is refused when the program is loaded, naming its line."""
+    fill = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
+    there = fill + "WEFT x=15 y=15 z=50 angle=0 length=20\nTAKEUP 2\n"
+    elsewhere = fill + "TAKEUP 1\nWEFT x=15 y=-5 z=2 angle=0 length=20\n"
+    mock = start_mock(tmp_path, {}, tables={"fieldbus.modbus": {"map": 2}})
+
+    async def scenario() -> None:
+        modbus = {"port": mock.ports["modbus"], "map": 2}
+        config = parse_config({"machine": MACHINE, "fieldbus": {"modbus": modbus}})
+        assert config.machine.weft_axes == ()
+        bus = open_bus(config)
+        await bus.connect()
+        ctl = Controller(config.machine, bus, Journal.open(tmp_path / "journal.db"))
+        try:
+            said = r"elsewhere\.bws:7:1: .* the weft's y = -5 mm is off the inserter's fixed y = 15"
+            with pytest.raises(ProgramError, match=said):
+                await ctl.load("elsewhere.bws", elsewhere)
+            await ctl.load("there.bws", there)
+            await ctl.command(Command.RESET)
+            await ctl.command(Command.START)
+            await ctl.wait()
+            assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+            records = (await loom_state(mock))["wefts"]
+            made = {"x": 15_000, "y": 15_000, "z": 50_000, "angle": 0, "length": 20_000}
+            assert records == [{**made, "takeup": 0}]
+            assert same_wefts(records, ctl.twin, parse_program(there)) == 1
+        finally:
+            await ctl.close()
+
+    try:
+        asyncio.run(asyncio.wait_for(scenario(), 120))
+    finally:
+        mock.stop()
