@@ -21,7 +21,7 @@ from typing import Any, Literal
 from bwsd.errors import ConfigError, TwinError
 from bwsd.limits import MODBUS_MAX_AXES, MODBUS_MAX_CELLS
 from bwsd.twin.exact import MIN_LENGTH, decimal_float
-from bwsd.twin.machine import Machine, Segment
+from bwsd.twin.machine import WEFT_AXES, Machine, Segment
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,22 @@ class Segments:
     default: tuple[Segment, ...] = ()
 
 
-Spec = Num | Text | Flag | Segments
+@dataclass(frozen=True)
+class Names:
+    """A list of distinct names out of ``choices`` (kept in the order of ``choices``)."""
+
+    choices: tuple[str, ...]
+    default: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Point:
+    """An optional point: a list of three numbers (mm), read as exact decimals."""
+
+    default: tuple[float, float, float] | None = None
+
+
+Spec = Num | Text | Flag | Segments | Names | Point
 _SEGMENT = re.compile(
     r"\s*(row|col)\s+([0-9]{1,6})\s*\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\]\s*",
     re.IGNORECASE | re.ASCII,
@@ -71,6 +86,8 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "d_mat": Num(float, 1e-3, 1e5),
         "c_mat": Num(float, 0.0, 1.0),
         "segments": Segments(),
+        "weft_axes": Names(WEFT_AXES, WEFT_AXES),
+        "weft_fixed": Point(),
     },
     "yarn": {"diameter": Num(float, 0.0, 1e3, 0.0)},
     "fieldbus": {
@@ -147,6 +164,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "stroke_speed": Num(float, 0.0, 1e6, 0.0),
         "takeup_speed": Num(float, 0.0, 1e6, 0.0),
         "weft_speed": Num(float, 0.0, 1e6, 0.0),
+        "weft_travel_speed": Num(float, 0.0, 1e6, 0.0),
         "heartbeat_ms": Num(int, 0, 65535, 100),
         "state_file": Text(""),
     },
@@ -171,6 +189,10 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
     path, table, key = where
     if isinstance(spec, Segments):
         return _segments(where, value)
+    if isinstance(spec, Names):
+        return _names(where, value, spec.choices)
+    if isinstance(spec, Point):
+        return _point(where, value)
     if isinstance(spec, Flag):
         if not isinstance(value, bool):
             raise ConfigError(f"must be true or false, got {value!r}", path=path, table=table,
@@ -212,6 +234,32 @@ def _segments(where: tuple[str, str, str], value: Any) -> tuple[Segment, ...]:
     return tuple(found)
 
 
+def _names(where: tuple[str, str, str], value: Any, choices: tuple[str, ...]) -> tuple[str, ...]:
+    path, table, key = where
+    named = ", ".join(f'"{c}"' for c in choices)
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(
+            f"must be a list of names out of {named}", path=path, table=table, key=key
+        )
+    for i, name in enumerate(value):
+        if name not in choices:
+            why = f"entry {i + 1}: {name[:20]!r} is not one of {named}"
+            raise ConfigError(why, path=path, table=table, key=key)
+        if name in value[:i]:
+            why = f"entry {i + 1}: {name!r} is named twice"
+            raise ConfigError(why, path=path, table=table, key=key)
+    return tuple(c for c in choices if c in value)
+
+
+def _point(where: tuple[str, str, str], value: Any) -> tuple[float, float, float]:
+    path, table, key = where
+    if not isinstance(value, list) or len(value) != 3:
+        why = "must be a list of three numbers [x, y, z] (mm)"
+        raise ConfigError(why, path=path, table=table, key=key)
+    x, y, z = (_value(where, v, Num(float, -1e5, 1e5)) for v in value)
+    return x, y, z
+
+
 def _exact_number(where: tuple[str, str, str], value: Decimal | float) -> float:
     """A number read as the exact decimal written (docs/twin.md): carried by a float."""
     path, table, key = where
@@ -237,7 +285,7 @@ def _table(raw: Any, name: str, path: str) -> dict[str, Any]:
         out[key] = _value((path, name, key), value, spec[key])
     for key, key_spec in spec.items():
         if key not in out:
-            if key_spec.default is None:
+            if key_spec.default is None and not isinstance(key_spec, Point):
                 raise ConfigError("missing key", path=path, table=name, key=key)
             out[key] = key_spec.default
     return out
@@ -261,6 +309,7 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
         if name not in data:
             raise ConfigError("missing table", path=path, table=name)
     tables = {name: _table(_lookup(data, name), name, path) for name in SCHEMA}
+    _weft_axes_of_map(data, tables, path)
     try:
         machine = Machine(**tables["machine"])
     except ValueError as exc:  # the segments: each key alone is in range
@@ -275,6 +324,23 @@ def parse_config(data: Mapping[str, Any], path: str = "<config>") -> Config:
     else:
         _check_modbus_map(machine, path)
     return Config(machine=machine, path=path, tables=tables)
+
+
+def _weft_axes_of_map(
+    data: Mapping[str, Any], tables: dict[str, dict[str, Any]], path: str
+) -> None:
+    """Modbus map 2 has no weft positioning axes: ``weft_axes`` is none there by default, and
+    naming one is refused."""
+    fieldbus, modbus = tables["fieldbus"], tables["fieldbus.modbus"]
+    if fieldbus["backend"] != "modbus" or modbus["map"] != 2:
+        return
+    if _lookup(data, "machine.weft_axes") not in (None, []):
+        why = (
+            "Modbus map 2 has no weft positioning axes ([fieldbus.modbus] map = 2): leave "
+            "weft_axes out or set it to []"
+        )
+        raise ConfigError(why, path=path, table="machine", key="weft_axes")
+    tables["machine"]["weft_axes"] = ()
 
 
 def _check_geometry(machine: Machine, path: str) -> None:
@@ -297,18 +363,20 @@ def _check_modbus_map(machine: Machine, path: str) -> None:
         raise ConfigError(f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
                           f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
                           key="backend")  # fmt: skip
-    axes = machine.rows + machine.cols + 3 + len(machine.segments)
+    axes = axis_count(machine)
     if axes > MODBUS_MAX_AXES:  # only segments get there while rows and cols are <= 1000
         raise ConfigError(f"the Modbus map addresses at most {MODBUS_MAX_AXES} axes, the machine "
-                          f"has {axes} ({machine.rows} rows, {machine.cols} cols, 3 weft and "
-                          f"take-up axes, {len(machine.segments)} segments)", path=path,
+                          f"has {axes} ({machine.rows} rows, {machine.cols} cols, "
+                          f"{3 + len(machine.weft_axes)} weft and take-up axes, "
+                          f"{len(machine.segments)} segments)", path=path,
                           table="machine", key="segments" if machine.segments else "")  # fmt: skip
 
 
 def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:
-    """A drive per axis (rows, cols, weft angle and insert, take-up, segments), node ids
-    from ``node_base``, all within 127 and apart from the I/O node."""
-    axes = machine.rows + machine.cols + 3 + len(machine.segments)
+    """A drive per axis (rows, cols, weft angle and insert, take-up, segments, the weft's
+    positioning axes), node ids from ``node_base``, all within 127 and apart from the I/O
+    node."""
+    axes = axis_count(machine)
     last = table["node_base"] + axes - 1
     if last > 127:
         what = f" ({len(machine.segments)} of them segments)" if machine.segments else ""
@@ -317,6 +385,11 @@ def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) ->
     if table["node_base"] <= table["io_node"] <= last:
         raise ConfigError(f"collides with the drives' node ids {table['node_base']}..{last}",
                           path=path, table="fieldbus.canopen", key="io_node")  # fmt: skip
+
+
+def axis_count(machine: Machine) -> int:
+    """The machine's axes (as ``bwsd.fieldbus.axes.machine_axes`` numbers them)."""
+    return machine.rows + machine.cols + 3 + len(machine.segments) + len(machine.weft_axes)
 
 
 def load_config(path: str | Path) -> Config:

@@ -81,7 +81,9 @@ class MockLoom:
         self, config: Config, fill: Iterable[tuple[int, int]], *, canopen: bool | None = None
     ) -> None:
         sim = config.table("simulator")
-        speeds = Speeds(sim["stroke_speed"], sim["takeup_speed"], sim["weft_speed"])
+        speeds = Speeds(
+            sim["stroke_speed"], sim["takeup_speed"], sim["weft_speed"], sim["weft_travel_speed"]
+        )
         self.config = config
         self.loom = Loom(config.machine, fill, speeds)
         if sim["state_file"]:

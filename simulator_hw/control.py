@@ -11,7 +11,8 @@ One JSON object a line in, one a line out. Requests (``axis`` is an axis name su
 - ``{"cmd": "estop", "pressed": true | false}``
 - ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
 - ``{"cmd": "state"}``: occupancy, e-stop, when the last quick stop came (the machine's
-  ``time.monotonic()``), and each axis's position, busy flag, fault and stroke count
+  ``time.monotonic()``), each axis's position, busy flag, fault and stroke count, and every
+  weft put in since power-on (``wefts``: x, y, z, angle, length, takeup, as on the wire)
 
 Answers are ``{"ok": true, ...}`` or ``{"ok": false, "error": "..."}``.
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from dataclasses import asdict
 from typing import Any
 
 from simulator_hw.loom import Loom
@@ -102,6 +104,7 @@ def state(loom: Loom) -> dict[str, Any]:
             }
             for sim in loom.axes
         },
+        "wefts": [asdict(weft) for weft in loom.wefts],
     }
 
 

@@ -2,7 +2,8 @@
 
 No I/O and no clock of its own: the bus servers call ``command`` and friends with the
 current time and ``tick(now)`` before every read, so the same loom answers both buses.
-Units as on the wire: micrometres, millidegrees.
+Units as on the wire: micrometres, millidegrees. Every weft the inserter puts in is recorded
+where it went (``wefts``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from bwsd.fieldbus.base import (
     OWNER_LEASE,
     STROKES_WRAP,
 )
-from bwsd.twin.machine import Machine
+from bwsd.twin.machine import WEFT_AXES, Machine
 
 WRONG_POSITION_OFFSET = 500  # µm a drive with an injected position fault is off by
 
@@ -42,6 +43,21 @@ class Speeds:
     stroke: float = 0.0  # mm/s, shift and insert actuators
     takeup: float = 0.0  # mm/s
     weft: float = 0.0  # deg/s, weft angle
+    travel: float = 0.0  # mm/s, the inserter's positioning axes (weft_x, weft_y, weft_z)
+
+
+@dataclass(frozen=True)
+class WeftMade:
+    """A weft the inserter put in: the inserter's place when its stroke reached the far end
+    (x, y in the guide plane, z above the fell: um; the angle: mdeg), the stroke (um) and
+    the take-up axis's position then (um). A coordinate without an axis is the fixed one."""
+
+    x: int
+    y: int
+    z: int
+    angle: int
+    length: int
+    takeup: int
 
 
 @dataclass
@@ -90,6 +106,7 @@ class Loom:
         self.owner = Owner()
         self.on_change: Callable[[], None] | None = None  # the mechanics changed (state file)
         self.quick_stopped: float | None = None  # monotonic time of the last quick stop
+        self.wefts: list[WeftMade] = []  # every weft put in since power-on, in order
 
     # ----- what survives a power cut -----
     def mechanics(self) -> dict[str, Any]:
@@ -208,7 +225,7 @@ class Loom:
         while sim.legs:
             start, src, dst = sim.legs[0]
             span = self._duration(sim, dst - src)
-            if sim.axis.name in self.faults.stall and src == 0 and dst != 0:
+            if sim.axis.name in self.faults.stall and not sim.latched and src != dst:
                 sim.position = src + (dst - src) // 2  # stuck half way out
                 self._stop(sim, FAULT_STALL)
                 return
@@ -242,9 +259,9 @@ class Loom:
 
     def _duration(self, sim: AxisSim, distance: int) -> float:
         kind = sim.axis.kind
-        speed = {"takeup": self.speeds.takeup, "weft_angle": self.speeds.weft}.get(
-            kind, self.speeds.stroke
-        )
+        speeds = {"takeup": self.speeds.takeup, "weft_angle": self.speeds.weft}
+        speeds |= dict.fromkeys(("weft_x", "weft_y", "weft_z"), self.speeds.travel)
+        speed = speeds.get(kind, self.speeds.stroke)
         scale = MDEG_PER_DEG if kind == "weft_angle" else UM_PER_MM
         return abs(distance) / (speed * scale) if speed > 0 else 0.0
 
@@ -270,9 +287,12 @@ class Loom:
                    for i in at)  # fmt: skip
 
     def _latch(self, sim: AxisSim) -> None:
-        """The stroke reached its far end: the cases of the line sit in their new cells."""
+        """The stroke reached its far end: the cases of the line sit in their new cells (an
+        insert stroke: the weft is in, where the inserter stands)."""
         sim.latched = True
         axis = sim.axis
+        if axis.kind == "weft_insert" and sim.stroke:
+            self.wefts.append(self._weft_made(sim.stroke))
         if axis.kind not in ("row", "col"):
             return
         k, at = self._cells(axis, sim.stroke)
@@ -282,6 +302,16 @@ class Loom:
         for i in at:
             self._set(axis.kind, line, i + k, True)
         self._changed()
+
+    def _weft_made(self, stroke: int) -> WeftMade:
+        """The weft an insert stroke of ``stroke`` um puts in now."""
+        where: dict[str, int] = {sim.axis.kind: sim.position for sim in self.axes}
+        fixed = self.machine.fixed_weft()
+        x, y, z = (
+            where.get(f"weft_{name}", round(value * UM_PER_MM))
+            for name, value in zip(WEFT_AXES, fixed, strict=True)
+        )
+        return WeftMade(x, y, z, where["weft_angle"], stroke, where["takeup"])
 
     def _get(self, kind: str, line: int, i: int) -> bool:
         return self.occupied[line][i] if kind == "row" else self.occupied[i][line]

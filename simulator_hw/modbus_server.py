@@ -53,6 +53,7 @@ from bwsd.fieldbus.modbus import (
     image_words,
     int32_words,
     map_problem,
+    version_problem,
     words_int32,
 )
 from simulator_hw.loom import AxisSim, Loom
@@ -145,6 +146,7 @@ class ModbusLoomServer:
         problem = map_problem(loom.machine)
         if version not in MAP_VERSIONS:
             problem = f"Modbus map {version}: the mock loom serves maps 2 and 3"
+        problem = problem or version_problem(loom.machine, version)
         if problem:
             raise FieldbusError(problem)
         self.version = version

@@ -91,7 +91,7 @@ def test_bus_and_simulator_tables_have_defaults_and_are_checked():
 def test_canopen_node_ids_must_fit_and_not_collide():
     big = {**GOOD, "machine": {**GOOD["machine"], "rows": 70, "cols": 70}}
     parse_config(big)  # fine on Modbus
-    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 143 axes"):
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 146 axes"):
         parse_config({**big, "fieldbus": {"backend": "canopen"}})
     clash = {"backend": "canopen", "canopen": {"io_node": 5}}
     with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.io_node\]: collides"):
@@ -111,15 +111,47 @@ def _row_segments(rows: int, per_row: int) -> list[str]:
 def test_modbus_map_limits_the_axes_segments_included():
     """An axis block per row, column, weft and take-up axis and segment: at most 4089."""
     square = {**GOOD["machine"], "rows": 100, "cols": 100}
-    fits = parse_config({"machine": {**square, "segments": _row_segments(100, 39)[:3886]}})
-    assert len(fits.machine.segments) == 3886  # 100 + 100 + 3 + 3886 = 4089 axes
-    over = {"machine": {**square, "segments": _row_segments(100, 39)[:3887]}}
+    fits = parse_config({"machine": {**square, "segments": _row_segments(100, 39)[:3883]}})
+    assert len(fits.machine.segments) == 3883  # 100 + 100 + 3 + 3883 + 3 = 4089 axes
+    over = {"machine": {**square, "segments": _row_segments(100, 39)[:3884]}}
     with pytest.raises(ConfigError, match=r"\[machine\.segments\]: the Modbus map addresses at "
-                       r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 3 weft and "
-                       r"take-up axes, 3887 segments\)"):  # fmt: skip
+                       r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 6 weft and "
+                       r"take-up axes, 3884 segments\)"):  # fmt: skip
         parse_config(over)
-    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 4090 axes \(3887 of"):
+    with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 4090 axes \(3884 of"):
         parse_config({**over, "fieldbus": {"backend": "canopen"}})  # the bus's own limit
+
+
+def test_weft_axes_default_to_all_three_and_none_on_modbus_map_2():
+    assert parse_config(GOOD).machine.weft_axes == ("x", "y", "z")
+    picked = {**GOOD["machine"], "weft_axes": ["z", "x"], "weft_fixed": [1, 2.54, 3]}
+    machine = parse_config({"machine": picked}).machine
+    assert machine.weft_axes == ("x", "z") and machine.fixed_weft() == (1.0, 2.54, 3.0)
+    map2 = {"fieldbus": {"modbus": {"map": 2}}}
+    assert parse_config({**GOOD, **map2}).machine.weft_axes == ()
+    none = {**GOOD["machine"], "weft_axes": []}
+    assert parse_config({"machine": none, **map2}).machine.weft_axes == ()
+    refused = r"\[machine\.weft_axes\]: Modbus map 2 has no weft positioning axes"
+    with pytest.raises(ConfigError, match=refused):
+        parse_config({"machine": picked, **map2})
+    canopen = {"fieldbus": {"backend": "canopen", "modbus": {"map": 2}}}  # map 2 is Modbus's
+    assert parse_config({**GOOD, **canopen}).machine.weft_axes == ("x", "y", "z")
+    bad_lists = [
+        (["w"], "entry 1: 'w' is not one of"),
+        (["x", "x"], "entry 2: .x. is named twice"),
+        ("xyz", "must be a list of names"),
+    ]
+    for bad, said in bad_lists:
+        with pytest.raises(ConfigError, match=rf"\[machine\.weft_axes\]: {said}"):
+            parse_config({"machine": {**GOOD["machine"], "weft_axes": bad}})
+    with pytest.raises(ConfigError, match=r"\[machine\.weft_fixed\]: must be a list of three"):
+        parse_config({"machine": {**GOOD["machine"], "weft_fixed": [1, 2]}})
+
+
+def test_the_fixed_weft_position_defaults_to_the_convergence_point_half_way_up():
+    machine = parse_config(GOOD).machine
+    ox, oy = machine.convergence_xy()
+    assert machine.fixed_weft() == (ox, oy, machine.d_mat / 2)
 
 
 def test_daemon_tables_defaults_and_flags():

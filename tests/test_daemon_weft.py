@@ -1,7 +1,8 @@
 """A weft pending across a crash: `bwsd serve` killed while the weft is under way, restarted.
 
 The insert stroke leaves no trace in the occupancy or the take-up; its stroke counter,
-journaled before the move and read back after the restart, says whether the weft went in.
+journaled before the move and read back after the restart, says whether the weft went in,
+and the inserter's positioning axes, read back too, where.
 """
 
 from __future__ import annotations
@@ -15,9 +16,15 @@ from typing import Any
 import pytest
 
 from bwsd.api.auth import TokenStore
+from bwsd.config import parse_config
+from bwsd.export.skeleton_json import skeleton_to_dict
+from bwsd.program import parse_program
+from bwsd.twin import simulate
+from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
-from tests.fieldbus.conftest import Mock, start_mock
-from tests.test_daemon import Served, daemon_config
+from tests.controller.test_wefts import loom_wefts, twin_wefts
+from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.test_daemon import Served, daemon_config, same_geometry
 
 FILL = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
 TURNED = FILL + "WEFT x=-5 y=15 z=2 angle=90 length=20\nTAKEUP 2\n"  # the inserter turns first
@@ -94,5 +101,77 @@ def test_a_weft_killed_between_its_insert_start_and_end_is_committed_once(slow):
         final = served.wait_for({"Complete", "Held", "Aborted"})
         assert final["name"] == "Complete" and final["index"] == 2, final
         assert loom(mock, "weft_insert")["strokes"] == 1  # never inserted twice
+    finally:
+        served.stop()
+
+
+# Two wefts at two places (x, y and z all change), each a stroke away from the last.
+PLACED = FILL + (
+    "WEFT x=15 y=-5 z=2 angle=0 length=20\nWEFT x=15 y=35 z=3 angle=0 length=20\nTAKEUP 2\n"
+)
+NEEDS_CANOPEN = pytest.mark.skipif(not canopen_installed(), reason="needs the canopen extra")
+BACKENDS = ["modbus", pytest.param("canopen", marks=NEEDS_CANOPEN)]
+
+
+@pytest.fixture(params=BACKENDS)
+def travelling(
+    request: pytest.FixtureRequest, tmp_path: Path
+) -> Iterator[tuple[Path, Path, str, Mock]]:
+    """A loom whose inserter travels at 20 mm/s (to the first weft: 0.75 s), on either bus."""
+    mock = start_mock(tmp_path, {"weft_travel_speed": 20.0, "stroke_speed": 50.0})
+    state = tmp_path / "state"
+    state.mkdir()
+    token = TokenStore.load(state / "tokens.json").add("tester", "operator")
+    path = tmp_path / "bwsd.toml"
+    backend: str = request.param
+    bus = {"port": mock.ports["modbus"]}
+    if backend == "canopen":
+        bus = {"port": mock.ports["socketcand"], "heartbeat_ms": 50}
+    tables = {
+        "machine": MACHINE,
+        "fieldbus": {"backend": backend, **BUS, "timeout": 10.0},
+        f"fieldbus.{backend}": bus,
+        "api": {"port": 0},
+        "plc": {"port": 0},
+    }
+    path.write_text(toml(tables))
+    yield path, state, token, mock
+    mock.stop()
+
+
+def test_a_weft_killed_between_its_placing_and_its_insert_resumes_identically(travelling):
+    """`bwsd serve` is killed while the inserter travels to the first weft's place; the loom
+    finishes that travel alone, so the restarted daemon finds the weft placed and not
+    inserted (the insert's stroke count unchanged): it settles it to run again, and Unhold
+    places it (already there), inserts it once and goes on to the end. The skeleton and the
+    wefts the loom made are those of an uninterrupted run."""
+    config, state, token, mock = travelling
+    served = Served(config, state, token)
+    served.http.post("/programs", json={"name": "placed.bws", "text": PLACED}).raise_for_status()
+    served.command("reset")
+    served.command("start")
+    until(lambda: loom(mock, "weft_x")["busy"], "the inserter never travelled")
+    served.kill()
+    travel = ("weft_x", "weft_y", "weft_z")
+    until(lambda: not any(loom(mock, a)["busy"] for a in travel), "the inserter kept moving")
+    placed = {a: loom(mock, a)["position"] for a in travel}
+    assert placed == {"weft_x": 15_000, "weft_y": -5_000, "weft_z": 2_000}  # placed ...
+    assert loom(mock, "weft_insert")["strokes"] == 0  # ... and not inserted
+    served = Served(config, state, token)
+    try:
+        until(lambda: "pending" not in served.recovered()["reason"], "the weft was never settled")
+        now = served.state()
+        assert now["name"] == "Held" and now["index"] == 0, now
+        assert "the weft was not inserted" in now["reason"] and "Unhold runs it" in now["reason"]
+        served.command("unhold")
+        final = served.wait_for({"Complete", "Held", "Aborted"})
+        assert final["name"] == "Complete" and final["index"] == 3, final["reason"]
+        skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
+        machine = parse_config({"machine": MACHINE}).machine
+        whole = simulate(machine, parse_program(PLACED))
+        assert same_geometry(skeleton, skeleton_to_dict(whole.skeleton()))
+        answer = asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "state"}))
+        assert answer["axes"]["weft_insert"]["strokes"] == 2  # each weft inserted once
+        assert loom_wefts(answer["wefts"]) == twin_wefts(whole)  # where the twin put them
     finally:
         served.stop()

@@ -25,7 +25,8 @@ from bwsd.controller.refusals import READS_FIRST, refusal
 from bwsd.controller.runloop import Aborted, Ending, Finished, Held, Parts, RunLoop
 from bwsd.controller.status import Fault, StopCause, cause_of
 from bwsd.errors import BwsdError
-from bwsd.fieldbus.base import FieldbusError
+from bwsd.fieldbus.axes import POSITIONING
+from bwsd.fieldbus.base import FieldbusError, MachineState
 from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, JournalError
 
 if TYPE_CHECKING:
@@ -89,6 +90,8 @@ async def _prepare(ctl: Controller, command: C, resume: bool) -> None:
     if ctl.recovering or ctl.broken:
         return
     state = await ctl.read_machine()
+    if command is C.UNHOLD and await _clear_placing(ctl, state):
+        state = await ctl.read_machine()
     job = ctl.job
     if job is None or job.pending is None:
         return
@@ -98,6 +101,18 @@ async def _prepare(ctl: Controller, command: C, resume: bool) -> None:
             log.info(
                 "pending instruction %d: %s (%s)", decision.index, decision.kind, decision.reason
             )
+
+
+async def _clear_placing(ctl: Controller, state: MachineState) -> bool:
+    """Unhold after a fault of the axes that place the weft inserter (and of no other):
+    clear it, since no case rides on them and the weft is placed again from absolute
+    set-points. True when it was cleared."""
+    faulted = [ctl.bus.axes[i] for i, axis in enumerate(state.axes) if axis.fault]
+    if state.estop or not faulted or any(a.kind not in POSITIONING for a in faulted):
+        return False
+    log.info("clearing the fault of %s to place the weft again", ", ".join(a.name for a in faulted))
+    await ctl.bus.reset_faults()
+    return True
 
 
 async def _act(ctl: Controller, state: S, resume: bool = False) -> None:

@@ -1,8 +1,9 @@
 """From a predicted instruction to the actuators' set-points, and back to a verdict (pure).
 
 The controller asks the twin for a prediction, refuses it here if it breaks a configured
-limit, turns it into axis set-points (in steps: a weft first turns the inserter, then
-inserts), and after the move compares what the machine reports with what was predicted.
+limit, turns it into axis set-points (in steps: a weft first places and turns the
+inserter, then inserts), and after the move compares what the machine reports with what
+was predicted.
 """
 
 from __future__ import annotations
@@ -12,10 +13,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from bwsd.errors import BwsdError
-from bwsd.fieldbus.axes import MDEG_PER_DEG, UM_PER_MM, axis_by_name, shift_stroke_um
+from bwsd.fieldbus.axes import (
+    MDEG_PER_DEG,
+    UM_PER_MM,
+    axis_by_name,
+    machine_axes,
+    shift_stroke_um,
+)
 from bwsd.fieldbus.base import AxisMove, MachineState
 from bwsd.twin import Machine, Prediction, Shift, TakeUp, Weft
 from bwsd.twin.instructions import Instruction
+from bwsd.twin.machine import WEFT_AXES
 
 
 class RefusedMove(BwsdError):
@@ -56,7 +64,8 @@ def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
 
     A shift is one step (every listed line at once); a take-up one step to the new absolute
     position (``origin_um``: where the take-up stood when the program started); a weft two
-    steps: turn the inserter to the angle, then an insert stroke of the weft's length.
+    steps: place the inserter (x, y, z on the axes the machine has) and turn it to the
+    angle, then an insert stroke of the weft's length.
     """
     if isinstance(instruction, Shift):
         step = []
@@ -69,11 +78,32 @@ def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
         target = origin_um + round((takeup_before + instruction.length) * UM_PER_MM)
         return [[AxisMove(axis_by_name(machine, "takeup").index, target)]]
     assert isinstance(instruction, Weft)
-    angle = axis_by_name(machine, "weft_angle").index
     insert = axis_by_name(machine, "weft_insert").index
     stroke = round(instruction.length * UM_PER_MM)
-    return [[AxisMove(angle, round(instruction.angle * MDEG_PER_DEG))],
-            [AxisMove(insert, stroke)]]  # fmt: skip
+    return [placing(machine, instruction), [AxisMove(insert, stroke)]]
+
+
+def placing(machine: Machine, weft: Weft) -> list[AxisMove]:
+    """The set-points that place the inserter for ``weft``: x and y in the guide plane and
+    z above the fell (absolute um, on the axes the machine has), the angle (absolute mdeg)."""
+    moves = [
+        AxisMove(axis_by_name(machine, f"weft_{name}").index, round(value * UM_PER_MM))
+        for name, value in zip(WEFT_AXES, (weft.x, weft.y, weft.z), strict=True)
+        if name in machine.weft_axes
+    ]
+    angle = axis_by_name(machine, "weft_angle").index
+    return [*moves, AxisMove(angle, round(weft.angle * MDEG_PER_DEG))]
+
+
+def misplaced(machine: Machine, weft: Weft, state: MachineState, tolerance: int) -> str:
+    """Where the inserter's read-back differs from ``weft``'s place ("" where it does not)."""
+    off = [
+        f"{machine_axes(machine)[m.axis].name} at {state.axes[m.axis].position}, the weft's "
+        f"{m.target}"
+        for m in placing(machine, weft)
+        if abs(state.axes[m.axis].position - m.target) > tolerance
+    ]
+    return "; ".join(off)
 
 
 def verify(prediction: Prediction, state: MachineState, takeup_um: int, tolerance: int) -> None:

@@ -10,8 +10,9 @@ the state before the instruction and with its prediction:
   cases as before: **finish** it (its set-point is absolute);
 - a weft leaves no trace in the occupancy or the take-up: its insert axis's stroke counter,
   journaled before the move, says whether the insert ran (one stroke more: commit if the
-  rest shows the prediction) or not (the same count: rerun); anything else, or no counter,
-  is blocked;
+  inserter's positioning axes, x, y, z and angle, read back the weft's place and the rest
+  shows the prediction) or not (the same count: rerun, its set-points are absolute);
+  anything else, or no counter, is blocked;
 - anything else is **blocked**, with the difference, for the operator (Abort ends it).
 
 Nothing here reads the bus or the journal: the caller brings the read-back.
@@ -61,14 +62,23 @@ def settle(
     origin_um: int,
     tolerance: int,
     strokes: Mapping[int, int] | None = None,
+    misplaced: str = "",
 ) -> Settle:
     """Decide from the read-back ``machine`` (its take-up axis at ``takeup_um``);
-    ``strokes``: the stroke counters of a weft's insert axes before it started (axis: count)."""
+    ``strokes``: the stroke counters of a weft's insert axes before it started (axis: count);
+    ``misplaced``: where the inserter's positioning axes read back off the weft's place."""
     index = pred.index
     if isinstance(instruction, Weft):
         ran = inserted(machine, strokes)
         if isinstance(ran, str):
             return Settle("blocked", index, f"instruction {index} started and not done: {ran}")
+        if ran and misplaced:
+            return Settle(
+                "blocked",
+                index,
+                f"instruction {index} started and not done: the weft was inserted but the "
+                f"inserter stands off its place ({misplaced}): where it went cannot be told",
+            )
         if not ran:
             if _shows(machine, takeup_um, before.occupancy, before.takeup_um, tolerance):
                 return Settle(

@@ -5,7 +5,8 @@ One instruction (docs/packml.md):
    while the journal records "started" (with the last instruction's "done"); the twin or
    a limit refuses it: Aborted with the reason, nothing moved;
 2. the bus moves the actuators and waits for them; a drive fault or the e-stop aborts,
-   a timeout, a lost connection, a read-back mismatch or a journal that cannot write holds;
+   a timeout, a lost connection, a read-back mismatch, a fault of an axis placing the weft
+   inserter or a journal that cannot write holds;
 3. the twin commits (``Job.commit``): the journal's "done", the event, a snapshot when due.
 
 The loop decides nothing about PackML: it returns how it ended (``Finished``, ``Held``,
@@ -29,8 +30,8 @@ from bwsd.controller.recorder import Recorder
 from bwsd.controller.settling import takeup_of
 from bwsd.controller.status import Event, StopCause, cause_of
 from bwsd.errors import TwinError
-from bwsd.fieldbus.axes import UM_PER_MM, axis_by_name
-from bwsd.fieldbus.base import DriveFault, EStopError, Fieldbus, FieldbusError
+from bwsd.fieldbus.axes import POSITIONING, UM_PER_MM, axis_by_name
+from bwsd.fieldbus.base import FAULT_ESTOP, DriveFault, EStopError, Fieldbus, FieldbusError
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction, Twin, Weft
 from bwsd.twin.instructions import Instruction
@@ -176,6 +177,8 @@ class RunLoop:
             parts.observe(state)
         except (DriveFault, EStopError) as exc:
             parts.failed(exc)
+            if placing_fault(exc):
+                return Held(cause_of(exc), _about(index, f"{exc}: the weft was not inserted"))
             return Aborted(cause_of(exc), _about(index, exc))
         except FieldbusError as exc:
             parts.failed(exc)
@@ -223,6 +226,16 @@ class RunLoop:
         insert = axis_by_name(self.job.twin.machine, "weft_insert").index
         count = self.parts.bus.known(insert).strokes
         return None if count is None else {insert: count}
+
+
+def placing_fault(error: FieldbusError) -> bool:
+    """A fault of an axis that places the weft inserter (not the e-stop): the weft did not go
+    in and no case moved, so the run holds rather than aborts, and Unhold places it again."""
+    return (
+        isinstance(error, DriveFault)
+        and error.axis.kind in POSITIONING
+        and error.code != FAULT_ESTOP
+    )
 
 
 def _started(steps: list[Any], origin: int, strokes: dict[int, int] | None) -> dict[str, Any]:

@@ -6,12 +6,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
+from bwsd.controller import plan
 from bwsd.controller.job import Job
 from bwsd.controller.recorder import Recorder
 from bwsd.controller.recovery import Before, Settle, settle
 from bwsd.controller.status import Event
 from bwsd.fieldbus.axes import axis_by_name
 from bwsd.fieldbus.base import MachineState
+from bwsd.twin import Weft
 
 NEXT = {
     "commit": "recorded done",
@@ -42,8 +44,12 @@ async def settle_pending(
         return None
     pred = await job.prediction()
     before = Before(job.twin.occupancy >= 0, job.takeup_um())
+    instruction = job.instruction(pending.index)
+    misplaced = ""
+    if isinstance(instruction, Weft):
+        misplaced = plan.misplaced(job.twin.machine, instruction, state, tolerance)
     decision = settle(
-        job.instruction(pending.index),
+        instruction,
         pred,
         state,
         takeup_of(job, state),
@@ -51,6 +57,7 @@ async def settle_pending(
         job.origin or 0,
         tolerance,
         pending.strokes,
+        misplaced,
     )
     if decision.kind == "commit":
         await job.commit(pred, recorder, publish, snapshot_every)

@@ -2,10 +2,12 @@
 
 One shift actuator per matrix row (moves that row's cases along x), one per column (along
 y), then the weft inserter's angle and insert axes, then the take-up, then one shift
-actuator per line segment the machine declares (moves only the cases on its cells). Axis i
-is numbered the same on every bus: rows 0..R-1, columns R..R+C-1, then ``weft_angle``,
+actuator per line segment the machine declares (moves only the cases on its cells), then
+the inserter's positioning axes the machine has (``[machine] weft_axes``). Axis i is
+numbered the same on every bus: rows 0..R-1, columns R..R+C-1, then ``weft_angle``,
 ``weft_insert``, ``takeup``, then the segments in the order of ``[machine] segments``
-(``row3[0..3]``...): a machine without segments keeps the numbering it always had.
+(``row3[0..3]``...), then ``weft_x``, ``weft_y``, ``weft_z`` (those present, in that order):
+the axes added later come last, so no axis a loom already had changes its number.
 """
 
 from __future__ import annotations
@@ -15,7 +17,11 @@ from typing import Literal
 
 from bwsd.twin.machine import Machine
 
-AxisKind = Literal["row", "col", "weft_angle", "weft_insert", "takeup"]
+AxisKind = Literal[
+    "row", "col", "weft_angle", "weft_insert", "takeup", "weft_x", "weft_y", "weft_z"
+]
+# The axes that place the inserter before a weft goes in (absolute; no case rides on them)
+POSITIONING: tuple[AxisKind, ...] = ("weft_x", "weft_y", "weft_z", "weft_angle")
 UM_PER_MM = 1000  # lengths travel as integer micrometres
 MDEG_PER_DEG = 1000  # angles travel as integer millidegrees
 
@@ -52,6 +58,8 @@ def machine_axes(machine: Machine) -> tuple[Axis, ...]:
              seg.line, (seg.lo, seg.hi))
         for i, seg in enumerate(machine.segments)
     ]  # fmt: skip
+    kinds: dict[str, AxisKind] = {"x": "weft_x", "y": "weft_y", "z": "weft_z"}
+    axes += [Axis(len(axes) + i, kinds[a], kinds[a]) for i, a in enumerate(machine.weft_axes)]
     return tuple(axes)
 
 

@@ -90,8 +90,20 @@ def map_problem(machine: Machine) -> str:
                 f"{machine.rows} x {machine.cols}")  # fmt: skip
     if axes > MAX_AXES:
         return (f"the Modbus map addresses at most {MAX_AXES} axes, the machine has {axes} "
-                f"({machine.rows} rows, {machine.cols} cols, 3 weft and take-up axes, "
+                f"({machine.rows} rows, {machine.cols} cols, "
+                f"{3 + len(machine.weft_axes)} weft and take-up axes, "
                 f"{len(machine.segments)} segments)")  # fmt: skip
+    return ""
+
+
+def version_problem(machine: Machine, version: int) -> str:
+    """Why map ``version`` cannot serve ``machine`` ("" when it can): map 2 has no weft
+    positioning axes."""
+    if version < 3 and machine.weft_axes:
+        return (
+            f"Modbus map {version} has no weft positioning axes; the machine has weft_"
+            f"{', weft_'.join(machine.weft_axes)} ([machine] weft_axes)"
+        )
     return ""
 
 
@@ -178,7 +190,7 @@ class ModbusBus(Fieldbus):
                  device_id: int, map_version: int = MAP_VERSION) -> None:  # fmt: skip
         if map_version not in MAP_VERSIONS:
             raise FieldbusError(f"Modbus map {map_version}: bwsd reads maps 2 and 3")
-        problem = map_problem(machine)
+        problem = map_problem(machine) or version_problem(machine, map_version)
         if problem:
             raise FieldbusError(problem)
         super().__init__(machine, settings)

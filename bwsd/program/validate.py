@@ -6,8 +6,8 @@ from pathlib import Path
 
 from bwsd.errors import ProgramError
 from bwsd.program.parser import MAX_INSTRUCTIONS, SourceMap, parse_program_with_positions
-from bwsd.twin.instructions import Program, Shift, Span
-from bwsd.twin.machine import Machine, unknown_segment
+from bwsd.twin.instructions import Program, Shift, Span, Weft
+from bwsd.twin.machine import Machine, unknown_segment, weft_off_fixed
 
 Cell = tuple[int, int]
 
@@ -150,8 +150,9 @@ def validate(
 ) -> None:
     """Refuse a program whose fill or moves are impossible on ``machine``.
 
-    Runs the fill and every ROW/COL on the occupancy grid only (no geometry). Errors name
-    the line (from ``program.lines``) and, when ``positions`` is given, the column.
+    Runs the fill and every ROW/COL on the occupancy grid only (no geometry), and refuses a
+    WEFT off the inserter's fixed position along a coordinate the machine has no axis for.
+    Errors name the line (from ``program.lines``) and, when ``positions`` is given, the column.
     """
     _check_diameter(program, machine, positions, source)
     grid = Occupancy(machine)
@@ -161,6 +162,10 @@ def validate(
             fault = _check_shift(instruction, grid, machine)
             if fault is not None:
                 raise _fail(fault[1], program, positions, source, i, fault[0])
+        elif isinstance(instruction, Weft):
+            off = weft_off_fixed(machine, instruction.x, instruction.y, instruction.z)
+            if off is not None:
+                raise _fail(off, program, positions, source, i, None)
 
 
 def load_program(path: str | Path, machine: Machine, most: int = MAX_INSTRUCTIONS) -> Program:

@@ -9,6 +9,8 @@ from typing import Any, Literal
 
 from bwsd.twin.exact import exact
 
+WEFT_AXES = ("x", "y", "z")  # the inserter's positioning axes a machine may have, in wire order
+
 
 @dataclass(frozen=True, order=True)
 class Segment:
@@ -47,6 +49,11 @@ class Machine:
     c_mat: float
     yarn_diameter: float = 0.0
     segments: tuple[Segment, ...] = ()
+    # The weft inserter's positioning axes (a subset of WEFT_AXES, kept in that order), and
+    # where it stands along a coordinate it has no axis for (mm: x, y in the guide plane, z
+    # above the fell; None: fixed_weft()'s default). Not geometry: as_dict leaves them out.
+    weft_axes: tuple[str, ...] = WEFT_AXES
+    weft_fixed: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.rows < 1 or self.cols < 1:
@@ -68,6 +75,21 @@ class Machine:
         overlap = first_overlap(self.segments)
         if overlap is not None:
             raise ValueError(f"segment {overlap[0].text()} overlaps {overlap[1].text()}")
+        self._check_weft_axes()
+
+    def _check_weft_axes(self) -> None:
+        axes = tuple(self.weft_axes)
+        unknown = [a for a in axes if a not in WEFT_AXES]
+        if unknown or len(set(axes)) != len(axes):
+            raise ValueError(
+                f"weft axes must be distinct ones of {', '.join(WEFT_AXES)}, got "
+                f"{', '.join(map(str, axes)) or 'none'}"
+            )
+        object.__setattr__(self, "weft_axes", tuple(a for a in WEFT_AXES if a in axes))
+        if self.weft_fixed is not None:
+            object.__setattr__(self, "weft_fixed", tuple(float(v) for v in self.weft_fixed))
+            if len(self.weft_fixed) != 3:
+                raise ValueError("the weft's fixed position needs x, y and z")
 
     def _check_segment(self, seg: Segment) -> None:
         lines, along = (self.rows, self.cols) if seg.axis == "row" else (self.cols, self.rows)
@@ -98,6 +120,7 @@ class Machine:
         data["segments"] = [asdict(seg) for seg in self.segments]  # lists, as JSON reads back
         if not self.segments:
             del data["segments"]
+        del data["weft_axes"], data["weft_fixed"]  # actuators, not geometry
         return data
 
     @classmethod
@@ -113,6 +136,15 @@ class Machine:
             if (seg.axis, seg.line, seg.lo, seg.hi) == (axis, line, *span):
                 return seg
         return None
+
+    def fixed_weft(self) -> tuple[float, float, float]:
+        """Where the inserter stands along a coordinate it has no axis for (mm): the
+        configured ``weft_fixed``, else x, y of the convergence point O and z half way from
+        the fell to the guides (d_mat / 2)."""
+        if self.weft_fixed is not None:
+            return self.weft_fixed
+        ox, oy = self.convergence_xy()
+        return ox, oy, self.d_mat / 2
 
     def inside(self, row: int, col: int) -> bool:
         """True when (row, col) is a cell of the matrix."""
@@ -154,3 +186,18 @@ def unknown_segment(machine: Machine, axis: str, line: int, span: tuple[int, int
     declared = ", ".join(seg.text() for seg in machine.segments) or "none"
     return (f"{axis.upper()} {line}[{span[0]}..{span[1]}] is not a segment of this machine "
             f"(declared in [machine] segments: {declared})")  # fmt: skip
+
+
+def weft_off_fixed(machine: Machine, x: float, y: float, z: float) -> str | None:
+    """Why a weft centred at (x, y) and z above the fell cannot be inserted by ``machine``:
+    along a coordinate it has no axis for, the weft must lie at the inserter's fixed value
+    (compared on the wire's micrometres). None when it can."""
+    for name, value, fixed in zip(WEFT_AXES, (x, y, z), machine.fixed_weft(), strict=True):
+        if name not in machine.weft_axes and round(value * 1000) != round(fixed * 1000):
+            has = ", ".join(f'"{a}"' for a in machine.weft_axes)
+            return (
+                f"the weft's {name} = {value:g} mm is off the inserter's fixed {name} = "
+                f"{fixed:g} mm: this machine has no weft_{name} axis ([machine] weft_axes "
+                f"= [{has}])"
+            )
+    return None

@@ -23,7 +23,7 @@ from bwsd.twin import _kernel
 from bwsd.twin.exact import MAX_DIAMETER, MIN_LENGTH, SCALE, as_bytes, exact
 from bwsd.twin.geometry import Geometry, Point, weft_ends
 from bwsd.twin.instructions import Instruction, Program, Shift, TakeUp
-from bwsd.twin.machine import Machine, unknown_segment
+from bwsd.twin.machine import Machine, unknown_segment, weft_off_fixed
 from bwsd.twin.prediction import NodeInsert, Prediction, Snapshot, mm
 from bwsd.twin.shed import closest
 from bwsd.twin.skeleton import ContactData, IntArray, SkeletonData, YarnData
@@ -138,6 +138,9 @@ class Twin:
                 takeup = self._takeup + exact(instruction.length)
                 result = self._kernel.takeup(self._geo.guide_z(takeup), index, predict)
             else:
+                off = weft_off_fixed(self.machine, instruction.x, instruction.y, instruction.z)
+                if off is not None:
+                    raise MoveError(off)
                 p0, p1 = weft_ends(instruction, takeup)
                 self._check_shed(p0, p1)
                 result = self._kernel.weft(*p0, *p1, predict)

@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from bwsd.controller.plan import Limits, Mismatch, RefusedMove, check_limits, setpoints, verify
+from bwsd.controller.plan import (
+    Limits,
+    Mismatch,
+    RefusedMove,
+    check_limits,
+    misplaced,
+    placing,
+    setpoints,
+    verify,
+)
 from bwsd.fieldbus.base import AxisMove, AxisState, MachineState
 from bwsd.twin import Machine, Shift, TakeUp, Twin, Weft
 
@@ -20,16 +31,39 @@ def state(occupancy, takeup_um: int = 0) -> MachineState:
 
 
 def test_setpoints_of_each_kind():
-    # axes: row0 row1 col0 col1 weft_angle weft_insert takeup
+    # axes: row0 row1 col0 col1 weft_angle weft_insert takeup weft_x weft_y weft_z
     assert setpoints(MACHINE, Shift("row", ((0, 1), (1, -1))), 0.0) == [
         [AxisMove(0, 10_000), AxisMove(1, -10_000)]
     ]
     assert setpoints(MACHINE, Shift("col", ((1, 2),)), 0.0) == [[AxisMove(3, 25_000)]]
     assert setpoints(MACHINE, TakeUp(2.5), 4.0) == [[AxisMove(6, 6_500)]]
-    assert setpoints(MACHINE, Weft(5, 5, 30, 90, 80), 0.0) == [
-        [AxisMove(4, 90_000)],
+    # a weft: placed (weft_x 7, weft_y 8, weft_z 9 and the angle together), then inserted
+    assert setpoints(MACHINE, Weft(5, 2.5, 30, 90, 80), 0.0) == [
+        [AxisMove(7, 5_000), AxisMove(8, 2_500), AxisMove(9, 30_000), AxisMove(4, 90_000)],
         [AxisMove(5, 80_000)],
     ]
+
+
+def test_a_weft_is_placed_only_on_the_axes_the_machine_has():
+    only_z = dataclasses.replace(MACHINE, weft_axes=("z",))  # weft_z is axis 7
+    assert setpoints(only_z, Weft(5, 6.25, 30, -45, 80), 1.0) == [
+        [AxisMove(7, 30_000), AxisMove(4, -45_000)],
+        [AxisMove(5, 80_000)],
+    ]
+    none = dataclasses.replace(MACHINE, weft_axes=())
+    assert placing(none, Weft(5, 6.25, 30, 0, 80)) == [AxisMove(4, 0)]
+
+
+def test_misplaced_names_each_placing_axis_off_the_weft():
+    weft = Weft(5, 2.5, 30, 90, 80)
+    at = {7: 5_000, 8: 2_500, 9: 30_000, 4: 90_000}
+    axes = [AxisState(at.get(i, 0), False, 0, 0, 0) for i in range(10)]
+    placed = MachineState(tuple(axes), np.zeros((2, 2), dtype=bool), False)
+    assert misplaced(MACHINE, weft, placed, 10) == ""
+    axes[9] = AxisState(30_011, False, 0, 0, 0)  # z off by 11 um, beyond the tolerance
+    axes[4] = AxisState(90_010, False, 0, 0, 0)  # the angle within it
+    off = MachineState(tuple(axes), placed.occupancy, False)
+    assert misplaced(MACHINE, weft, off, 10) == "weft_z at 30011, the weft's 30000"
 
 
 def _busy_prediction():

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from bwsd.config import parse_config
+from bwsd.controller.plan import misplaced, placing
 from bwsd.controller.recovery import Before, settle
-from bwsd.fieldbus.axes import axis_by_name
+from bwsd.fieldbus.axes import axis_by_name, machine_axes
 from bwsd.fieldbus.base import AxisState, MachineState
 from bwsd.program import parse_program
 from bwsd.twin import Twin
@@ -56,3 +57,29 @@ def test_a_weft_whose_insert_counted_one_stroke_is_committed():
 def test_a_weft_that_cannot_be_told_is_blocked_for_the_operator(now, journaled, fault, reason):
     said = decide(now, journaled, fault)
     assert said.startswith("blocked: instruction 1 started and not done: ") and reason in said
+
+
+def test_a_weft_inserted_with_the_inserter_off_its_place_is_blocked():
+    program = parse_program(TEXT)
+    twin = Twin(M, program.fill)
+    weft = program.instructions[0]
+    pred = twin.predict(weft)
+    at_rest = twin.occupancy >= 0
+    placed = {m.axis: m.target for m in placing(M, weft)}
+    axes = [AxisState(placed.get(i, 0), False, 0, 0, 0, 0) for i in range(len(machine_axes(M)))]
+    axes[INSERT] = AxisState(0, False, 3, 0, 20_000, 8)  # one stroke more than journaled
+    state = MachineState(tuple(axes), at_rest, False)
+    assert misplaced(M, weft, state, 10) == ""
+    there = settle(weft, pred, state, 0, Before(at_rest, 0), 0, 10, {INSERT: 7}, "")
+    assert there.kind == "commit"
+    y = axis_by_name(M, "weft_y").index
+    axes[y] = AxisState(placed[y] + 2_000, False, 0, 0, 0, 0)  # moved since: where did it go?
+    moved = MachineState(tuple(axes), at_rest, False)
+    off = misplaced(M, weft, moved, 10)
+    assert off == f"weft_y at {placed[y] + 2_000}, the weft's {placed[y]}"
+    decision = settle(weft, pred, moved, 0, Before(at_rest, 0), 0, 10, {INSERT: 7}, off)
+    assert decision.kind == "blocked" and "the weft was inserted but the inserter stands " in (
+        decision.reason
+    )
+    not_yet = settle(weft, pred, moved, 0, Before(at_rest, 0), 0, 10, {INSERT: 8}, off)
+    assert not_yet.kind == "rerun"  # not inserted: placed again from absolute set-points

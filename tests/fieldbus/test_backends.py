@@ -207,9 +207,9 @@ class TestSegmentAxes:
         async def body(bus: Fieldbus) -> None:
             names = [axis.name for axis in bus.axes]
             assert names[9:] == ["weft_angle", "weft_insert", "takeup", "row1[0..2]",
-                                 "col2[0..2]"]  # fmt: skip
+                                 "col2[0..2]", "weft_x", "weft_y", "weft_z"]  # fmt: skip
             state = await bus.state()
-            assert len(state.axes) == 14 and not any(a.fault for a in state.axes)
+            assert len(state.axes) == 17 and not any(a.fault for a in state.axes)
 
         run(with_segment_bus(segment_mock, backend, body))
 

@@ -284,7 +284,7 @@ def test_from_config_takes_both_tables():
     })  # fmt: skip
     bus = CanopenBus.from_config(config)
     assert (bus.port, bus.io_node, bus.heartbeat_ms) == (4000, 5, 0)
-    assert bus.drive_ids == list(range(10, 18)) and bus.settings.io_timeout == 0.25
+    assert bus.drive_ids == list(range(10, 21)) and bus.settings.io_timeout == 0.25
 
 
 def test_occupancy_bitmap_is_row_major_lsb_first():

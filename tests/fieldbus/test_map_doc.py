@@ -9,6 +9,7 @@ the documented addresses.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import re
 import time
 from collections.abc import Iterator
@@ -19,6 +20,8 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.constants import ExcCodes
 
 from bwsd.fieldbus import base, modbus
+from bwsd.fieldbus.axes import machine_axes
+from bwsd.twin.machine import Machine, Segment
 from simulator_hw.control import request
 from tests.doc_tables import DOCS, addresses, doc_table
 from tests.fieldbus.conftest import MACHINE, Mock, start_mock
@@ -36,6 +39,7 @@ AXIS_BLOCK = {
 }
 FAULTS = doc_table(DOC, "code", "name", "meaning", after="## Fault codes")
 IMAGE = doc_table(DOC, "address", "meaning", after="## Input registers")
+AXES = doc_table(DOC, "axis", "index", "target (+0, +1)", "map", after="## Axes")
 INPUTS = doc_table(DOC, "address", "meaning", after="## Discrete inputs")
 ROWS, COLS = MACHINE["rows"], MACHINE["cols"]
 PITCH_UM = int(MACHINE["pitch_x"] * 1000)
@@ -52,6 +56,50 @@ def block() -> tuple[int, int]:
     assert found, "the axis block's placement is not where the doc says it"
     assert found[1] == found[3]
     return int(found[2]), int(found[3])
+
+
+def index_of(expression: str, **names: int) -> int:
+    """An index as the Axes table writes it (``R + C + S + 3``), for the numbers ``names``."""
+    terms = [term.strip() for term in expression.split("+")]
+    return sum(int(t) if t.isdigit() else names[t] for t in terms)
+
+
+def documented_axes(machine: Machine, version: int = 3) -> dict[int, str]:
+    """Every axis of ``machine`` the Axes table places on map ``version``: {index: name}."""
+    rows, cols, segs = machine.rows, machine.cols, len(machine.segments)
+    found: dict[int, str] = {}
+    for row in AXES:
+        if int(row["map"]) > version:
+            continue
+        name, expression = row["axis"], row["index"]
+        sizes = {"R": rows, "C": cols, "S": segs}
+        if name == "row r":
+            found |= {index_of(expression, r=r, **sizes): f"row{r}" for r in range(rows)}
+        elif name == "col c":
+            found |= {index_of(expression, c=c, **sizes): f"col{c}" for c in range(cols)}
+        elif name == "segment j":
+            for j, seg in enumerate(machine.segments):
+                found[index_of(expression, j=j, **sizes)] = (
+                    f"{seg.axis}{seg.line}[{seg.lo}..{seg.hi}]"
+                )
+        else:
+            found[index_of(expression, **sizes)] = name
+    return found
+
+
+def test_the_axes_are_numbered_as_the_axes_table_says():
+    corner = (Segment("row", 3, 0, 3), Segment("col", 3, 0, 3))
+    segmented = Machine(8, 8, 10, 12, 100, 0.5, segments=corner)
+    for machine in (segmented, Machine(**MACHINE)):
+        wire = {axis.index: axis.name for axis in machine_axes(machine)}
+        assert wire == documented_axes(machine)
+    assert documented_axes(segmented)[21] == "weft_x"  # the doc's example
+    map2 = dataclasses.replace(segmented, weft_axes=())  # map 2 has no positioning axes
+    assert {a.index: a.name for a in machine_axes(map2)} == documented_axes(map2, version=2)
+    absolute = [row["axis"] for row in AXES if row["target (+0, +1)"].startswith("absolute")]
+    assert absolute == ["weft_angle", "takeup", "weft_x", "weft_y", "weft_z"]
+    relative = {a.name for a in machine_axes(segmented) if a.relative}
+    assert not relative & set(absolute) and "weft_insert" in relative
 
 
 def bits(meaning: str) -> dict[str, int]:
@@ -126,7 +174,8 @@ async def registers(client: AsyncModbusTcpClient, address: int, count: int) -> l
 def test_a_live_loom_answers_at_the_documented_addresses(any_map):
     mock, version = any_map
     base_at, stride = block()
-    axes = ROWS + COLS + 3
+    axes = ROWS + COLS + (6 if version == 3 else 3)  # map 3: weft_x, weft_y, weft_z
+    assert axes == len(documented_axes(Machine(**MACHINE), version))
     axis = {name: addresses(row["offset"]) for name, row in AXIS_BLOCK.items()}
 
     async def scenario() -> None:
@@ -171,10 +220,37 @@ def test_a_live_loom_answers_at_the_documented_addresses(any_map):
             owner = await client.read_holding_registers(claim, count=4, device_id=1)
             assert owner.isError() is (version == 2)  # the claim is map 3's
             await check_inputs(client, mock, version, axes, whole)
+            if version == 3:
+                await check_weft_axes(client, mock)
         finally:
             client.close()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
+
+
+async def check_weft_axes(client: AsyncModbusTcpClient, mock: Mock) -> None:
+    """Map 3: each positioning axis at its documented block takes an absolute target and
+    stays there (a stroke would go back home)."""
+    base_at, stride = block()
+    axis = {name: addresses(row["offset"]) for name, row in AXIS_BLOCK.items()}
+    indexes = {v: k for k, v in documented_axes(Machine(**MACHINE)).items()}
+    targets = [("weft_x", 36_000), ("weft_y", -8_250), ("weft_z", 30_000)]
+    for seq, (name, target) in enumerate(targets, start=1):
+        at = base_at + stride * indexes[name]
+        written = await client.write_registers(
+            at + axis["target"][0], [*modbus.int32_words(target), seq], device_id=1
+        )
+        assert not written.isError(), written
+        deadline = time.monotonic() + 10
+        while (await registers(client, at + axis["done sequence"][0], 1))[0] != seq:
+            assert time.monotonic() < deadline, f"{name} never completed"
+            await asyncio.sleep(0.01)
+        words = await registers(client, at, stride)
+        position = axis["actual position"]
+        assert modbus.words_int32(words[position[0]], words[position[1]]) == target
+        assert [words[i] for i in axis["shift kind"]] == [0]
+        state = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})
+        assert state["axes"][name]["position"] == target
 
 
 async def check_inputs(

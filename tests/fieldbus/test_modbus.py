@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import socket
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -32,6 +33,7 @@ from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
 
 MACHINE = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5)
+MAP2 = dataclasses.replace(MACHINE, weft_axes=())  # map 2 has no weft positioning axes
 SETTINGS = BusSettings(
     timeout=2.0,
     io_timeout=0.3,
@@ -127,11 +129,11 @@ def test_weft_and_takeup_reach_their_targets():
 
 def test_a_machine_of_many_axes_is_read_in_several_requests():
     big = Machine(rows=12, cols=10, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5)
-    loom = Loom(big, [(11, 9)], Speeds())  # 25 axes: 400 registers
+    loom = Loom(big, [(11, 9)], Speeds())  # 28 axes: 448 registers
 
     async def test(bus: ModbusBus) -> None:
-        state = await bus.execute([stroke("col9", -11, big), AxisMove(24, 7_000)])
-        assert len(state.axes) == 25 and state.axes[24].position == 7_000
+        state = await bus.execute([stroke("col9", -11, big), AxisMove(27, 7_000)])
+        assert len(state.axes) == 28 and state.axes[27].position == 7_000  # weft_z
         assert state.occupancy.shape == (12, 10) and state.occupancy[0, 9]
         assert int(state.occupancy.sum()) == 1
 
@@ -295,7 +297,7 @@ def test_a_loom_of_another_machine_is_refused():
     async def scenario() -> None:
         async with rig(Loom(other, [], Speeds())) as (_, server):
             bus = ModbusBus(MACHINE, SETTINGS, HOST, server.port, 1)
-            with pytest.raises(FieldbusError, match=r"expected \[3, 9, 3, 3\]"):
+            with pytest.raises(FieldbusError, match=r"expected \[3, 12, 3, 3\]"):
                 await bus.connect()
 
     asyncio.run(scenario())
@@ -325,7 +327,7 @@ def test_from_config_takes_every_setting():
     bus = ModbusBus.from_config(config)
     assert (bus.host, bus.port, bus.device_id) == ("10.0.0.5", 1502, 17)
     assert bus.settings == BusSettings(7.0, 0.5, 0.2, 3.0, 9, 25)
-    assert bus.machine == config.machine and len(bus.axes) == 9
+    assert bus.machine == config.machine and len(bus.axes) == 12  # 9 and weft_x, weft_y, weft_z
 
 
 def test_a_machine_beyond_the_input_address_space_is_refused():
@@ -394,13 +396,14 @@ class RequestCounter:
     ("version", "requests"), [(3, 1), (2, 3)]
 )  # 2: 144 registers and the inputs
 def test_map_3_reads_the_axes_occupancy_and_estop_in_one_request(version, requests):
-    loom = Loom(MACHINE, [(0, 0), (1, 1)], Speeds())
+    machine = MACHINE if version == 3 else MAP2  # map 3: with the weft's positioning axes
+    loom = Loom(machine, [(0, 0), (1, 1)], Speeds())
 
     async def scenario() -> None:
         server = ModbusLoomServer(loom, HOST, 0, 1, version)
         await server.start()
         counter = RequestCounter(server.port)
-        bus = ModbusBus(MACHINE, SETTINGS, HOST, await counter.start(), 1, version)
+        bus = ModbusBus(machine, SETTINGS, HOST, await counter.start(), 1, version)
         try:
             await bus.connect()
             await bus.execute([stroke("row0", 1)])
@@ -421,11 +424,11 @@ def test_map_3_reads_the_axes_occupancy_and_estop_in_one_request(version, reques
 
 def test_a_map_2_loom_is_read_when_the_config_asks_for_map_2():
     async def scenario() -> None:
-        async with rig(Loom(MACHINE, [(0, 0)], Speeds()), version=2) as (bus, server):
+        async with rig(Loom(MAP2, [(0, 0)], Speeds()), version=2) as (bus, server):
             await bus.connect()
             state = await bus.execute([stroke("row0", 2)])
             assert state.occupancy[0].tolist() == [False, False, True]
-            newer = ModbusBus(MACHINE, SETTINGS, HOST, server.port, 1)  # map 3 by default
+            newer = ModbusBus(MAP2, SETTINGS, HOST, server.port, 1)  # map 3 by default
             with pytest.raises(FieldbusError, match=r"are \[2, 9, 3, 3\], expected \[3, 9, 3, 3\]"):
                 await newer.connect()
 
@@ -436,5 +439,8 @@ def test_the_map_key_is_checked_at_load():
     machine = {"rows": 3, "cols": 3, "pitch_x": 10, "pitch_y": 12, "d_mat": 100, "c_mat": 0.5}
     config = parse_config({"machine": machine, "fieldbus": {"modbus": {"map": 2}}})
     assert ModbusBus.from_config(config).map_version == 2
+    assert len(ModbusBus.from_config(config).axes) == 9  # no weft positioning axes on map 2
+    with pytest.raises(FieldbusError, match="Modbus map 2 has no weft positioning axes"):
+        ModbusBus(MACHINE, SETTINGS, HOST, 1502, 1, 2)
     with pytest.raises(Exception, match=r"\[fieldbus\.modbus\.map\]"):
         parse_config({"machine": machine, "fieldbus": {"modbus": {"map": 1}}})

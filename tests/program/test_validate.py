@@ -107,3 +107,24 @@ def test_load_program_unreadable(tmp_path):
     binary.write_bytes(b"\xff\xfe\x00")
     with pytest.raises(ProgramError, match="UTF-8"):
         load_program(binary, M2)
+
+
+def test_a_weft_off_the_fixed_position_of_a_missing_axis_is_refused_at_its_line():
+    """Without weft_y the inserter stands at the fixed y (the matrix's centre, 10 mm here):
+    a weft elsewhere along y is refused naming its line; x and z have axes, so any goes."""
+    machine = Machine(3, 3, 10, 10, 100, 0.5, weft_axes=("x", "z"))
+    at_fixed = "FILL row=0 col=0\nX\nEND\nWEFT x=3 y=10 z=7 angle=0 length=5\n"
+    validate(parse_program(at_fixed), machine)
+    off = at_fixed + "REPEAT 2\n  TAKEUP 1\n  WEFT x=3 y=10.001 z=7 angle=0 length=5\nEND\n"
+    program, positions = parse_program_with_positions(off, "w.bws")
+    said = (
+        r"w\.bws:7:3: instruction 3: the weft's y = 10\.001 mm is off the inserter's fixed "
+        r'y = 10 mm: this machine has no weft_y axis \(\[machine\] weft_axes = \["x", "z"\]\)'
+    )
+    with pytest.raises(ProgramError, match=said):
+        validate(program, machine, "w.bws", positions)
+    first = parse_program(at_fixed)
+    validate(first, Machine(3, 3, 10, 10, 100, 0.5, weft_axes=(), weft_fixed=(3, 10, 7)))
+    higher = Machine(3, 3, 10, 10, 100, 0.5, weft_axes=(), weft_fixed=(3, 10, 7.001))
+    with pytest.raises(ProgramError, match=r"the weft's z = 7 mm is off the inserter's fixed z"):
+        validate(first, higher)  # one micrometre off on the wire

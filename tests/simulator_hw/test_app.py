@@ -18,19 +18,20 @@ MACHINE = {"rows": 20, "cols": 20, "pitch_x": 1, "pitch_y": 1, "d_mat": 10, "c_m
 
 
 def segmented(count: int) -> dict[str, object]:
-    """The machine with ``count`` two-cell segments: 43 + count axes."""
+    """The machine with ``count`` two-cell segments: 46 + count axes (the weft's positioning
+    axes included)."""
     segments = [f"ROW {r}[{2 * j}..{2 * j + 1}]" for r in range(20) for j in range(10)]
     return {**MACHINE, "segments": segments[:count]}
 
 
 def test_a_drive_per_axis_while_the_node_ids_last():
-    fits = parse_config({"machine": segmented(83)})  # drives 1..126, the I/O node 127
+    fits = parse_config({"machine": segmented(80)})  # drives 1..126, the I/O node 127
     assert canopen_ids_problem(fits) == ""
     assert MockLoom(fits, []).hub is not None
 
 
 def test_a_machine_with_more_axes_than_node_ids_is_served_over_modbus_only():
-    over = parse_config({"machine": segmented(85)})  # Modbus drives it: CANopen cannot
+    over = parse_config({"machine": segmented(82)})  # Modbus drives it: CANopen cannot
     assert canopen_ids_problem(over) == (
         "the drives of its 128 axes (nodes 1..128) and the I/O node 127 do not fit CANopen "
         "node ids 1..127"
@@ -43,7 +44,7 @@ def test_a_machine_with_more_axes_than_node_ids_is_served_over_modbus_only():
 
 def test_the_mock_loom_says_when_it_serves_modbus_only(tmp_path: Path):
     config = tmp_path / "mock.toml"
-    config.write_text(toml({"machine": segmented(85), "simulator": {"modbus_port": 0,
+    config.write_text(toml({"machine": segmented(82), "simulator": {"modbus_port": 0,
                             "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
     mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config", str(config)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,

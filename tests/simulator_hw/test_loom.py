@@ -111,7 +111,8 @@ def cells(loom: Loom) -> set[tuple[int, int]]:
 
 def test_a_segment_stroke_latches_only_the_cases_on_its_cells():
     loom = Loom(SEGMENTED, [(1, 0), (1, 1), (1, 4), (0, 4), (2, 4)], Speeds(stroke=100))
-    assert [sim.axis.name for sim in loom.axes[ROW1_SEGMENT:]] == ["row1[0..2]", "col4[0..1]"]
+    names = [sim.axis.name for sim in loom.axes[ROW1_SEGMENT:]]
+    assert names == ["row1[0..2]", "col4[0..1]", "weft_x", "weft_y", "weft_z"]
     loom.command(ROW1_SEGMENT, 10_000, 1, now=0.0)
     loom.tick(0.05)
     assert loom.axes[ROW1_SEGMENT].busy and (1, 0) in cells(loom)  # not latched mid-stroke

@@ -25,7 +25,8 @@ from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
 
-MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5)
+# without the weft's positioning axes (as on map 2): N axes (test_weft_positioning_axes has them)
+MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5, weft_axes=())
 N = 2 + 3 + 3
 ROW0, ROW1, COL0, WEFT_ANGLE, TAKEUP = 0, 1, 2, 5, 7
 CELL_UM = 10_000
@@ -121,7 +122,8 @@ def test_a_shift_stroke_moves_the_cases_and_completes():
 
 def test_each_shift_axis_says_which_cells_it_moves():
     segmented = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5,
-                        segments=(Segment("row", 1, 1, 2), Segment("col", 0, 0, 1)))  # fmt: skip
+                        segments=(Segment("row", 1, 1, 2), Segment("col", 0, 0, 1)),
+                        weft_axes=())  # fmt: skip
 
     async def test(client: AsyncModbusTcpClient) -> None:
         assert await regs(client, 1, 1) == [N + 2]
@@ -142,7 +144,7 @@ def test_a_machine_beyond_the_map_is_refused_by_the_server():
     segments = tuple(Segment("row", r, 2 * j, 2 * j + 1) for r in range(100) for j in range(39))
     huge = Machine(rows=100, cols=100, pitch_x=1, pitch_y=1, d_mat=10, c_mat=0.5,
                    segments=segments)  # fmt: skip
-    with pytest.raises(FieldbusError, match="at most 4089 axes, the machine has 4103"):
+    with pytest.raises(FieldbusError, match="at most 4089 axes, the machine has 4106"):
         ModbusLoomServer(Loom(huge, [], Speeds()))
 
 
