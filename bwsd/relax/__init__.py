@@ -5,6 +5,7 @@ path: the twin's contacts decide every refusal.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -89,7 +90,7 @@ def relax(
 def _per_yarn(chains: Chains, found: Sections) -> tuple[FloatArray, ...]:
     table = np.column_stack([found.width, found.height, found.up])
     bounds = np.searchsorted(chains.yarn, np.arange(int(chains.yarn.max()) + 2))
-    return tuple(table[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True))
+    return tuple(table[a:b] for a, b in itertools.pairwise(bounds))
 
 
 def crimp(sk: SkeletonData) -> dict[str, Any]:

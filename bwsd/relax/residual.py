@@ -17,7 +17,7 @@ from scipy.sparse import coo_matrix
 from bwsd.relax.sections import TOUCH
 from bwsd.relax.solver import Layout, Pairs, forces
 from bwsd.relax.state import Chains
-from bwsd.twin.skeleton import FloatArray
+from bwsd.twin.skeleton import FloatArray, IntArray
 
 
 def residuals(chains: Chains, lay: Layout, pairs: Pairs, d: float) -> FloatArray:
@@ -42,7 +42,7 @@ def residuals(chains: Chains, lay: Layout, pairs: Pairs, d: float) -> FloatArray
     return out
 
 
-def _contact_matrix(pairs: Pairs, lay: Layout, near: np.ndarray, count: int) -> coo_matrix:
+def _contact_matrix(pairs: Pairs, lay: Layout, near: IntArray, count: int) -> coo_matrix:
     """Columns: the force of a unit push of each pair on the nodes' free components."""
     s, t, n = pairs.s[near], pairs.t[near], pairs.normal[near]
     ends = (lay.a[pairs.i[near]], lay.b[pairs.i[near]], lay.a[pairs.j[near]], lay.b[pairs.j[near]])

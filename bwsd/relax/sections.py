@@ -11,6 +11,7 @@ height along the main axis is d (1 - FLAT f), its width d / (1 - FLAT f).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,5 +88,5 @@ def sections(chains: Chains, lay: Layout, pairs: Pairs, d: float) -> Sections:
 def default_up(chains: Chains) -> FloatArray:
     """The exports' up vector of each node (normal to the yarn), yarn by yarn."""
     bounds = np.searchsorted(chains.yarn, np.arange(int(chains.yarn.max()) + 2))
-    parts = [up_vectors(chains.pos[a:b]) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    parts = [up_vectors(chains.pos[a:b]) for a, b in itertools.pairwise(bounds)]
     return np.vstack(parts) if parts else np.zeros((0, 3))
