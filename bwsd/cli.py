@@ -1,4 +1,5 @@
-"""Command line: `bwsd simulate`, `bwsd program`, `bwsd slice`, `bwsd metrics`, `bwsd demo`."""
+"""Command line: `bwsd simulate`, `bwsd program`, `bwsd relax`, `bwsd slice`, `bwsd metrics`,
+`bwsd demo`."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bwsd.journal.cli import configure as configure_journal
     from bwsd.opcua.cli import configure as configure_opcua
     from bwsd.program.cli import configure as configure_program
+    from bwsd.relax.cli import configure as configure_relax
     from bwsd.sweep.cli import configure as configure_sweep
 
     parser = argparse.ArgumentParser(prog="bwsd", description=__doc__)
@@ -29,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     configure_token(sub)
     configure_program(sub)
     configure_export(sub)
+    configure_relax(sub)
     configure_hw(sub)
     configure_journal(sub)
     configure_sweep(sub)
