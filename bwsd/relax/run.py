@@ -8,22 +8,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bwsd.relax.solver import (
-    CAP,
-    REACH,
-    Layout,
-    Pairs,
-    caps,
-    clamp,
-    energy,
-    list_pairs,
-    measure,
-    pull,
-    separation,
-)
+from bwsd.relax import _step
+from bwsd.relax.solver import CAP, REACH, Layout, energy, list_pairs, measure
 from bwsd.relax.state import Chains
 from bwsd.twin.skeleton import FloatArray
 
+PASSES = 3  # separation passes after each tightening move
+MIN_ALPHA = 1e-6  # the smallest step size tried before phase 2 ends
 Progress = Callable[[str, int, int], None]
 Trace = Callable[[FloatArray, FloatArray, Chains], None]
 
@@ -77,9 +68,26 @@ class Solver:
         self.pairs = list_pairs(self.chains.pos, self.lay, self.d)
         self.room = np.full(len(self.chains.pos), CAP * self.d * (1 + REACH))
 
-    def worst(self, pairs: Pairs) -> float:
-        """The deepest overlap of the listed pairs (0 when none)."""
-        return max(0.0, self.d - float(pairs.dist.min())) if len(pairs.dist) else 0.0
+    def kernel(self, alpha: float, passes: int) -> tuple[FloatArray, float, float]:
+        """One compiled step from the current positions: new positions, their tension-weighted
+        length and worst overlap (``alpha`` 0 and no passes: the current ones)."""
+        pos = np.ascontiguousarray(self.chains.pos)
+        out = np.empty_like(pos)
+        energy, worst = _step.step(
+            pos,
+            out,
+            self.lay.a,
+            self.lay.b,
+            self.lay.tension,
+            self.lay.free,
+            self.pairs.i,
+            self.pairs.j,
+            self.room,
+            self.d,
+            alpha,
+            passes,
+        )
+        return out, energy, worst
 
     def move(self, new: FloatArray) -> None:
         """Take ``new`` positions (a step within every node's cap) and relist when needed."""
@@ -90,57 +98,41 @@ class Solver:
         self.chains = self.chains.with_pos(new)
         if self.room.min() < 0.5 * CAP * self.d * (1 + REACH):
             self._relist()
-        else:
-            self.pairs = measure(new, self.lay, self.pairs)
 
     def separate(self, progress: Progress | None) -> None:
         """Phase 1: push overlapping pairs apart until the worst overlap is in tolerance."""
         tol = self.options.overlap * self.d
+        worst = self.kernel(0.0, 0)[2]
         for k in range(self.options.max_separate):
-            if self.worst(self.pairs) <= tol:
+            if worst <= tol:
                 break
-            count = len(self.chains.pos)
-            step = separation(self.pairs, self.lay, self.d, count)
-            cap = caps(self.pairs, self.lay, count, self.room)
-            self.move(self.chains.pos + clamp(step, cap))
+            new, _, worst = self.kernel(0.0, 1)
+            self.move(new)
             self.figures.separate_steps = k + 1
             if progress is not None:
                 progress("separating", k + 1, self.options.max_separate)
 
-    def tighten_step(self, alpha: float) -> tuple[FloatArray, float, float]:
-        """A trial step at step size ``alpha``: new positions, their energy and worst
-        overlap."""
-        pos, count = self.chains.pos, len(self.chains.pos)
-        cap = caps(self.pairs, self.lay, count, self.room)
-        trial = pos + clamp(alpha * pull(pos, self.lay, count), cap)
-        for _ in range(3):
-            pairs = measure(trial, self.lay, self.pairs)
-            trial = trial + separation(pairs, self.lay, self.d, count)
-        trial = pos + clamp(trial - pos, cap)
-        pairs = measure(trial, self.lay, self.pairs)
-        return trial, energy(trial, self.lay), self.worst(pairs)
-
     def tighten(self, progress: Progress | None) -> None:
         """Phase 2: steps that never raise the tension-weighted length."""
         opts, alpha = self.options, 1.0
-        e = energy(self.chains.pos, self.lay)
+        _, e, worst = self.kernel(0.0, 0)
         self.figures.energies.append(e)
         for k in range(opts.max_steps):
             if k and k % opts.crimp_every == 0:
                 self.add_crimp()
-            limit = max(opts.overlap * self.d, self.worst(self.pairs))
-            trial, e_new, worst = self.tighten_step(alpha)
-            while (e_new > e or worst > limit) and alpha > 1e-6:
+            limit = max(opts.overlap * self.d, worst)
+            trial, e_new, w_new = self.kernel(alpha, PASSES)
+            while (e_new > e or w_new > limit) and alpha > MIN_ALPHA:
                 alpha /= 2
                 self.figures.rejected += 1
-                trial, e_new, worst = self.tighten_step(alpha)
-            if e_new > e or worst > limit:
+                trial, e_new, w_new = self.kernel(alpha, PASSES)
+            if e_new > e or w_new > limit:
                 break
             self.move(trial)
             self.figures.steps = k + 1
             self.figures.energies.append(e_new)
             done = e - e_new <= opts.stall * e
-            e, alpha = e_new, min(1.0, 2 * alpha)
+            e, worst, alpha = e_new, w_new, min(1.0, 2 * alpha)
             if progress is not None:
                 progress("tightening", k + 1, opts.max_steps)
             if done:
@@ -149,7 +141,8 @@ class Solver:
     def add_crimp(self) -> None:
         """A node at the closest point of each segment that touches another yarn inside it,
         far enough from its ends (``Options.spacing``): where the yarn will bend round."""
-        pairs, spacing = self.pairs, self.options.spacing * self.d
+        pairs = measure(self.chains.pos, self.lay, self.pairs)
+        spacing = self.options.spacing * self.d
         touching = pairs.dist < self.d * (1 + 0.05)
         seg_len = np.linalg.norm(self.chains.pos[self.lay.b] - self.chains.pos[self.lay.a], axis=1)
         seg = np.concatenate([pairs.i[touching], pairs.j[touching]])
@@ -188,6 +181,7 @@ def solve(
     solver.add_crimp() if d > 0 else None
     solver.tighten(progress)
     solver.figures.energy = energy(solver.chains.pos, solver.lay)
-    solver.figures.worst_overlap = solver.worst(list_pairs(solver.chains.pos, solver.lay, d))
+    solver._relist()
+    solver.figures.worst_overlap = solver.kernel(0.0, 0)[2]
     solver.figures.seconds = time.perf_counter() - start
     return solver.chains, solver.figures

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bwsd.twin.skeleton import FloatArray, SkeletonData
+from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
 
 PARALLEL = 1e-3  # |sin| of the angle between the tangents below which a side is not told
 
@@ -19,26 +19,27 @@ PARALLEL = 1e-3  # |sin| of the angle between the tangents below which a side is
 def contact_sides(sk: SkeletonData) -> tuple[FloatArray, FloatArray]:
     """Per contact: the side (+1, -1, or 0 where the yarns run parallel or X = Y) and the
     sine of the angle between the two yarns there."""
-    where: dict[int, tuple[int, int]] = {}
-    for k, yarn in enumerate(sk.yarns):
-        for i, node in enumerate(yarn.node_ids.tolist()):
-            where[node] = (k, i)
-    side = np.zeros(len(sk.contacts))
-    sine = np.zeros(len(sk.contacts))
-    for c, contact in enumerate(sk.contacts):
-        x, tx = _point(sk, where[contact.moving_node])
-        y, ty = _point(sk, where[contact.hit_node])
-        cross = np.cross(tx, ty)
-        sine[c] = float(np.linalg.norm(cross))
-        value = float(np.dot(cross, x - y))
-        side[c] = np.sign(value) if sine[c] > PARALLEL else 0.0
+    pos = np.vstack([np.asarray(y.nodes, np.float64).reshape(-1, 3) for y in sk.yarns])
+    ids = np.concatenate([np.asarray(y.node_ids, np.int64) for y in sk.yarns])
+    yarn = np.repeat(np.arange(len(sk.yarns)), [len(y.node_ids) for y in sk.yarns])
+    order = np.argsort(ids, kind="stable")
+    table = np.array([(c.moving_node, c.hit_node) for c in sk.contacts], np.int64).reshape(-1, 2)
+    at = order[np.searchsorted(ids[order], table)]
+    x, tx = pos[at[:, 0]], _tangent(pos, yarn, at[:, 0])
+    y, ty = pos[at[:, 1]], _tangent(pos, yarn, at[:, 1])
+    cross = np.cross(tx, ty)
+    sine = np.linalg.norm(cross, axis=1)
+    value = np.einsum("ij,ij->i", cross, x - y)
+    side = np.where(sine > PARALLEL, np.sign(value), 0.0)
     return side, sine
 
 
-def _point(sk: SkeletonData, at: tuple[int, int]) -> tuple[FloatArray, FloatArray]:
-    """A node and its yarn's unit tangent there (from the neighbours)."""
-    nodes = np.asarray(sk.yarns[at[0]].nodes)
-    i = at[1]
-    tangent = nodes[min(i + 1, len(nodes) - 1)] - nodes[max(i - 1, 0)]
-    size = float(np.linalg.norm(tangent))
-    return nodes[i], tangent / size if size > 0 else tangent
+def _tangent(pos: FloatArray, yarn: IntArray, at: IntArray) -> FloatArray:
+    """Unit tangent of each node ``at`` from its neighbours on its own yarn."""
+    last = len(pos) - 1
+    before = np.where((at > 0) & (yarn[np.maximum(at - 1, 0)] == yarn[at]), at - 1, at)
+    after = np.where((at < last) & (yarn[np.minimum(at + 1, last)] == yarn[at]), at + 1, at)
+    tangent = pos[after] - pos[before]
+    size = np.linalg.norm(tangent, axis=1, keepdims=True)
+    out: FloatArray = np.divide(tangent, size, out=np.zeros_like(tangent), where=size > 0)
+    return out
