@@ -74,8 +74,8 @@ def relax(
     found = sections(out, lay, pairs, sk.diameter)
     residual = residuals(out, lay, pairs, sk.diameter)
     free = out.free.any(axis=1)
-    before, _ = contact_sides(sk)
-    after, _ = contact_sides(relaxed)
+    before, _, _ = contact_sides(sk)
+    after, _, _ = contact_sides(relaxed)
     told = (before != 0) & (after != 0)
     return Relaxed(
         relaxed,

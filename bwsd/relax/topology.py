@@ -16,9 +16,9 @@ from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
 PARALLEL = 1e-3  # |sin| of the angle between the tangents below which a side is not told
 
 
-def contact_sides(sk: SkeletonData) -> tuple[FloatArray, FloatArray]:
-    """Per contact: the side (+1, -1, or 0 where the yarns run parallel or X = Y) and the
-    sine of the angle between the two yarns there."""
+def contact_sides(sk: SkeletonData) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per contact: the side (+1, -1, or 0 where the yarns run parallel or X = Y), the sine
+    of the angle between the two yarns there, and the distance |X - Y|."""
     pos = np.vstack([np.asarray(y.nodes, np.float64).reshape(-1, 3) for y in sk.yarns])
     ids = np.concatenate([np.asarray(y.node_ids, np.int64) for y in sk.yarns])
     yarn = np.repeat(np.arange(len(sk.yarns)), [len(y.node_ids) for y in sk.yarns])
@@ -31,7 +31,7 @@ def contact_sides(sk: SkeletonData) -> tuple[FloatArray, FloatArray]:
     sine = np.linalg.norm(cross, axis=1)
     value = np.einsum("ij,ij->i", cross, x - y)
     side = np.where(sine > PARALLEL, np.sign(value), 0.0)
-    return side, sine
+    return side, sine, np.linalg.norm(x - y, axis=1)
 
 
 def _tangent(pos: FloatArray, yarn: IntArray, at: IntArray) -> FloatArray:
