@@ -1,10 +1,9 @@
-"""Types of the relaxation's compiled step (bwsd/relax/csrc/step.c)."""
+"""Types of the relaxation's compiled steps (bwsd/relax/csrc/step.c)."""
 
 from typing import Any as Buffer
 
-def step(
+def steps(
     pos: Buffer,
-    out: Buffer,
     a: Buffer,
     b: Buffer,
     tension: Buffer,
@@ -12,8 +11,14 @@ def step(
     pi: Buffer,
     pj: Buffer,
     room: Buffer,
+    energies: Buffer,
     d: float,
-    alpha: float,
+    target: float,
+    limit: float,
+    stall: float,
+    relist: float,
     passes: int,
+    pull: bool,
+    alpha: float,
     /,
-) -> tuple[float, float]: ...
+) -> tuple[int, int, float, float, int, float]: ...

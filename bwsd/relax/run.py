@@ -9,12 +9,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bwsd.relax import _step
-from bwsd.relax.solver import CAP, REACH, Layout, energy, list_pairs, measure
+from bwsd.relax.solver import CAP, REACH, Layout, Pairs, energy, list_pairs, measure
 from bwsd.relax.state import Chains
 from bwsd.twin.skeleton import FloatArray
 
-PASSES = 3  # separation passes after each tightening move
-MIN_ALPHA = 1e-6  # the smallest step size tried before phase 2 ends
+PASSES = 4  # Gauss-Seidel sweeps over the pairs in a step
+SKIN = 0.5  # pairs are pushed apart to d and this share of the overlap tolerance
+RELIST = 0.5  # the pairs are listed again when a node has used this share of the reach
+TOUCHING = 1.05  # a segment touches another yarn within this share of one diameter
 Progress = Callable[[str, int, int], None]
 Trace = Callable[[FloatArray, FloatArray, Chains], None]
 
@@ -58,6 +60,7 @@ class Solver:
         self.chains, self.d, self.options, self.trace = chains, d, options, trace
         self.next_id = int(chains.ids.max()) + 1
         self.figures = Figures()
+        self.alpha = 1.0
         self._relayout()
 
     def _relayout(self) -> None:
@@ -68,93 +71,76 @@ class Solver:
         self.pairs = list_pairs(self.chains.pos, self.lay, self.d)
         self.room = np.full(len(self.chains.pos), CAP * self.d * (1 + REACH))
 
-    def kernel(self, alpha: float, passes: int) -> tuple[FloatArray, float, float]:
-        """One compiled step from the current positions: new positions, their tension-weighted
-        length and worst overlap (``alpha`` 0 and no passes: the current ones)."""
-        pos = np.ascontiguousarray(self.chains.pos)
-        out = np.empty_like(pos)
-        energy, worst = _step.step(
-            pos,
-            out,
-            self.lay.a,
-            self.lay.b,
-            self.lay.tension,
-            self.lay.free,
-            self.pairs.i,
-            self.pairs.j,
-            self.room,
-            self.d,
-            alpha,
-            passes,
-        )
-        return out, energy, worst
+    def kernel(self, most: int, pull: bool, passes: int) -> tuple[int, float, float, int]:
+        """Up to ``most`` compiled steps from the current positions (relisting the pairs
+        when their reach is used up): steps kept, energy, worst overlap and the kernel's
+        status (0 stalled or separated, 1 out of steps, 3 no step kept)."""
+        taken, energy, worst, status = 0, 0.0, 0.0, 1
+        while taken < most:
+            count = 1 if self.trace is not None else most - taken
+            pos = np.ascontiguousarray(self.chains.pos).copy()
+            old = self.chains.pos
+            energies = np.zeros(count)
+            steps, rejected, energy, worst, status, self.alpha = _step.steps(
+                pos, self.lay.a, self.lay.b, self.lay.tension, self.lay.free, self.pairs.i,
+                self.pairs.j, self.room, energies, self.d, self.d + SKIN * self.limit, self.limit, self.options.stall,
+                RELIST * CAP * self.d * (1 + REACH), passes, pull, self.alpha,
+            )  # fmt: skip
+            self.figures.rejected += rejected
+            self.figures.energies.extend(energies[:steps].tolist())
+            if steps and self.trace is not None:
+                self.trace(old, pos, self.chains)
+            self.chains = self.chains.with_pos(pos)
+            taken += steps
+            if status == 2:
+                self._relist()
+            elif status != 1 or self.trace is None:
+                break
+        return taken, energy, worst, status
 
-    def move(self, new: FloatArray) -> None:
-        """Take ``new`` positions (a step within every node's cap) and relist when needed."""
-        old = self.chains.pos
-        if self.trace is not None:
-            self.trace(old, new, self.chains)
-        self.room = self.room - np.sqrt(np.einsum("ij,ij->i", new - old, new - old))
-        self.chains = self.chains.with_pos(new)
-        if self.room.min() < 0.5 * CAP * self.d * (1 + REACH):
-            self._relist()
+    @property
+    def limit(self) -> float:
+        """The worst overlap a step may leave: the tolerance, in mm."""
+        return self.options.overlap * self.d
 
     def separate(self, progress: Progress | None) -> None:
         """Phase 1: push overlapping pairs apart until the worst overlap is in tolerance."""
-        tol = self.options.overlap * self.d
-        worst = self.kernel(0.0, 0)[2]
-        for k in range(self.options.max_separate):
-            if worst <= tol:
-                break
-            new, _, worst = self.kernel(0.0, 1)
-            self.move(new)
-            self.figures.separate_steps = k + 1
-            if progress is not None:
-                progress("separating", k + 1, self.options.max_separate)
+        taken, _, _, _ = self.kernel(self.options.max_separate, False, PASSES)
+        self.figures.separate_steps = taken
+        if progress is not None:
+            progress("separating", taken, self.options.max_separate)
 
     def tighten(self, progress: Progress | None) -> None:
-        """Phase 2: steps that never raise the tension-weighted length."""
-        opts, alpha = self.options, 1.0
-        _, e, worst = self.kernel(0.0, 0)
-        self.figures.energies.append(e)
-        for k in range(opts.max_steps):
-            if k and k % opts.crimp_every == 0:
-                self.add_crimp()
-            limit = max(opts.overlap * self.d, worst)
-            trial, e_new, w_new = self.kernel(alpha, PASSES)
-            while (e_new > e or w_new > limit) and alpha > MIN_ALPHA:
-                alpha /= 2
-                self.figures.rejected += 1
-                trial, e_new, w_new = self.kernel(alpha, PASSES)
-            if e_new > e or w_new > limit:
-                break
-            self.move(trial)
-            self.figures.steps = k + 1
-            self.figures.energies.append(e_new)
-            done = e - e_new <= opts.stall * e
-            e, worst, alpha = e_new, w_new, min(1.0, 2 * alpha)
+        """Phase 2: steps that never raise the tension-weighted length, with a round of
+        crimp nodes every ``crimp_every`` steps while nodes are added."""
+        opts, done = self.options, 0
+        while done < opts.max_steps:
+            chunk = min(opts.crimp_every, opts.max_steps - done)
+            taken, _, _, status = self.kernel(chunk, True, PASSES)
+            done += taken
+            self.figures.steps = done
             if progress is not None:
-                progress("tightening", k + 1, opts.max_steps)
-            if done:
+                progress("tightening", done, opts.max_steps)
+            added = self.add_crimp() if self.d > 0 else 0
+            if status in (0, 3) and added == 0:
                 break
 
-    def add_crimp(self) -> None:
+    def add_crimp(self) -> int:
         """A node at the closest point of each segment that touches another yarn inside it,
-        far enough from its ends (``Options.spacing``): where the yarn will bend round."""
+        far enough from its ends (``Options.spacing``): where the yarn will bend round.
+        Returns how many were added."""
         pairs = measure(self.chains.pos, self.lay, self.pairs)
         spacing = self.options.spacing * self.d
-        touching = pairs.dist < self.d * (1 + 0.05)
+        touching = pairs.dist < self.d * TOUCHING
         seg_len = np.linalg.norm(self.chains.pos[self.lay.b] - self.chains.pos[self.lay.a], axis=1)
         seg = np.concatenate([pairs.i[touching], pairs.j[touching]])
         par = np.concatenate([pairs.s[touching], pairs.t[touching]])
-        length = seg_len[seg]
-        room = np.minimum(par, 1 - par) * length
+        room = np.minimum(par, 1 - par) * seg_len[seg]
         keep = room > spacing
-        seg, par = seg[keep], par[keep]
-        seg, first = np.unique(seg, return_index=True)
+        seg, first = np.unique(seg[keep], return_index=True)
         if len(seg) == 0:
-            return
-        par = par[first]
+            return 0
+        par = par[keep][first]
         a, b = self.lay.a[seg], self.lay.b[seg]
         pos = self.chains.pos
         points = pos[a] + par[:, None] * (pos[b] - pos[a])
@@ -162,6 +148,7 @@ class Solver:
         self.next_id += len(seg)
         self.figures.added_nodes += len(seg)
         self._relayout()
+        return len(seg)
 
 
 def solve(
@@ -178,10 +165,17 @@ def solve(
     if d > 0:
         solver.separate(progress)
     solver.figures.energy_separated = energy(solver.chains.pos, solver.lay)
-    solver.add_crimp() if d > 0 else None
+    if d > 0:
+        solver.add_crimp()
     solver.tighten(progress)
     solver.figures.energy = energy(solver.chains.pos, solver.lay)
     solver._relist()
-    solver.figures.worst_overlap = solver.kernel(0.0, 0)[2]
+    solver.figures.worst_overlap = worst_overlap(solver.chains.pos, solver.lay, solver.pairs, d)
     solver.figures.seconds = time.perf_counter() - start
     return solver.chains, solver.figures
+
+
+def worst_overlap(pos: FloatArray, lay: Layout, pairs: Pairs, d: float) -> float:
+    """The deepest overlap of the listed pairs, in mm (0 when none is closer than d)."""
+    found = measure(pos, lay, pairs)
+    return float(np.maximum(d - found.dist, 0.0).max(initial=0.0))

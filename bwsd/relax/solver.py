@@ -28,7 +28,7 @@ from bwsd.relax.state import Chains
 from bwsd.twin.skeleton import FloatArray, IntArray
 
 CAP = 0.45  # a node moves at most this share of its segments' distance to other yarns a step
-REACH = 1.0  # pairs are listed within d + REACH d; nodes move at most CAP of that between lists
+REACH = 0.5  # pairs are listed within d + REACH d; nodes move at most CAP of that between lists
 
 
 @dataclass

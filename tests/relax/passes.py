@@ -37,9 +37,7 @@ def passes_through(old: FloatArray, new: FloatArray, a: IntArray, b: IntArray,
     move = np.linalg.norm(new - old, axis=1)
     seg_move = np.maximum(move[a], move[b])
     reach = 2 * float(seg_move.max(initial=0.0)) + 1e-9
-    lo = np.minimum(old[a], old[b])
-    hi = np.maximum(old[a], old[b])
-    i, j = candidates(lo, hi, yarn, reach)  # boxes of the segments at the start, grown
+    i, j = candidates(old[a], old[b], yarn, reach)  # pairs that may meet: within reach at first
     if len(i) == 0:
         return 0
     m = seg_move[i] + seg_move[j]

@@ -1,6 +1,21 @@
-/* One step of the relaxation (docs/relax.md): the same arithmetic as a loop over nodes and
- * pairs, in the fixed order of the arrays given, so the same input gives the same bytes.
- * Built with the package (setup.py), -ffp-contract=off as the twin's kernel. */
+/* The relaxation's steps (docs/relax.md, "Method"): a loop over nodes and pairs in the
+ * fixed order of the arrays given, so the same input gives the same bytes. Built with the
+ * package (setup.py), -ffp-contract=off as the twin's kernel; the interpreter lock is
+ * released while it runs.
+ *
+ * One step, from positions x0:
+ *   1. caps: each node may move at most CAP times the least distance from its segments to
+ *      the listed segments of other yarns, and no more than its room (what is left of the
+ *      pair list's reach);
+ *   2. pull (alpha > 0): Gauss-Seidel over the nodes in order, each free node moved by alpha
+ *      of the way to the minimiser of its two segments' majorised tension x length (the
+ *      point (T1 a / l1 + T2 b / l2) / (T1 / l1 + T2 / l2) on its free components);
+ *   3. push: `passes` Gauss-Seidel sweeps over the pairs in order, each overlapping pair
+ *      pushed apart to `target` (d and a skin) along its closest points' direction, the correction shared by the
+ *      four ends with weights of the closest points and inverse masses 1 / stiffness;
+ *   every node's displacement from x0 is kept within its cap after each change.
+ * A step is kept when the tension-weighted length did not rise and the worst overlap stayed
+ * within the limit; else alpha halves and the step is tried again from x0. */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
@@ -9,16 +24,24 @@
 #include <string.h>
 
 #define CAP 0.45
+#define GROW 1.25 /* alpha grows by this after a kept step */
+#define MIN_ALPHA (1.0 / 1048576.0)
 
 typedef struct {
-    const double *pos;
-    double *out;
-    const int64_t *a, *b, *pi, *pj;
-    const double *tension, *free, *room;
-    Py_ssize_t nodes, segs, pairs;
-    double d, alpha;
-    int passes;
-} Step;
+    double *pos;         /* (nodes, 3), updated in place with every kept step */
+    const int64_t *a, *b; /* segment ends */
+    const int64_t *pi, *pj; /* listed pairs of segments */
+    const double *tension, *free;
+    double *room;        /* per node, updated with every kept step */
+    double *energies;    /* the energy after each kept step */
+    Py_ssize_t nodes, segs, pairs, max_steps;
+    double d, target, limit, stall, relist;
+    int passes, pull;
+} Run;
+
+typedef struct {
+    double *x, *cap, *stiff, *inv;
+} Work;
 
 static double dot3(const double *u, const double *v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; }
 
@@ -43,146 +66,227 @@ static double closest(const double *p0, const double *p1, const double *q0, cons
     return dist;
 }
 
-static double pair_at(const Step *st, const double *x, Py_ssize_t p, double *s, double *t, double *n,
-                      int64_t *ends) {
-    ends[0] = st->a[st->pi[p]]; ends[1] = st->b[st->pi[p]];
-    ends[2] = st->a[st->pj[p]]; ends[3] = st->b[st->pj[p]];
-    return closest(x + 3 * ends[0], x + 3 * ends[1], x + 3 * ends[2], x + 3 * ends[3], s, t, n);
+static double pair_at(const Run *r, const double *x, Py_ssize_t p, double *s, double *t, double *n,
+                      int64_t *e) {
+    e[0] = r->a[r->pi[p]]; e[1] = r->b[r->pi[p]];
+    e[2] = r->a[r->pj[p]]; e[3] = r->b[r->pj[p]];
+    return closest(x + 3 * e[0], x + 3 * e[1], x + 3 * e[2], x + 3 * e[3], s, t, n);
 }
 
-static void caps(const Step *st, double *cap) {
+static double seg_len(const double *x, int64_t a, int64_t b) {
+    double s[3] = {x[3 * b] - x[3 * a], x[3 * b + 1] - x[3 * a + 1], x[3 * b + 2] - x[3 * a + 2]};
+    return sqrt(dot3(s, s));
+}
+
+static void caps(const Run *r, Work *w) {
     double s, t, n[3];
     int64_t e[4];
-    memcpy(cap, st->room, (size_t)st->nodes * sizeof(double));
-    for (Py_ssize_t p = 0; p < st->pairs; p++) {
-        double limit = CAP * pair_at(st, st->pos, p, &s, &t, n, e);
-        for (int k = 0; k < 4; k++) if (limit < cap[e[k]]) cap[e[k]] = limit;
+    memcpy(w->cap, r->room, (size_t)r->nodes * sizeof(double));
+    for (Py_ssize_t p = 0; p < r->pairs; p++) {
+        double limit = CAP * pair_at(r, r->pos, p, &s, &t, n, e);
+        for (int k = 0; k < 4; k++) if (limit < w->cap[e[k]]) w->cap[e[k]] = limit;
     }
 }
 
-static void clamp_moves(double *move, const double *cap, Py_ssize_t nodes) {
-    for (Py_ssize_t i = 0; i < nodes; i++) {
-        double len = sqrt(dot3(move + 3 * i, move + 3 * i));
-        if (len > cap[i]) for (int k = 0; k < 3; k++) move[3 * i + k] *= cap[i] / len;
+/* Node i's stiffness T1 / l1 + T2 / l2 at x0: its inverse is the node's inverse mass. */
+static void stiffness(const Run *r, Work *w) {
+    memset(w->stiff, 0, (size_t)r->nodes * sizeof(double));
+    for (Py_ssize_t q = 0; q < r->segs; q++) {
+        double len = seg_len(r->pos, r->a[q], r->b[q]);
+        double k = r->tension[q] / (len > 1e-12 ? len : 1e-12);
+        w->stiff[r->a[q]] += k; w->stiff[r->b[q]] += k;
+    }
+    for (Py_ssize_t i = 0; i < r->nodes; i++) w->inv[i] = w->stiff[i] > 0.0 ? 1.0 / w->stiff[i] : 0.0;
+}
+
+/* Keep node i within its cap of x0. */
+static void keep(const Run *r, Work *w, int64_t i) {
+    double m[3];
+    for (int k = 0; k < 3; k++) m[k] = w->x[3 * i + k] - r->pos[3 * i + k];
+    double len = sqrt(dot3(m, m));
+    if (len > w->cap[i])
+        for (int k = 0; k < 3; k++) w->x[3 * i + k] = r->pos[3 * i + k] + m[k] * (w->cap[i] / len);
+}
+
+/* Gauss-Seidel over the nodes; prev[i] and next[i] are node i's segments (-1: none). */
+static void pull(const Run *r, Work *w, const int64_t *prev, const int64_t *next, double alpha) {
+    for (Py_ssize_t i = 0; i < r->nodes; i++) {
+        double num[3] = {0.0, 0.0, 0.0}, den = 0.0;
+        const double *xi = w->x + 3 * i;
+        if (prev[i] >= 0) {
+            int64_t q = prev[i], o = r->a[q];
+            double len = seg_len(w->x, o, i), k = r->tension[q] / (len > 1e-12 ? len : 1e-12);
+            for (int c = 0; c < 3; c++) num[c] += k * w->x[3 * o + c];
+            den += k;
+        }
+        if (next[i] >= 0) {
+            int64_t q = next[i], o = r->b[q];
+            double len = seg_len(w->x, i, o), k = r->tension[q] / (len > 1e-12 ? len : 1e-12);
+            for (int c = 0; c < 3; c++) num[c] += k * w->x[3 * o + c];
+            den += k;
+        }
+        if (den <= 0.0) continue;
+        for (int c = 0; c < 3; c++) {
+            double target = num[c] / den;
+            w->x[3 * i + c] = xi[c] + alpha * (target - xi[c]) * r->free[3 * i + c];
+        }
+        keep(r, w, i);
     }
 }
 
-static void pull(const Step *st, const double *x, double *move, double *stiff) {
-    memset(move, 0, (size_t)st->nodes * 3 * sizeof(double));
-    memset(stiff, 0, (size_t)st->nodes * sizeof(double));
-    for (Py_ssize_t q = 0; q < st->segs; q++) {
-        const double *pa = x + 3 * st->a[q], *pb = x + 3 * st->b[q];
-        double seg[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-        double len = sqrt(dot3(seg, seg));
-        if (len < 1e-12) len = 1e-12;
-        double k = st->tension[q] / len;
-        for (int c = 0; c < 3; c++) { move[3 * st->a[q] + c] += k * seg[c]; move[3 * st->b[q] + c] -= k * seg[c]; }
-        stiff[st->a[q]] += k; stiff[st->b[q]] += k;
-    }
-    for (Py_ssize_t i = 0; i < st->nodes; i++)
-        for (int c = 0; c < 3; c++)
-            move[3 * i + c] = stiff[i] > 0 ? st->alpha * move[3 * i + c] / stiff[i] * st->free[3 * i + c] : 0.0;
-}
-
-/* Push every overlapping pair apart (position-based, averaged over each node's pairs). */
-static void separate(const Step *st, double *x, double *acc, double *hits) {
-    double s, t, n[3];
+/* One Gauss-Seidel sweep over the pairs; returns the worst overlap met. */
+static double push(const Run *r, Work *w) {
+    double s, t, n[3], worst = 0.0;
     int64_t e[4];
-    memset(acc, 0, (size_t)st->nodes * 3 * sizeof(double));
-    memset(hits, 0, (size_t)st->nodes * sizeof(double));
-    for (Py_ssize_t p = 0; p < st->pairs; p++) {
-        double dist = pair_at(st, x, p, &s, &t, n, e);
-        if (!(dist < st->d)) continue;
-        double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+    for (Py_ssize_t p = 0; p < r->pairs; p++) {
+        double dist = pair_at(r, w->x, p, &s, &t, n, e);
+        if (!(dist < r->d)) continue; /* only overlaps are pushed, to the skin beyond d */
+        if (r->d - dist > worst) worst = r->d - dist;
+        double wt[4] = {1.0 - s, s, -(1.0 - t), -t};
         for (int c = 0; c < 3; c++) {
             double denom = 0.0;
-            for (int k = 0; k < 4; k++) denom += w[k] * w[k] * st->free[3 * e[k] + c];
+            for (int k = 0; k < 4; k++) denom += wt[k] * wt[k] * w->inv[e[k]] * r->free[3 * e[k] + c];
             if (denom <= 0.0) continue;
-            double lam = (st->d - dist) * n[c] / denom;
-            for (int k = 0; k < 4; k++) acc[3 * e[k] + c] += w[k] * st->free[3 * e[k] + c] * lam;
+            double lam = (r->target - dist) * n[c] / denom;
+            for (int k = 0; k < 4; k++) w->x[3 * e[k] + c] += wt[k] * w->inv[e[k]] * r->free[3 * e[k] + c] * lam;
         }
-        for (int k = 0; k < 4; k++) if (w[k] != 0.0) hits[e[k]] += 1.0;
+        for (int k = 0; k < 4; k++) keep(r, w, e[k]);
     }
-    for (Py_ssize_t i = 0; i < st->nodes; i++) {
-        double h = hits[i] > 1.0 ? hits[i] : 1.0;
-        for (int c = 0; c < 3; c++) x[3 * i + c] += acc[3 * i + c] / h;
-    }
+    return worst;
 }
 
-static void measure(const Step *st, double *energy, double *worst) {
+static void measure(const Run *r, const double *x, double *energy, double *worst) {
     double s, t, n[3], e_sum = 0.0, w_max = 0.0;
     int64_t e[4];
-    for (Py_ssize_t q = 0; q < st->segs; q++) {
-        const double *pa = st->out + 3 * st->a[q], *pb = st->out + 3 * st->b[q];
-        double seg[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-        e_sum += st->tension[q] * sqrt(dot3(seg, seg));
-    }
-    for (Py_ssize_t p = 0; p < st->pairs; p++) {
-        double over = st->d - pair_at(st, st->out, p, &s, &t, n, e);
+    for (Py_ssize_t q = 0; q < r->segs; q++) e_sum += r->tension[q] * seg_len(x, r->a[q], r->b[q]);
+    for (Py_ssize_t p = 0; p < r->pairs; p++) {
+        double over = r->d - pair_at(r, x, p, &s, &t, n, e);
         if (over > w_max) w_max = over;
     }
     *energy = e_sum; *worst = w_max;
 }
 
-static int run(const Step *st, double *energy, double *worst) {
-    size_t n3 = (size_t)st->nodes * 3;
-    double *cap = malloc((size_t)st->nodes * sizeof(double)), *hits = malloc((size_t)st->nodes * sizeof(double));
-    double *move = malloc(n3 * sizeof(double)), *acc = malloc(n3 * sizeof(double));
-    if (!cap || !hits || !move || !acc) { free(cap); free(hits); free(move); free(acc); return -1; }
-    caps(st, cap);
-    memcpy(st->out, st->pos, n3 * sizeof(double));
-    if (st->alpha > 0.0) {
-        pull(st, st->pos, move, hits);
-        clamp_moves(move, cap, st->nodes);
-        for (size_t i = 0; i < n3; i++) st->out[i] += move[i];
+static void try_step(const Run *r, Work *w, const int64_t *prev, const int64_t *next, double alpha) {
+    memcpy(w->x, r->pos, (size_t)r->nodes * 3 * sizeof(double));
+    if (alpha > 0.0) pull(r, w, prev, next, alpha);
+    for (int k = 0; k < r->passes; k++) if (push(r, w) == 0.0) break;
+}
+
+static void take(Run *r, Work *w) {
+    for (Py_ssize_t i = 0; i < r->nodes; i++) {
+        double m[3];
+        for (int k = 0; k < 3; k++) m[k] = w->x[3 * i + k] - r->pos[3 * i + k];
+        r->room[i] -= sqrt(dot3(m, m));
     }
-    for (int k = 0; k < st->passes; k++) separate(st, st->out, acc, hits);
-    for (size_t i = 0; i < n3; i++) move[i] = st->out[i] - st->pos[i];
-    clamp_moves(move, cap, st->nodes);
-    for (size_t i = 0; i < n3; i++) st->out[i] = st->pos[i] + move[i];
-    measure(st, energy, worst);
-    free(cap); free(hits); free(move); free(acc);
-    return 0;
+    memcpy(r->pos, w->x, (size_t)r->nodes * 3 * sizeof(double));
+}
+
+static double least(const double *v, Py_ssize_t n) {
+    double m = INFINITY;
+    for (Py_ssize_t i = 0; i < n; i++) if (v[i] < m) m = v[i];
+    return m;
+}
+
+/* Status: 0 stalled (converged), 1 out of steps, 2 relist needed, 3 no step was kept. */
+typedef struct { Py_ssize_t steps, rejected; double energy, worst, alpha; int status; } Outcome;
+
+static void run(Run *r, Work *w, const int64_t *prev, const int64_t *next, Outcome *o) {
+    double e0, w0, e1, w1;
+    measure(r, r->pos, &e0, &w0);
+    o->status = 1;
+    while (o->steps < r->max_steps) {
+        if (least(r->room, r->nodes) < r->relist) { o->status = 2; break; }
+        stiffness(r, w);
+        caps(r, w);
+        double limit = w0 > r->limit ? w0 : r->limit;
+        for (;;) {
+            try_step(r, w, prev, next, r->pull ? o->alpha : 0.0);
+            measure(r, w->x, &e1, &w1);
+            if (!r->pull || (e1 <= e0 && w1 <= limit) || o->alpha <= MIN_ALPHA) break;
+            o->alpha *= 0.5;
+            o->rejected++;
+        }
+        if (r->pull && (e1 > e0 || w1 > limit)) { o->status = 3; break; }
+        take(r, w);
+        r->energies[o->steps++] = e1;
+        double drop = e0 - e1;
+        e0 = e1; w0 = w1;
+        if (r->pull) {
+            o->alpha = o->alpha * GROW < 1.0 ? o->alpha * GROW : 1.0;
+            if (drop <= r->stall * e1) { o->status = 0; break; }
+        } else if (w1 <= r->limit) { o->status = 0; break; }
+    }
+    o->energy = e0; o->worst = w0;
 }
 
 static int check(Py_buffer *buf, Py_ssize_t items, size_t size, const char *what) {
     if (buf->len != items * (Py_ssize_t)size) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd items", what, items);
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd items of %zu bytes", what, items, size);
         return -1;
     }
     return 0;
 }
 
-static PyObject *py_step(PyObject *self, PyObject *args) {
-    (void)self;
-    Py_buffer pos, out, a, b, tension, freeb, pi, pj, room;
-    double d, alpha, energy = 0.0, worst = 0.0;
-    int passes, rc = -1;
-    if (!PyArg_ParseTuple(args, "y*w*y*y*y*y*y*y*y*ddi", &pos, &out, &a, &b, &tension, &freeb,
-                          &pi, &pj, &room, &d, &alpha, &passes))
-        return NULL;
-    Step st = {pos.buf, out.buf, a.buf, b.buf, pi.buf, pj.buf, tension.buf, freeb.buf, room.buf,
-               pos.len / 24, a.len / 8, pi.len / 8, d, alpha, passes};
-    if (check(&out, st.nodes * 3, 8, "out") == 0 && check(&b, st.segs, 8, "b") == 0 &&
-        check(&tension, st.segs, 8, "tension") == 0 && check(&freeb, st.nodes * 3, 8, "free") == 0 &&
-        check(&pj, st.pairs, 8, "pj") == 0 && check(&room, st.nodes, 8, "room") == 0) {
-        Py_BEGIN_ALLOW_THREADS
-        rc = run(&st, &energy, &worst);
-        Py_END_ALLOW_THREADS
-        if (rc != 0) PyErr_NoMemory();
+static int neighbours(const Run *r, int64_t *prev, int64_t *next) {
+    for (Py_ssize_t i = 0; i < r->nodes; i++) { prev[i] = -1; next[i] = -1; }
+    for (Py_ssize_t q = 0; q < r->segs; q++) {
+        if (r->a[q] < 0 || r->a[q] >= r->nodes || r->b[q] < 0 || r->b[q] >= r->nodes) return -1;
+        next[r->a[q]] = q; prev[r->b[q]] = q;
     }
-    PyBuffer_Release(&pos); PyBuffer_Release(&out); PyBuffer_Release(&a); PyBuffer_Release(&b);
-    PyBuffer_Release(&tension); PyBuffer_Release(&freeb); PyBuffer_Release(&pi);
-    PyBuffer_Release(&pj); PyBuffer_Release(&room);
+    for (Py_ssize_t p = 0; p < r->pairs; p++)
+        if (r->pi[p] < 0 || r->pi[p] >= r->segs || r->pj[p] < 0 || r->pj[p] >= r->segs) return -1;
+    return 0;
+}
+
+static int execute(Run *r, Outcome *o) {
+    size_t n = (size_t)r->nodes;
+    Work w = {malloc(3 * n * sizeof(double) + 1), malloc(n * sizeof(double) + 1),
+              malloc(n * sizeof(double) + 1), malloc(n * sizeof(double) + 1)};
+    int64_t *prev = malloc(n * sizeof(int64_t) + 1), *next = malloc(n * sizeof(int64_t) + 1);
+    int rc = -1;
+    if (w.x && w.cap && w.stiff && w.inv && prev && next) {
+        rc = neighbours(r, prev, next) ? -2 : 0;
+        if (rc == 0) run(r, &w, prev, next, o);
+    }
+    free(w.x); free(w.cap); free(w.stiff); free(w.inv); free(prev); free(next);
+    return rc;
+}
+
+static PyObject *py_steps(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer pos, a, b, tension, freeb, pi, pj, room, energies;
+    Run r;
+    Outcome o = {0, 0, 0.0, 0.0, 1.0, 1};
+    int rc = -1;
+    if (!PyArg_ParseTuple(args, "w*y*y*y*y*y*y*w*w*dddddipd", &pos, &a, &b, &tension, &freeb, &pi,
+                          &pj, &room, &energies, &r.d, &r.target, &r.limit, &r.stall, &r.relist, &r.passes,
+                          &r.pull, &o.alpha))
+        return NULL;
+    r.pos = pos.buf; r.a = a.buf; r.b = b.buf; r.pi = pi.buf; r.pj = pj.buf;
+    r.tension = tension.buf; r.free = freeb.buf; r.room = room.buf; r.energies = energies.buf;
+    r.nodes = pos.len / 24; r.segs = a.len / 8; r.pairs = pi.len / 8; r.max_steps = energies.len / 8;
+    if (check(&pos, r.nodes * 3, 8, "pos") == 0 && check(&b, r.segs, 8, "b") == 0 &&
+        check(&tension, r.segs, 8, "tension") == 0 && check(&freeb, r.nodes * 3, 8, "free") == 0 &&
+        check(&pj, r.pairs, 8, "pj") == 0 && check(&room, r.nodes, 8, "room") == 0) {
+        Py_BEGIN_ALLOW_THREADS
+        rc = execute(&r, &o);
+        Py_END_ALLOW_THREADS
+        if (rc == -1) PyErr_NoMemory();
+        else if (rc == -2) PyErr_SetString(PyExc_ValueError, "an index is out of range");
+    }
+    PyBuffer_Release(&pos); PyBuffer_Release(&a); PyBuffer_Release(&b); PyBuffer_Release(&tension);
+    PyBuffer_Release(&freeb); PyBuffer_Release(&pi); PyBuffer_Release(&pj); PyBuffer_Release(&room);
+    PyBuffer_Release(&energies);
     if (rc != 0) return NULL;
-    return Py_BuildValue("dd", energy, worst);
+    return Py_BuildValue("nnddid", o.steps, o.rejected, o.energy, o.worst, o.status, o.alpha);
 }
 
 static PyMethodDef methods[] = {
-    {"step", py_step, METH_VARARGS,
-     "step(pos, out, a, b, tension, free, pi, pj, room, d, alpha, passes) -> (energy, worst)"},
+    {"steps", py_steps, METH_VARARGS,
+     "steps(pos, a, b, tension, free, pi, pj, room, energies, d, target, limit, stall, relist, passes,"
+     " pull, alpha) -> (steps, rejected, energy, worst, status, alpha)"},
     {NULL, NULL, 0, NULL}};
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_step", "One relaxation step.", -1, methods};
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_step", "The relaxation's steps.", -1, methods};
 
 PyMODINIT_FUNC PyInit__step(void) { return PyModule_Create(&module); }
