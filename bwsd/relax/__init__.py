@@ -21,6 +21,8 @@ from bwsd.twin.skeleton import FloatArray, SkeletonData
 
 __all__ = ["Options", "Relaxed", "crimp", "relax"]
 
+APART = 2.0  # a contact whose yarns end farther apart (in d) has been undone: its side is not told
+
 
 @dataclass(frozen=True)
 class Relaxed:
@@ -75,8 +77,8 @@ def relax(
     residual = residuals(out, lay, pairs, sk.diameter)
     free = out.free.any(axis=1)
     before, _, _ = contact_sides(sk)
-    after, _, _ = contact_sides(relaxed)
-    told = (before != 0) & (after != 0)
+    after, _, apart = contact_sides(relaxed)
+    told = (before != 0) & (after != 0) & (apart < APART * sk.diameter)
     return Relaxed(
         relaxed,
         _per_yarn(out, found),

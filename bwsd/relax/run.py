@@ -83,8 +83,9 @@ class Solver:
             energies = np.zeros(count)
             steps, rejected, energy, worst, status, self.alpha = _step.steps(
                 pos, self.lay.a, self.lay.b, self.lay.tension, self.lay.free, self.pairs.i,
-                self.pairs.j, self.room, energies, self.d, self.d + SKIN * self.limit, self.limit, self.options.stall,
-                RELIST * CAP * self.d * (1 + REACH), passes, pull, self.alpha,
+                self.pairs.j, self.room, energies, self.d, self.d + SKIN * self.limit,
+                self.limit, self.options.stall, RELIST * CAP * self.d * (1 + REACH), passes,
+                pull, self.alpha,
             )  # fmt: skip
             self.figures.rejected += rejected
             self.figures.energies.extend(energies[:steps].tolist())

@@ -62,8 +62,11 @@ def _window(key: FloatArray, a: IntArray, node: IntArray, reach: float
     return lo, np.maximum(hi - lo, 0)
 
 
-def _crossings(pos: FloatArray, a: IntArray, moving: tuple[IntArray, IntArray],
-               hit: tuple[IntArray, IntArray]) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
+Window = tuple[IntArray, IntArray]
+
+
+def _crossings(pos: FloatArray, a: IntArray, moving: Window, hit: Window
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
     """Side, sine and distance of the closest pair of segments of each contact's windows."""
     (fm, cm), (fh, ch) = moving, hit
     total = cm * ch
