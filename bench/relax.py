@@ -92,8 +92,8 @@ def _mean(values: list[dict[str, Any]] | None, key: str) -> float | None:
     return float(statistics.mean(v[key] for v in values)) if values else None
 
 
-def _fmt(value: float | None, scale: float = 1.0, digits: int = 1) -> str:
-    return "-" if value is None else f"{value * scale:.{digits}f}"
+def _fmt(value: float | None, scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+    return "-" if value is None else f"{value * scale:.{digits}f}{unit}"
 
 
 def metrics_rows(stem: str, folder: Path | None) -> list[str]:
@@ -110,10 +110,10 @@ def metrics_rows(stem: str, folder: Path | None) -> list[str]:
         c = crimp(skel)
         out.append(
             f"| {stem} | {label} | {_fmt(angle)} | "
-            f"{_fmt(m['interpenetration']['skeleton']['all']['share'], 100)} % | "
-            f"{_fmt(_mean(m['volume_fraction'], 'fraction'), 100, 2)} % | "
+            f"{_fmt(m['interpenetration']['skeleton']['all']['share'], 100, 1, ' %')} | "
+            f"{_fmt(_mean(m['volume_fraction'], 'fraction'), 100, 2, ' %')} | "
             f"{_fmt(sec.get('width'))} | {_fmt(sec.get('thickness'))} | "
-            f"{_fmt(c['mean'], 100, 2) if c['mean'] is not None else '-'} |"
+            f"{_fmt(c['mean'], 100, 2, ' %')} |"
         )
         if folder is not None:
             zone = contact_zone(sk)

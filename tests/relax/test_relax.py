@@ -7,6 +7,7 @@ import itertools
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -240,3 +241,27 @@ def test_a_centreline_only_model_is_pulled_straight() -> None:
     sk = replace(twisted(1, 0), diameter=0.0)
     relaxed = relax(sk, Options(max_steps=4000))
     assert relaxed.figures.energy == pytest.approx(straight_length(sk), rel=1e-4)
+
+
+# --- Deliverable: sections from contacts, to TexGen and back ---------------------------
+
+
+def test_sections_are_flattened_and_read_back_from_texgen(tmp_path: Path) -> None:
+    """Pressed nodes flatten (area kept: width x height = d^2), and the .tg3 gives back each
+    node's ellipse and up vector."""
+    pytest.importorskip("pytexgen")
+    from bwsd.export.texgen import read_tg3_sections, write_tg3
+
+    relaxed = relaxed_of("twist")
+    d = relaxed.skeleton.diameter
+    table = np.vstack(relaxed.sections)
+    assert np.allclose(table[:, 0] * table[:, 1], d * d)
+    assert (table[:, 1] < 0.99 * d).any()
+    assert np.allclose(np.linalg.norm(table[:, 2:], axis=1), 1.0)
+    path = tmp_path / "relaxed.tg3"
+    write_tg3(relaxed.skeleton, path, sections=relaxed.sections)
+    back = read_tg3_sections(path)
+    for mine, theirs in zip(relaxed.sections, back, strict=True):
+        assert theirs.shape == mine.shape
+        assert np.allclose(theirs[:, :2], mine[:, :2], rtol=1e-6)
+        assert np.allclose(theirs[:, 2:], mine[:, 2:], atol=1e-6)
