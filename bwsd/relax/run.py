@@ -48,7 +48,7 @@ class Figures:
     energy: float = 0.0
     worst_overlap: float = 0.0
     seconds: float = 0.0
-    energies: list[float] = field(default_factory=list)
+    energies: list[float] = field(default_factory=list)  # after each tightening step
 
 
 class Solver:
@@ -88,7 +88,8 @@ class Solver:
                 pull, self.alpha,
             )  # fmt: skip
             self.figures.rejected += rejected
-            self.figures.energies.extend(energies[:steps].tolist())
+            if pull:  # the separation may raise it; the tightening never does
+                self.figures.energies.extend(energies[:steps].tolist())
             if steps and self.trace is not None:
                 self.trace(old, pos, self.chains)
             self.chains = self.chains.with_pos(pos)
