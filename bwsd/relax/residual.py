@@ -19,6 +19,9 @@ from bwsd.relax.solver import Layout, Pairs, forces
 from bwsd.relax.state import Chains
 from bwsd.twin.skeleton import FloatArray, IntArray
 
+MAX_ITER = 10  # iterations of the bounded least squares (each of at most LSMR_ITER inner ones);
+LSMR_ITER = 200  # any forces >= 0 where it stops give an upper bound of the residual
+
 
 def residuals(chains: Chains, lay: Layout, pairs: Pairs, d: float) -> FloatArray:
     """Per node: the unbalanced force over its yarn's tension (0 on fixed components)."""
@@ -34,7 +37,8 @@ def residuals(chains: Chains, lay: Layout, pairs: Pairs, d: float) -> FloatArray
             method="trf",
             lsmr_tol="auto",
             tol=1e-12,
-            max_iter=400,
+            max_iter=MAX_ITER,
+            lsmr_maxiter=LSMR_ITER,
         )
         pull = pull + push @ found.x
     left = np.linalg.norm(pull.reshape(-1, 3), axis=1)
