@@ -1,4 +1,5 @@
-"""Builds the twin's compiled kernel (bwsd/twin/csrc) with the package: `pip install .`.
+"""Builds the compiled kernels with the package (`pip install .`): the twin's (bwsd/twin/csrc)
+and the relaxation's step (bwsd/relax/csrc).
 
 Everything else about the package is in pyproject.toml. The kernel is C11 with GNU
 extensions (128-bit integers), built with floating-point contraction off: a fused
@@ -62,7 +63,12 @@ setup(
             sources=SOURCES,
             depends=sorted(str(p) for p in Path("bwsd/twin/csrc").glob("*.h")),
             extra_compile_args=FLAGS,
-        )
+        ),
+        Extension(
+            "bwsd.relax._step",
+            sources=["bwsd/relax/csrc/step.c"],
+            extra_compile_args=FLAGS,
+        ),
     ],
     cmdclass={"build_ext": BuildKernel},
 )

@@ -89,7 +89,11 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "weft_axes": Names(WEFT_AXES, WEFT_AXES),
         "weft_fixed": Point(),
     },
-    "yarn": {"diameter": Num(float, 0.0, 1e3, 0.0)},
+    "yarn": {
+        "diameter": Num(float, 0.0, 1e3, 0.0),
+        "tension": Num(float, 1e-6, 1e6, 1.0),  # N, warps (the relaxation: only ratios matter)
+        "weft_tension": Num(float, 1e-6, 1e6, 1.0),  # N, wefts
+    },
     "fieldbus": {
         "backend": Text("modbus", ("modbus", "canopen")),
         "timeout": Num(float, 1e-3, 3600.0, 5.0),

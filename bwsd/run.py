@@ -32,6 +32,11 @@ def configure(sub: Any) -> None:
         default=[],
         help="write FILE.tg3 (TexGen), FILE.vtp (ParaView) or FILE.json; repeatable",
     )
+    p.add_argument(
+        "--relax",
+        action="store_true",
+        help="write the relaxed preform (docs/relax.md) to --skeleton and --export",
+    )
     p.set_defaults(handler=_simulate_cmd)
 
 
@@ -131,10 +136,18 @@ def _percentiles(seconds: list[float]) -> dict[str, float]:
     }
 
 
-def _write_exports(twin: Twin, skeleton: str | None, exports: list[str]) -> None:
+def _write_exports(
+    twin: Twin, skeleton: str | None, exports: list[str], relaxed: Any = None
+) -> None:
     from bwsd.export import export
     from bwsd.export.skeleton_json import write_skeleton_json
 
+    if relaxed is not None:
+        from bwsd.relax.document import write_relaxed
+
+        for path in ([skeleton] if skeleton else []) + exports:
+            write_relaxed(relaxed, path)
+        return
     sk = twin.skeleton()
     for path in ([skeleton] if skeleton else []) + exports:
         Path(path).parent.mkdir(parents=True, exist_ok=True)  # out/x.json makes out/
@@ -150,15 +163,26 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
     with _progress(sys.stderr.isatty() and not args.json) as progress:
         _, program, twin = load_and_simulate(args.program, args.config, progress, timings)
     seconds = time.perf_counter() - start
-    _write_exports(twin, args.skeleton, args.export)
+    relaxed = None
+    if args.relax:
+        from bwsd.relax.cli import relax_skeleton
+
+        relaxed = relax_skeleton(twin.skeleton(), args.config, not args.json)
+    _write_exports(twin, args.skeleton, args.export, relaxed)
     loose = loose_wefts(twin, program)
     _warn_loose(loose, args.program)
     summary = _summary(twin, seconds, timings, loose)
+    if relaxed is not None:
+        summary["relaxed"] = relaxed.summary()
     if args.json:
         print(json.dumps(summary, allow_nan=False))  # never NaN or Infinity
     else:
         ms = summary.pop("predict_ms")
         summary.pop("loose_wefts")
+        if relaxed is not None:
+            from bwsd.relax.cli import summary_line
+
+            print("relaxed: " + summary_line(summary.pop("relaxed")))
         print(", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "
               f"{ms['p50']} p99 {ms['p99']} max {ms['max']}")  # fmt: skip
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from bwsd.export.mixing import NamedSection
@@ -57,6 +57,11 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="measure the footprint at this height in the preform frame (mm)",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    p.add_argument(
+        "--relaxed",
+        action="store_true",
+        help="measure the relaxed preform (docs/relax.md) instead of the twin's",
+    )
     p.set_defaults(handler=run_metrics)
 
 
@@ -124,16 +129,20 @@ def run_metrics(args: argparse.Namespace) -> int:
     named = named or _header_section(args.program)
     cycle = args.cycle_length if args.cycle_length is not None else program.cycle_length
     takeups = takeups_of(program)
+    visits = None
     if named is None:
         with refused_at_line(program, args.program):
             sk = simulate(machine, program).skeleton()
-        result = metrics(sk, cycle, takeups=takeups, z=args.z)
     else:
         check_fits(named.section, machine)
         with refused_at_line(program, args.program):
             twin, visits = simulate_with_visits(machine, program, named.section)
-        result = metrics(twin.skeleton(), cycle, takeups=takeups, z=args.z, named=named,
-                         visits=visits)  # fmt: skip
+        sk = twin.skeleton()
+    extra: dict[str, Any] = {}
+    if args.relaxed:
+        sk, extra = _relaxed(sk, args.config, not args.json)
+    result = metrics(sk, cycle, takeups=takeups, z=args.z, named=named, visits=visits)
+    result.update(extra)
     if args.json:
         print(json.dumps(result, indent=2, allow_nan=False))  # never NaN or Infinity
     else:
@@ -143,6 +152,15 @@ def run_metrics(args: argparse.Namespace) -> int:
 
         print_metrics(result, Console())
     return 0
+
+
+def _relaxed(sk: SkeletonData, config: str, show: bool) -> tuple[SkeletonData, dict[str, Any]]:
+    """The relaxed skeleton, and the metrics it adds: weft crimp and the solver's figures."""
+    from bwsd.relax import crimp
+    from bwsd.relax.cli import relax_skeleton
+
+    relaxed = relax_skeleton(sk, config, show)
+    return relaxed.skeleton, {"crimp": crimp(relaxed.skeleton), "relaxed": relaxed.summary()}
 
 
 def _header_section(program: str) -> NamedSection | None:

@@ -44,6 +44,31 @@ def print_metrics(result: dict[str, Any], console: Console) -> None:
         console.print(_mixing_table(result["mixing"], result["section_spec"]))
     if result["footprint"] is not None:
         console.print(_footprint_table(result["footprint"]))
+    if "relaxed" in result:
+        console.print(_relaxed_table(result["relaxed"], result["crimp"]))
+
+
+def _relaxed_table(relaxed: dict[str, Any], crimp: dict[str, Any]) -> Table:
+    table = Table(title="Relaxation (docs/relax.md)", show_header=False)
+    length = relaxed["tension_length"]
+    table.add_row("steps", f"{relaxed['separate_steps']} separating, {relaxed['steps']} tightening")
+    table.add_row("nodes added", str(relaxed["added_nodes"]))
+    table.add_row(
+        "tension x length",
+        f"{length['twin']:.6g} (twin), {length['separated']:.6g} "
+        f"(separated), {length['relaxed']:.6g} (relaxed)",
+    )
+    table.add_row("worst overlap", _number(relaxed["worst_overlap"], " mm"))
+    table.add_row("force residual", f"{relaxed['force_residual']:.3g} of the tension")
+    table.add_row("contact sides kept", f"{relaxed['sides']['kept']} of {relaxed['sides']['told']}")
+    table.add_row(
+        "weft crimp",
+        "n/a"
+        if crimp["mean"] is None
+        else f"mean {100 * crimp['mean']:.2f} %, max {100 * crimp['max']:.2f} %",
+    )
+    table.add_row("seconds", f"{relaxed['seconds']:.3f}")
+    return table
 
 
 def _section_table(section: dict[str, Any] | None) -> Table:

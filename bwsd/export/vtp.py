@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -33,7 +34,7 @@ from bwsd.export.layout import (
     point_arrays,
     require_yarns,
 )
-from bwsd.twin.skeleton import IntArray, SkeletonData
+from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
 
 A = TypeVar("A", bound=vtkDataArray)
 
@@ -75,8 +76,12 @@ def _cell_arrays(sk: SkeletonData, codes: dict[str, int], info: IntArray) -> dic
     }
 
 
-def skeleton_polydata(sk: SkeletonData) -> vtkPolyData:
-    """The skeleton as a ``vtkPolyData``: points, lines, point data and cell data."""
+def skeleton_polydata(
+    sk: SkeletonData, sections: Sequence[FloatArray] | None = None
+) -> vtkPolyData:
+    """The skeleton as a ``vtkPolyData``: points, lines, point data and cell data; with
+    ``sections`` (per yarn, (nodes, 5): width, height, up vector) the point arrays
+    ``section_width``, ``section_height`` and ``section_up`` too."""
     require_yarns(sk)
     codes = family_codes(sk)
     links, info = contact_links(sk, codes)
@@ -89,6 +94,14 @@ def skeleton_polydata(sk: SkeletonData) -> vtkPolyData:
         poly.GetPointData().AddArray(fill(vtkTypeInt64Array(), values, name))
     for name, values in _cell_arrays(sk, codes, info).items():
         poly.GetCellData().AddArray(fill(vtkTypeInt64Array(), values, name))
+    if sections is not None:
+        table = np.vstack([np.asarray(t, dtype=np.float64).reshape(-1, 5) for t in sections])
+        for name, values in (
+            ("section_width", table[:, 0]),
+            ("section_height", table[:, 1]),
+            ("section_up", table[:, 2:5]),
+        ):
+            poly.GetPointData().AddArray(fill(vtkDoubleArray(), np.ascontiguousarray(values), name))
     return poly
 
 
@@ -122,10 +135,12 @@ def write_file(target: Path, data: bytes) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def write_vtp(sk: SkeletonData, path: str | Path) -> None:
-    """Write ``skeleton_polydata(sk)`` as a VTK XML PolyData file (.vtp).
+def write_vtp(
+    sk: SkeletonData, path: str | Path, sections: Sequence[FloatArray] | None = None
+) -> None:
+    """Write ``skeleton_polydata(sk, sections)`` as a VTK XML PolyData file (.vtp).
 
     The file is written next to ``path`` and renamed into place, so a failed write
     leaves any previous file untouched.
     """
-    write_file(Path(path), polydata_xml(skeleton_polydata(sk)))
+    write_file(Path(path), polydata_xml(skeleton_polydata(sk, sections)))
