@@ -31,7 +31,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "opcua": ("bwsd.opcua.cli", "the OPC UA server's certificate"),
     "simulate": ("bwsd.run", "run a program through the twin"),
     "program": ("bwsd.program.cli", "print a generated .bws program"),
-    "relax": ("bwsd.relax.cli", "the tight preform: the skeleton relaxed under yarn tension"),
+    "relax": (
+        "bwsd.relax.cli",
+        "the tight preform: the twin's skeleton relaxed under yarn tension, without "
+        "interpenetration, its topology kept",
+    ),
     "slice": ("bwsd.export.cli", "draw the preform's cross-section at one height"),
     "metrics": ("bwsd.export.cli", "formed zone: yarn angles, volume fraction, contacts, section"),
     "sweep": (

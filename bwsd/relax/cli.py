@@ -9,10 +9,11 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from bwsd.relax import Options, Relaxed, relax
-from bwsd.twin.skeleton import SkeletonData
+if TYPE_CHECKING:  # the parser imports nothing heavy: the handlers import what they need
+    from bwsd.relax import Options, Relaxed
+    from bwsd.twin.skeleton import SkeletonData
 
 QUIET_SECONDS = 2.0  # progress shows on a terminal once a run has taken this long
 
@@ -42,6 +43,7 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def options_of(config: str) -> Options:
     """The relaxation's options from a config's ``[yarn]`` tensions."""
     from bwsd.config import load_config
+    from bwsd.relax import Options
 
     yarn = load_config(config).table("yarn")
     return Options(warp_tension=yarn["tension"], weft_tension=yarn["weft_tension"])
@@ -70,6 +72,8 @@ def progress(enabled: bool) -> Iterator[Callable[[str, int, int], None] | None]:
 
 def relax_skeleton(sk: SkeletonData, config: str, show: bool) -> Relaxed:
     """Relax ``sk`` with the config's tensions, with progress on a terminal when ``show``."""
+    from bwsd.relax import relax
+
     with progress(show and sys.stderr.isatty()) as report:
         return relax(sk, options_of(config), report)
 

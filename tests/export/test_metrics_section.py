@@ -16,10 +16,11 @@ from rich.console import Console
 
 from bwsd.cli import main
 from bwsd.errors import ProgramError
-from bwsd.export.cli import print_metrics, simulate_program
+from bwsd.export.cli import simulate_program
 from bwsd.export.footprint import Grid, disc_samples, footprint
 from bwsd.export.metrics import groups, metrics, section, unconnected
 from bwsd.export.mixing import section_header
+from bwsd.export.tables import print_metrics
 from bwsd.program.sections import parse_section
 
 from .conftest import MACHINE, build, warp, weft
