@@ -6,16 +6,18 @@ loom in its own process. A client process loads the 624-carrier braid, resets, r
 (first-use costs are paid there: lazy imports, the debug mode's first source reads), then
 starts it and reads ``/state``, ``/skeleton`` and the event WebSocket while it runs; slow
 callbacks are counted from that start.
-asyncio logs every callback that held the loop longer than 20 ms; the test fails on any.
+Every callback that held the loop longer than 20 ms by its own doing fails the test (see
+SlowCallbacks: a callback preempted by another process on the machine is not counted).
 """
 
 from __future__ import annotations
 
 import asyncio
 import linecache
-import logging
 import multiprocessing
+import resource
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,18 +33,35 @@ from tests.fieldbus.conftest import BUS, ROOT, start_mock
 SLOW = 0.020  # s
 
 
-class SlowCallbacks(logging.Handler):
-    """asyncio's "Executing <Handle ...> took 0.031 seconds" warnings, kept."""
+class SlowCallbacks:
+    """Every callback of the loop that held it longer than SLOW by its own doing.
+
+    A callback's wall time counts when the loop's thread was not preempted meanwhile (no
+    involuntary context switch: the time was the callback's, computing or waiting on a disk),
+    or when its own CPU time passes SLOW. A callback the kernel preempted for another process
+    (the machine is shared: a test run, the mock loom, the client) is the machine's doing,
+    not the daemon's, and asyncio's wall-clock report alone cannot tell the two apart.
+    """
 
     def __init__(self) -> None:
-        super().__init__(logging.WARNING)
         self.seen: list[str] = []
-        self.armed = False  # from the moment the daemon serves
+        self.armed = False  # from the moment the client has paid its first-use costs
 
-    def emit(self, record: logging.LogRecord) -> None:
-        text = record.getMessage()
-        if self.armed and text.startswith("Executing ") and " took " in text:
-            self.seen.append(text)
+    def wrap(self, run: Callable[[asyncio.Handle], None]) -> Callable[[asyncio.Handle], None]:
+        def timed(handle: asyncio.Handle) -> None:
+            before = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+            start, cpu = time.perf_counter(), time.thread_time()
+            run(handle)
+            wall, used = time.perf_counter() - start, time.thread_time() - cpu
+            if self.armed and wall > SLOW:
+                preempted = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw - before
+                if used > SLOW or not preempted:
+                    self.seen.append(
+                        f"{handle!r} took {wall * 1000:.1f} ms ({used * 1000:.1f}"
+                        f" ms of CPU, preempted {preempted} times)"
+                    )
+
+        return timed
 
 
 def machine() -> dict[str, Any]:
@@ -101,7 +120,7 @@ def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkey
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")
     slow = SlowCallbacks()
-    logging.getLogger("asyncio").addHandler(slow)
+    monkeypatch.setattr(asyncio.events.Handle, "_run", slow.wrap(asyncio.events.Handle._run))
     spawn = multiprocessing.get_context("spawn")
     errors, warm = spawn.Queue(), spawn.Event()
 
@@ -128,7 +147,6 @@ def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkey
     try:
         asyncio.run(scenario(), debug=True)
     finally:
-        logging.getLogger("asyncio").removeHandler(slow)
         mock.stop()
     found = []
     while not errors.empty():

@@ -27,7 +27,7 @@ def test_no_operation_answers_a_server_error(live: Live):
                                            timeout=WAIT)  # fmt: skip
     headers = live.headers("operator")
     operations = [result.ok() for result in schema.get_all_operations()]
-    assert len(operations) == 13  # GET /api/v1/whoami among them
+    assert len(operations) == 14  # GET /api/v1/whoami and POST /programs/{id}/load among them
     spec = httpx.get(f"{live.base}/openapi.json", timeout=WAIT).json()
     seen: dict[str, set[int]] = {}
     for operation in operations:

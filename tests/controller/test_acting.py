@@ -14,6 +14,7 @@ from bwsd.controller.errors import ControllerError
 from bwsd.controller.packml import Command, State
 from bwsd.controller.status import Fault, StopCause
 from bwsd.fieldbus.base import FAULT_ESTOP, FAULT_STALL
+from bwsd.journal.writer import ROUTINE
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
@@ -120,7 +121,8 @@ def test_abort_reaches_aborted_while_another_process_holds_the_journal(tmp_path)
             await ctl.wait()
             await ctl.command(Command.CLEAR)  # the outcome is written before it, at the latest
             assert rig.journal.program(1).outcome == "aborted"
-            await ctl.recorder.catch_up()  # the state history is written behind the commands
+            # the state history is written behind the commands, in order: wait for the queue
+            await ctl.recorder.writer.queue(ROUTINE, lambda: None)
             names = [s.name for s in rig.journal.states()]
             assert "Aborting" in names and "Aborted" in names  # the history misses nothing
         finally:

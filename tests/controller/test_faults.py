@@ -24,6 +24,7 @@ from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State
 from bwsd.controller.status import Event, Fault, InstructionDone, StopCause
 from bwsd.errors import BwsdError
+from bwsd.journal.writer import ROUTINE
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
@@ -172,7 +173,8 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
         await ctl.wait()
         assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
         assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))
-        await ctl.recorder.catch_up()  # the state history is written behind the run
+        # the state history is written behind the run, in order: wait for what is queued
+        await ctl.recorder.writer.queue(ROUTINE, lambda: None)
         record = journal.program(pid)
         assert (record.outcome, record.done) == ("complete", 15) and journal.pending(pid) is None
         names = [state.name for state in journal.states()]

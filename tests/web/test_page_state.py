@@ -356,8 +356,10 @@ def test_after_stop_progress_and_next_line_are_what_the_daemon_says(slow_live: L
     expected = f"{state['index']} / {state['count']}"
     page.page.wait_for_function("t => document.querySelector('#progress-text').textContent === t",
                                 arg=expected, timeout=MS)  # fmt: skip
-    note = page.page.locator("#job-note").inner_text()
-    assert note.startswith(f"ended after instruction {state['index']} of {state['count']}")
+    ended = f"ended after instruction {state['index']} of {state['count']}"
+    page.page.wait_for_function(
+        "t => document.querySelector('#job-note').textContent.startsWith(t)", arg=ended, timeout=MS
+    )
     assert page.page.locator("#next").inner_text() == "next: — (the run has ended)"
     assert page.page.locator("#job-text .current").count() == 0
     assert page.errors == []
