@@ -422,6 +422,9 @@ def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     from bwsd.fieldbus.owner import holder
 
     config, state, token, _ = rig
+    # Each record the run waits for (instruction 1 started, held, the session's end) gives
+    # up after the busy timeout: 1.5 s instead of 5 s each, still past the stall's 0.75 s.
+    config.write_text(config.read_text() + "\n[journal]\nbusy_timeout = 1.5\n")
     served = Served(config, state, token)
     served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
     served.command("reset")
