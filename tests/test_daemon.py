@@ -32,6 +32,7 @@ from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.timing import scaled
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"
@@ -82,14 +83,14 @@ class Served:
 
     def recovered(self, limit: float = 60) -> dict[str, Any]:
         """The state once the twin is rebuilt (commands wait while it is)."""
-        deadline = time.monotonic() + limit
+        deadline = time.monotonic() + scaled(limit)
         while (state := self.state())["recovering"].startswith("rebuilding"):
             assert time.monotonic() < deadline, state["recovering"]
             time.sleep(0.02)
         return state
 
     def wait_for(self, names: set[str], limit: float = 120) -> dict[str, Any]:
-        deadline = time.monotonic() + limit
+        deadline = time.monotonic() + scaled(limit)
         while (state := self.state())["name"] not in names:
             assert time.monotonic() < deadline, f"still {state['name']}: {state['reason']}"
             time.sleep(0.05)
@@ -98,12 +99,12 @@ class Served:
     def kill(self) -> None:
         self.http.close()
         self.proc.send_signal(signal.SIGKILL)
-        self.proc.wait(timeout=20)
+        self.proc.wait(timeout=scaled(20))
 
     def stop(self) -> None:
         self.http.close()
         self.proc.send_signal(signal.SIGTERM)
-        self.proc.wait(timeout=30)
+        self.proc.wait(timeout=scaled(30))
 
 
 @pytest.fixture
@@ -245,7 +246,7 @@ def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(ri
         assert refused.status_code == 409 and "cannot be read" in refused.json()["error"]
         assert served.state()["bus"]["connected"] is False
         asyncio.run(request(*control, {"cmd": "clear"}))
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + scaled(30)
         while not served.state()["bus"]["connected"]:  # the watch task reads it again
             assert time.monotonic() < deadline
             time.sleep(0.05)
@@ -433,7 +434,7 @@ def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     other.execute("BEGIN IMMEDIATE")
     try:
         health = httpx.Client(base_url=served.urls["api"], timeout=30)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + scaled(30)
         while (answer := health.get("/healthz")).status_code == 200:
             assert time.monotonic() < deadline
             time.sleep(0.05)

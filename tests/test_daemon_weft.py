@@ -18,11 +18,12 @@ from bwsd.api.auth import TokenStore
 from simulator_hw.control import request
 from tests.fieldbus.conftest import Mock, start_mock
 from tests.test_daemon import Served, daemon_config
+from tests.timing import scaled
 
 FILL = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
 TURNED = FILL + "WEFT x=-5 y=15 z=2 angle=90 length=20\nTAKEUP 2\n"  # the inserter turns first
 STRAIGHT = FILL + "WEFT x=15 y=-5 z=2 angle=0 length=20\nTAKEUP 2\n"  # it is at 0 already
-LIMIT = 60.0  # s: a bound for waiting, never an expected duration
+LIMIT = scaled(60.0)  # s: a bound for waiting, never an expected duration
 
 
 def loom(mock: Mock, axis: str) -> dict[str, Any]:
