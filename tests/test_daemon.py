@@ -174,6 +174,7 @@ def fire(served: Served, name: str, body: dict[str, Any]) -> None:
     threading.Thread(target=send, daemon=True).start()
 
 
+@pytest.mark.slow
 def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     """SIGKILL at random moments: while it runs (predicting, journaling, moving), inside an
     Abort, and inside the resume that follows one."""
@@ -227,6 +228,7 @@ def kill_anywhere(served: Served, config: Path, state: Path, token: str,
     return served
 
 
+@pytest.mark.slow
 def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(rig):
     config, state, token, mock = rig
     served = Served(config, state, token)
@@ -397,6 +399,7 @@ def test_a_tls_file_that_cannot_serve_is_a_clear_error(rig):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_a_restart_restores_the_loaded_program_with_its_cause(rig):
     config, state, token, _ = rig
     for stop in ("kill", "stop"):
@@ -416,6 +419,7 @@ def test_a_restart_restores_the_loaded_program_with_its_cause(rig):
             served.stop()
 
 
+@pytest.mark.slow
 def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     """Another process holds the journal's lock mid-run: the stall is on /healthz, the run
     holds; SIGTERM still ends the daemon cleanly, its bus lock free for the next one (the

@@ -67,6 +67,7 @@ def killed_while(slow: tuple[Path, Path, str, Mock], text: str, axis: str) -> Se
     return served
 
 
+@pytest.mark.slow
 def test_a_weft_killed_before_its_insert_is_run_again_not_committed(slow):
     mock = slow[3]
     served = killed_while(slow, TURNED, "weft_angle")

@@ -7,6 +7,7 @@ import logging
 import socket
 import time
 
+import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
@@ -17,6 +18,7 @@ from tests.timing import scaled
 __all__ = ["rig"]
 
 
+@pytest.mark.slow
 def test_garbage_on_the_plc_port_and_refused_logins_are_summarised(rig):
     """Garbage on the PLC port logged about 200 B per 13-byte frame; each refused WebSocket
     login wrote an ERROR line."""
