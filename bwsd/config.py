@@ -125,7 +125,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "snapshot_every": Num(int, 0, 1_000_000, 200),
     },
     "daemon": {"state_dir": Text("state")},
-    "journal": {"path": Text("journal.db")},
+    "journal": {"path": Text("journal.db"), "busy_timeout": Num(float, 0.1, 600.0, 5.0)},
     "api": {
         "host": Text("127.0.0.1"),
         "port": Num(int, 0, 65535, 8080),

@@ -76,7 +76,11 @@ async def start(config: Config, state_dir: Path) -> Daemon:
     bus.owner_id, bus.holds = daemon_owner_id(state_dir), True
     table = config.table("controller")
     limits = Limits(table["max_contacts"], table["tensioner_stroke"])
-    settings = Settings(table["max_instructions"], table["snapshot_every"])
+    settings = Settings(
+        table["max_instructions"],
+        table["snapshot_every"],
+        journal_busy_timeout=config.table("journal")["busy_timeout"],
+    )
     controller = Controller(config.machine, bus, journal, limits, settings=settings)
     tokens = TokenStore.load(tokens_file(config, state_dir))  # one store: every door's users
     daemon = Daemon(config, state_dir, controller, journal, Gate(controller, tokens), lock)

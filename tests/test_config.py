@@ -15,7 +15,7 @@ GOOD = {
 
 def _with(table: str, key: str, value) -> dict:
     data = {name: dict(values) for name, values in GOOD.items()}
-    data[table][key] = value
+    data.setdefault(table, {})[key] = value
     return data
 
 
@@ -41,6 +41,7 @@ def test_yarn_table_is_optional():
         ("machine", "speed", 3, r"\[machine.speed\]: unknown key"),
         ("yarn", "diameter", -1, r"\[yarn.diameter\]: must lie in"),
         ("yarn", "colour", "red", r"\[yarn.colour\]: unknown key"),
+        ("journal", "busy_timeout", 0, r"\[journal.busy_timeout\]: must lie in \[0.1, 600\]"),
     ],
 )
 def test_bad_values_name_table_and_key(table, key, value, message):
@@ -163,6 +164,7 @@ def test_daemon_tables_defaults_and_flags():
         "max_instructions": 1_000_000,
         "snapshot_every": 200,
     }
+    assert cfg.table("journal") == {"path": "journal.db", "busy_timeout": 5.0}
     with pytest.raises(ConfigError, match=r"\[api.open_reads\]: must be true or false"):
         parse_config({**GOOD, "api": {"open_reads": 1}})
 

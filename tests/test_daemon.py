@@ -32,6 +32,7 @@ from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.timing import scaled
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"
@@ -82,14 +83,14 @@ class Served:
 
     def recovered(self, limit: float = 60) -> dict[str, Any]:
         """The state once the twin is rebuilt (commands wait while it is)."""
-        deadline = time.monotonic() + limit
+        deadline = time.monotonic() + scaled(limit)
         while (state := self.state())["recovering"].startswith("rebuilding"):
             assert time.monotonic() < deadline, state["recovering"]
             time.sleep(0.02)
         return state
 
     def wait_for(self, names: set[str], limit: float = 120) -> dict[str, Any]:
-        deadline = time.monotonic() + limit
+        deadline = time.monotonic() + scaled(limit)
         while (state := self.state())["name"] not in names:
             assert time.monotonic() < deadline, f"still {state['name']}: {state['reason']}"
             time.sleep(0.05)
@@ -98,12 +99,12 @@ class Served:
     def kill(self) -> None:
         self.http.close()
         self.proc.send_signal(signal.SIGKILL)
-        self.proc.wait(timeout=20)
+        self.proc.wait(timeout=scaled(20))
 
     def stop(self) -> None:
         self.http.close()
         self.proc.send_signal(signal.SIGTERM)
-        self.proc.wait(timeout=30)
+        self.proc.wait(timeout=scaled(30))
 
 
 @pytest.fixture
@@ -173,6 +174,7 @@ def fire(served: Served, name: str, body: dict[str, Any]) -> None:
     threading.Thread(target=send, daemon=True).start()
 
 
+@pytest.mark.slow
 def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     """SIGKILL at random moments: while it runs (predicting, journaling, moving), inside an
     Abort, and inside the resume that follows one."""
@@ -226,6 +228,7 @@ def kill_anywhere(served: Served, config: Path, state: Path, token: str,
     return served
 
 
+@pytest.mark.slow
 def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(rig):
     config, state, token, mock = rig
     served = Served(config, state, token)
@@ -245,7 +248,7 @@ def test_a_restart_while_the_loom_is_silent_holds_and_resumes_once_it_answers(ri
         assert refused.status_code == 409 and "cannot be read" in refused.json()["error"]
         assert served.state()["bus"]["connected"] is False
         asyncio.run(request(*control, {"cmd": "clear"}))
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + scaled(30)
         while not served.state()["bus"]["connected"]:  # the watch task reads it again
             assert time.monotonic() < deadline
             time.sleep(0.05)
@@ -396,6 +399,7 @@ def test_a_tls_file_that_cannot_serve_is_a_clear_error(rig):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_a_restart_restores_the_loaded_program_with_its_cause(rig):
     config, state, token, _ = rig
     for stop in ("kill", "stop"):
@@ -415,6 +419,7 @@ def test_a_restart_restores_the_loaded_program_with_its_cause(rig):
             served.stop()
 
 
+@pytest.mark.slow
 def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     """Another process holds the journal's lock mid-run: the stall is on /healthz, the run
     holds; SIGTERM still ends the daemon cleanly, its bus lock free for the next one (the
@@ -422,6 +427,9 @@ def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     from bwsd.fieldbus.owner import holder
 
     config, state, token, _ = rig
+    # Each record the run waits for (instruction 1 started, held, the session's end) gives
+    # up after the busy timeout: 1.5 s instead of 5 s each, still past the stall's 0.75 s.
+    config.write_text(config.read_text() + "\n[journal]\nbusy_timeout = 1.5\n")
     served = Served(config, state, token)
     served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
     served.command("reset")
@@ -430,7 +438,7 @@ def test_sigterm_closes_the_bus_and_its_lock_while_the_journal_is_locked(rig):
     other.execute("BEGIN IMMEDIATE")
     try:
         health = httpx.Client(base_url=served.urls["api"], timeout=30)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + scaled(30)
         while (answer := health.get("/healthz")).status_code == 200:
             assert time.monotonic() < deadline
             time.sleep(0.05)

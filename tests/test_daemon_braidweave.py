@@ -109,6 +109,7 @@ def test_the_config_carries_the_corner_segments(generated: Generated):
     assert {w[4] for w in wefts} == {"angle=0", "angle=90"}
 
 
+@pytest.mark.slow
 def test_a_braid_weave_on_segments_runs_to_complete_and_equals_simulate(rig, generated):
     served, mock = rig
     program = parse_program(generated.program)

@@ -25,11 +25,12 @@ from simulator_hw.control import request
 from tests.controller.test_wefts import loom_wefts, twin_wefts
 from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served, daemon_config, same_geometry
+from tests.timing import scaled
 
 FILL = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
 TURNED = FILL + "WEFT x=-5 y=15 z=2 angle=90 length=20\nTAKEUP 2\n"  # the inserter turns first
 STRAIGHT = FILL + "WEFT x=15 y=-5 z=2 angle=0 length=20\nTAKEUP 2\n"  # it is at 0 already
-LIMIT = 60.0  # s: a bound for waiting, never an expected duration
+LIMIT = scaled(60.0)  # s: a bound for waiting, never an expected duration
 
 
 def loom(mock: Mock, axis: str) -> dict[str, Any]:
@@ -73,6 +74,7 @@ def killed_while(slow: tuple[Path, Path, str, Mock], text: str, axis: str) -> Se
     return served
 
 
+@pytest.mark.slow
 def test_a_weft_killed_before_its_insert_is_run_again_not_committed(slow):
     mock = slow[3]
     served = killed_while(slow, TURNED, "weft_angle")

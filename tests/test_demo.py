@@ -69,6 +69,7 @@ def test_a_mock_loom_that_cannot_start_says_why(tmp_path):
     assert re.fullmatch(wanted, last), last
 
 
+@pytest.mark.slow
 def test_the_demo_token_is_revoked_when_it_stops_and_a_stale_one_replaced(tmp_path):
     state = tmp_path / "state"
     state.mkdir()

@@ -7,15 +7,18 @@ import logging
 import socket
 import time
 
+import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from bwsd.logs import FirstLine
 from tests.test_daemon import Served, rig
+from tests.timing import scaled
 
 __all__ = ["rig"]
 
 
+@pytest.mark.slow
 def test_garbage_on_the_plc_port_and_refused_logins_are_summarised(rig):
     """Garbage on the PLC port logged about 200 B per 13-byte frame; each refused WebSocket
     login wrote an ERROR line."""
@@ -24,7 +27,7 @@ def test_garbage_on_the_plc_port_and_refused_logins_are_summarised(rig):
     try:
         urls = served.urls
         plc_port = int(urls["plc"].rsplit(":", 1)[1])
-        time.sleep(0.5)
+        time.sleep(scaled(0.5))  # the start-up's lines are written
         before = served.log.stat().st_size
         for number in range(100):
             with socket.create_connection(("127.0.0.1", plc_port), timeout=5) as sock:
@@ -37,7 +40,7 @@ def test_garbage_on_the_plc_port_and_refused_logins_are_summarised(rig):
         for _ in range(20):
             with contextlib.suppress(InvalidStatus):
                 connect(ws, open_timeout=5).close()
-        time.sleep(0.5)
+        time.sleep(scaled(0.5))  # the refusals' lines are written
         state_now = served.state()  # the daemon is fine
         assert state_now["name"] == "Stopped"
     finally:

@@ -74,11 +74,13 @@ class TwinView:
 
 @dataclass(frozen=True)
 class Settings:
-    """The ``[controller]`` table's run settings (the limits are in ``Limits``)."""
+    """The ``[controller]`` table's run settings (the limits are in ``Limits``), and the
+    ``[journal]`` table's ``busy_timeout``."""
 
     max_instructions: int = 1_000_000  # a program may expand to at most this many
     snapshot_every: int = 200  # instructions between twin snapshots in the journal
     poll_interval: float = 0.5  # s between reads of the machine at rest
+    journal_busy_timeout: float = 5.0  # s an urgent record waits for another process's lock
 
 
 class Controller:
@@ -102,7 +104,7 @@ class Controller:
         if publish is not None:
             self.events.subscribe(lambda event: publish(event.wire()))
         self.supervisor = Supervisor(self._task_failed)
-        self.recorder = Recorder(journal, self._journal_trouble)
+        self.recorder = Recorder(journal, self._journal_trouble, self.settings.journal_busy_timeout)
         self.packml = PackML()
         self.packml.on_change.append(self._on_state)
         self.seen = MachineView(

@@ -47,9 +47,11 @@ class Outcome:
 class Recorder:
     """The controller's one way to the journal (see the module's rule)."""
 
-    def __init__(self, journal: Journal, trouble: Callable[[str], None]) -> None:
+    def __init__(
+        self, journal: Journal, trouble: Callable[[str], None], busy_timeout: float = 5.0
+    ) -> None:
         self.journal = journal
-        self.writer = JournalWriter(journal)
+        self.writer = JournalWriter(journal, round(busy_timeout * 1000))
         self._trouble = trouble  # told once per stall and per run of failed routine records
         self._done: tuple[int, int, dict[str, Any]] | None = None  # (pid, index, payload)
         self._outcome: Outcome | None = None  # the last outcome not yet written

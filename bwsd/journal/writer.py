@@ -41,8 +41,9 @@ class JournalWriter:
     the calls already submitted, then closes the journal.
     """
 
-    def __init__(self, journal: Journal) -> None:
+    def __init__(self, journal: Journal, busy_timeout_ms: int = BUSY_TIMEOUT_MS) -> None:
         self.journal = journal
+        self._urgent_ms = busy_timeout_ms  # how long an urgent call waits for another's lock
         self._queue: queue.PriorityQueue[_Job] = queue.PriorityQueue()
         self._order = itertools.count()
         self._closed = False
@@ -103,7 +104,7 @@ class JournalWriter:
     def _patience(self, priority: int) -> None:
         """A routine record waits a moment for another process's lock, an urgent one the
         journal's full busy timeout: a locked journal never holds an outcome up behind logs."""
-        wanted = ROUTINE_BUSY_MS if priority == ROUTINE else BUSY_TIMEOUT_MS
+        wanted = ROUTINE_BUSY_MS if priority == ROUTINE else self._urgent_ms
         if wanted != self._waiting:
             self.journal.wait_when_busy(wanted)
             self._waiting = wanted

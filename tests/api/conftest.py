@@ -21,6 +21,7 @@ from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from tests.fieldbus.conftest import Mock, client_config, mock
+from tests.timing import scaled
 
 __all__ = ["Live", "live", "mock", "open_live", "start_live"]
 
@@ -28,7 +29,7 @@ __all__ = ["Live", "live", "mock", "open_live", "start_live"]
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 BRAID = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
 BRAID_STEPS = 15
-WAIT = 60.0  # s: the bound of every wait for the machine
+WAIT = scaled(60.0)  # s: the bound of every wait for the machine
 
 
 @dataclass

@@ -43,6 +43,7 @@ async def half_way(rig: Rig) -> None:
     await asyncio.sleep(0.3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", [Command.ABORT, Command.STOP])
 def test_abort_and_stop_cut_the_stroke_at_once_and_the_part_resumes(tmp_path, command):
     async def scenario() -> None:
@@ -131,6 +132,7 @@ def test_abort_reaches_aborted_while_another_process_holds_the_journal(tmp_path)
     run(scenario())
 
 
+@pytest.mark.slow
 def test_clear_is_refused_while_the_estop_is_pressed_and_no_drive_is_reset(tmp_path):
     async def scenario() -> None:
         rig = slow(tmp_path)

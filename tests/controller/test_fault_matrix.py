@@ -31,6 +31,7 @@ def test_every_fault_in_every_state_ends_with_an_exit_and_resumes(tmp_path, faul
 CUTS = 20
 
 
+@pytest.mark.slow
 def test_a_run_cut_by_stop_or_abort_anywhere_resumes_to_the_same_skeleton(tmp_path):
     """Stop or Abort at random moments, mid-stroke or between strokes; Reset (Clear), then
     Start with resume: the program finishes with the skeleton of an uninterrupted run, and

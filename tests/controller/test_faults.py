@@ -254,6 +254,7 @@ def test_suspend_is_journaled_suspended_with_its_reason(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_allowed_lists_exactly_the_commands_that_are_accepted(mock, tmp_path):
     """In every state a run goes through, each command is tried on a fresh controller in
     that state: those ``allowed`` lists are accepted, the others refused."""

@@ -14,13 +14,14 @@ from typing import Any
 import pytest
 
 from bwsd.config import Config, parse_config
+from tests.timing import scaled
 
 ROOT = Path(__file__).resolve().parents[2]
 MACHINE = {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0,
            "c_mat": 0.5}  # fmt: skip
 PROGRAM = "FILL row=1 col=0\n.XX.\n.XX.\nEND\n"  # cases at (1, 1), (1, 2), (2, 1), (2, 2)
-BUS = {"timeout": 3.0, "io_timeout": 0.5, "reconnect_delay": 0.05, "reconnect_delay_max": 0.2,
-       "reconnect_attempts": 4}  # fmt: skip
+BUS = {"timeout": scaled(3.0), "io_timeout": scaled(0.5), "reconnect_delay": 0.05,
+       "reconnect_delay_max": 0.2, "reconnect_attempts": 4}  # fmt: skip
 
 
 def toml(data: dict[str, Any]) -> str:

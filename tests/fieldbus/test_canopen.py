@@ -33,13 +33,16 @@ from bwsd.twin import Machine
 from simulator_hw.canopen_drives import CanopenLoom
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.socketcand_hub import SocketcandHub
+from tests.timing import scaled
 
 MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5)
 ROW0, ROW1, COL0, COL2 = 0, 1, 2, 4
 WEFT_ANGLE, WEFT_INSERT, TAKEUP = 5, 6, 7
+# An SDO answer may take more than 0.3 s on a loaded machine (the hub, the drives and the
+# master share this process): 1 s, the backend's default, times the machine's factor.
 SETTINGS = BusSettings(
-    timeout=2.0, io_timeout=0.3, reconnect_delay=0.01, reconnect_delay_max=0.05,
-    reconnect_attempts=3,
+    timeout=scaled(2.0), io_timeout=scaled(1.0), reconnect_delay=0.01,
+    reconnect_delay_max=0.05, reconnect_attempts=3,
 )  # fmt: skip
 
 
@@ -75,12 +78,12 @@ async def rig(
 
 
 def run(scenario: Callable[[], Awaitable[None]]) -> None:
-    asyncio.run(asyncio.wait_for(scenario(), 20))
+    asyncio.run(asyncio.wait_for(scenario(), scaled(20)))
 
 
 async def until(condition: Callable[[], bool], limit: float = 5.0) -> None:
     """Wait for ``condition`` (the limit only guards against a hang)."""
-    async with asyncio.timeout(limit):
+    async with asyncio.timeout(scaled(limit)):
         while not condition():
             await asyncio.sleep(0.005)
 
@@ -344,7 +347,7 @@ def test_the_mapping_is_written_at_start_and_the_drives_send_what_it_says():
             try:
                 sniffer.drain()
                 master.network.sync.transmit()
-                await asyncio.sleep(0.1)
+                await asyncio.sleep(scaled(0.1))
                 sent = {m.arbitration_id: bytes(m.data) for m in sniffer.drain()}
             finally:
                 sniffer.bus.shutdown()

@@ -31,12 +31,13 @@ from bwsd.twin import Machine
 from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
+from tests.timing import scaled
 
 MACHINE = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5)
 MAP2 = dataclasses.replace(MACHINE, weft_axes=())  # map 2 has no weft positioning axes
-SETTINGS = BusSettings(
-    timeout=2.0,
-    io_timeout=0.3,
+SETTINGS = BusSettings(  # bounds for waiting: 1 s, the default, for one request
+    timeout=scaled(2.0),
+    io_timeout=scaled(1.0),
     reconnect_delay=0.01,
     reconnect_delay_max=0.05,
     reconnect_attempts=3,

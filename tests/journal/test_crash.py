@@ -218,6 +218,7 @@ def run_and_kill(writer: Writer, mode: str, rng: random.Random) -> None:
     assert writer.proc.returncode == -signal.SIGKILL, writer.errors()
 
 
+@pytest.mark.slow
 def test_killed_writers_resume_exactly(
     tmp_path: Path, spawn: Callable[[Path, int, int], Writer]
 ) -> None:

@@ -235,6 +235,7 @@ def rig(tmp_path: Path) -> Iterator[tuple[Path, Path, str]]:
     mock.stop()
 
 
+@pytest.mark.slow
 def test_a_daemon_stopped_mid_program_starts_again_and_one_killed_too(
     rig: tuple[Path, Path, str],
 ) -> None:

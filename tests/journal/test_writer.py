@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import asyncio
 import random
+import sqlite3
 import threading
+import time
 from pathlib import Path
 
 import pytest
 
 from bwsd.journal import Journal, JournalError, JournalWriter
+from bwsd.journal.writer import ROUTINE, ROUTINE_BUSY_MS
 
 TEXT = "FILL row=0 col=0\nXX\nEND\n"
 
@@ -71,6 +74,35 @@ def test_reads_see_every_write_submitted_before_them(path: Path) -> None:
             return counts
 
     assert asyncio.run(main()) == list(range(1, 11))
+
+
+def test_a_locked_journal_fails_an_urgent_write_after_its_busy_timeout(path: Path) -> None:
+    """Another process holds the lock: an urgent write waits the writer's busy timeout (the
+    config's ``[journal] busy_timeout``), a routine one 0.2 s, then each fails."""
+
+    async def main() -> tuple[float, float]:
+        async with JournalWriter(Journal.open(path), busy_timeout_ms=1500) as writer:
+            journal = writer.journal
+            other = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+            other.execute("BEGIN IMMEDIATE")
+            try:
+                began = time.monotonic()
+                with pytest.raises(JournalError, match="locked"):
+                    await writer.run(journal.add_program, "part.bws", TEXT, 3)
+                urgent = time.monotonic() - began
+                began = time.monotonic()
+                with pytest.raises(JournalError, match="locked"):
+                    await writer.queue(ROUTINE, lambda: journal.log_event("tick", {}))
+                routine = time.monotonic() - began
+            finally:
+                other.execute("ROLLBACK")
+                other.close()
+            await writer.run(journal.add_program, "part.bws", TEXT, 3)  # writes again
+            return urgent, routine
+
+    urgent, routine = asyncio.run(main())
+    assert 1.5 <= urgent < 5.0, urgent  # its own timeout, not the journal's default 5 s
+    assert ROUTINE_BUSY_MS / 1000 <= routine < 1.5, routine
 
 
 def test_an_exception_reaches_its_caller_and_the_writer_goes_on(path: Path) -> None:

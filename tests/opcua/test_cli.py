@@ -47,6 +47,7 @@ def test_cert_is_made_once_shown_and_renewed(tmp_path, capsys, mock):
     assert run(served()) == renewed
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_an_error_naming_the_table(mock, tmp_path):
     with socket.socket() as held:
         held.bind(("127.0.0.1", 0))
@@ -61,6 +62,7 @@ def test_a_port_in_use_is_an_error_naming_the_table(mock, tmp_path):
             run(scenario())
 
 
+@pytest.mark.slow
 def test_serve_stops_with_the_error_when_the_opcua_port_is_taken(tmp_path):
     with socket.socket() as held:
         held.bind(("127.0.0.1", 0))

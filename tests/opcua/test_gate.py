@@ -83,6 +83,7 @@ def test_a_unit_mode_sent_as_int16_or_wrong_acts_as_its_number_or_not_at_all(moc
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_removed_token_ends_its_open_session_and_its_commands(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as r:
@@ -110,6 +111,7 @@ def test_a_removed_token_ends_its_open_session_and_its_commands(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_fresh_install_follows_the_documented_trust_steps(mock, tmp_path):
     """docs/opcua.md, literally: with trusted/ empty a new client is refused as untrusted
     (not an internal error) and kept in rejected/; moved to trusted/, it connects."""
@@ -164,6 +166,7 @@ def test_node_ids_arrays_and_what_each_user_may_write(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_program_is_loaded_over_opc_ua_with_the_refusals_of_rest(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as r, r.session("operator") as client:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
 from bwsd.api.auth import TokenStore
@@ -53,6 +54,7 @@ async def modbus(client: AsyncModbusTcpClient) -> Tags:
     return decode(answer.registers)
 
 
+@pytest.mark.slow
 def test_opcua_modbus_and_rest_always_agree_during_a_run(tmp_path):
     mock = start_mock(tmp_path, {"stroke_speed": 100.0, "takeup_speed": 100.0})
     state = tmp_path / "state"

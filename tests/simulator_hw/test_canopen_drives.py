@@ -17,6 +17,7 @@ from bwsd.twin import Machine
 from simulator_hw.canopen_drives import CanopenLoom
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.socketcand_hub import SocketcandHub
+from tests.timing import scaled
 
 MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5)
 ROW0, COL0, TAKEUP = 0, 2, 7
@@ -84,7 +85,7 @@ async def rig(speeds: Speeds | None = None) -> AsyncIterator[Rig]:
 
 
 async def until(condition: Callable[[], bool], limit: float = 5.0) -> None:
-    async with asyncio.timeout(limit):
+    async with asyncio.timeout(scaled(limit)):
         while not condition():
             await asyncio.sleep(0.005)
 

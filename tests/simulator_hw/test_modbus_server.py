@@ -24,6 +24,7 @@ from bwsd.twin import Machine
 from bwsd.twin.machine import Segment
 from simulator_hw.loom import Loom, Speeds
 from simulator_hw.modbus_server import ModbusLoomServer
+from tests.timing import scaled
 
 # without the weft's positioning axes (as on map 2): N axes (test_weft_positioning_axes has them)
 MACHINE = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5, weft_axes=())
@@ -31,7 +32,7 @@ N = 2 + 3 + 3
 ROW0, ROW1, COL0, WEFT_ANGLE, TAKEUP = 0, 1, 2, 5, 7
 CELL_UM = 10_000
 ESTOP = 6  # discrete input after the 2 x 3 occupancy sensors
-LIMIT = 3.0  # s: a bound for waiting, never an expected duration
+LIMIT = scaled(3.0)  # s: a bound for waiting, never an expected duration
 
 
 @asynccontextmanager
@@ -48,7 +49,7 @@ async def serving(loom: Loom, device_id: int = 1,
 @asynccontextmanager
 async def client_of(server: ModbusLoomServer) -> AsyncIterator[AsyncModbusTcpClient]:
     client = AsyncModbusTcpClient(
-        "127.0.0.1", port=server.port, timeout=0.3, retries=0, reconnect_delay=0
+        "127.0.0.1", port=server.port, timeout=scaled(1.0), retries=0, reconnect_delay=0
     )
     assert await client.connect()
     try:

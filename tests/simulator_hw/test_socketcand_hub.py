@@ -18,6 +18,7 @@ from can.interfaces.socketcand.socketcand import (
 
 from simulator_hw.loom import Faults
 from simulator_hw.socketcand_hub import SocketcandHub, format_frame, parse_send
+from tests.timing import scaled
 
 FRAME = re.compile(rb"< frame ([0-9A-F]{3}|[0-9A-F]{8}) \d+\.\d{6} ([0-9A-F]*) >")
 
@@ -27,7 +28,7 @@ def run(scenario: Callable[[], Awaitable[None]]) -> None:
 
 
 async def until(condition: Callable[[], bool], limit: float = 5.0) -> None:
-    async with asyncio.timeout(limit):
+    async with asyncio.timeout(scaled(limit)):
         while not condition():
             await asyncio.sleep(0.005)
 
