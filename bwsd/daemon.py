@@ -122,9 +122,18 @@ async def _serve_api(daemon: Daemon) -> None:
     hosts = allowed_hosts(table["host"], table["hosts"])
     tokens = daemon.gate.tokens
     assert tokens is not None
-    app = create_app(daemon.controller, tokens, table["open_reads"], web_root=web_root,
-                     origins=table["origins"].split(), doors=doors, hosts=hosts,
-                     gate=daemon.gate)  # fmt: skip
+    yarn = daemon.config.table("yarn")
+    app = create_app(
+        daemon.controller,
+        tokens,
+        table["open_reads"],
+        web_root=web_root,
+        origins=table["origins"].split(),
+        doors=doors,
+        hosts=hosts,
+        gate=daemon.gate,
+        tensions=(yarn["tension"], yarn["weft_tension"]),
+    )
     server = uvicorn.Server(server_config(app, doors, host=table["host"], port=table["port"],
                                           log_level="warning", lifespan="off"))  # fmt: skip
     where = f"{table['host']}:{table['port']}"
@@ -148,6 +157,7 @@ async def _serve_api(daemon: Daemon) -> None:
     log.info("REST API and the page on %s", daemon.urls["api"])  # /healthz answers from here
     daemon._tasks.append(task)
     daemon._closers.append(lambda: setattr(server, "should_exit", True))
+    daemon._closers.append(app.state.ctx.relaxed.close)  # the relaxed preform's worker
 
 
 async def _serve_plc(daemon: Daemon) -> None:

@@ -32,7 +32,7 @@ from .hosts import HostCheck, default_hosts, origin_allowed
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer
 from .models import MAX_BODY_BYTES, Error, Health
 from .problems import ApiError, error_body
-from .view import SkeletonView
+from .view import RelaxedView, SkeletonView
 
 PREFIX = "/api/v1"
 DESCRIPTION = """Control and state of a braiding-weaving machine (see docs/api.md).
@@ -46,16 +46,19 @@ def create_app(
     controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
     queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT, origins: Iterable[str] = (),
     doors: Doors = DEFAULT_DOORS, hosts: Iterable[str] | None = None, gate: Gate | None = None,
+    tensions: tuple[float, float] = (1.0, 1.0),
 ) -> FastAPI:  # fmt: skip
     """The API of ``controller`` and the page at ``/`` (from ``web_root``); requests must
-    name one of ``hosts`` (by default ``default_hosts`` of loopback) as their Host.
+    name one of ``hosts`` (by default ``default_hosts`` of loopback) as their Host;
+    ``tensions`` (warp, weft) are the relaxed preform's (``GET /skeleton?relaxed=true``).
 
     Subscribes to the controller's event stream (until the app's lifespan ends).
     """
     metrics = Metrics(controller)
     hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
     metrics.clients.set_function(lambda: float(hub.clients))
-    ctx = Context(controller, SkeletonView(controller), metrics, hub)
+    view = SkeletonView(controller)
+    ctx = Context(controller, view, metrics, hub, RelaxedView(view, *tensions))
     # No /docs or /redoc: FastAPI's pages load their scripts from a public CDN at a floating
     # version, on the origin that holds the tokens. /openapi.json serves the schema.
     app = FastAPI(title="bwsd", version=__version__, description=DESCRIPTION,
@@ -131,6 +134,7 @@ def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[N
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         yield
         ctx.uninstall()
+        ctx.relaxed.close()
 
     return lifespan
 

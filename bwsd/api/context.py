@@ -13,7 +13,7 @@ from bwsd.controller.status import Event, Fault, StateChanged
 
 from .events import EventHub
 from .metrics import Metrics
-from .view import SkeletonView
+from .view import RelaxedView, SkeletonView
 
 
 @dataclass
@@ -24,6 +24,7 @@ class Context:
     view: SkeletonView
     metrics: Metrics
     hub: EventHub
+    relaxed: RelaxedView
     last_fault: str | None = None
 
     # ----- the controller's events -----

@@ -171,9 +171,22 @@ async def get_history(
             responses={**AUTH_ERRORS, **INVALID, 200: {"content": SKELETON_CONTENT},
                        409: {"model": Error}})  # fmt: skip
 async def get_skeleton(
-    ctx: Ctx, fmt: Annotated[Literal["json", "tg3", "vtp"], Query(alias="format")] = "json"
+    ctx: Ctx,
+    fmt: Annotated[Literal["json", "tg3", "vtp"], Query(alias="format")] = "json",
+    relaxed: Annotated[
+        bool, Query(description="the relaxed preform (docs/relax.md), JSON")
+    ] = False,
 ) -> Response:
-    """The predicted skeleton: JSON (docs/skeleton-json.md), TexGen .tg3 or VTK .vtp."""
+    """The predicted skeleton: JSON (docs/skeleton-json.md), TexGen .tg3 or VTK .vtp; with
+    ``relaxed``, the relaxed preform of the same instruction (JSON, computed off the control
+    path in a worker process, kept per instruction)."""
+    if relaxed:
+        if fmt != "json":
+            raise ApiError(409, "the relaxed preform is served as JSON only (format=json)")
+        document = await ctx.relaxed.current()
+        if document is None:
+            raise ApiError(409, "no program is loaded")
+        return Response(document, media_type="application/json")
     sk = await ctx.view.current()
     if sk is None:
         raise ApiError(409, "no program is loaded")
