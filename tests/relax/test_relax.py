@@ -12,7 +12,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 
+from bwsd.errors import BwsdError
 from bwsd.export.formed import takeups_of
 from bwsd.export.metrics import metrics
 from bwsd.program.generators import GENERATORS
@@ -25,6 +28,7 @@ from bwsd.twin import Machine, Shift, TakeUp, Twin, simulate
 from bwsd.twin.skeleton import SkeletonData
 from tests.relax.conftest import EXAMPLES, metrics_of, overlap_share, relaxed_of, twin_of
 from tests.relax.passes import passes_through
+from tests.twin.test_against_reference import _fitting, braids
 
 TWIST_MACHINE = Machine(rows=2, cols=2, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5)
 TURN = [
@@ -267,3 +271,43 @@ def test_sections_are_flattened_and_read_back_from_texgen(tmp_path: Path) -> Non
         assert theirs.shape == mine.shape
         assert np.allclose(theirs[:, :2], mine[:, :2], rtol=1e-6)
         assert np.allclose(theirs[:, 2:], mine[:, 2:], atol=1e-6)
+
+
+@settings(
+    max_examples=20,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+@given(braids(), st.floats(0.2, 0.9))
+def test_small_random_programs_relax_without_a_pass_through_or_a_side_flipped(
+    case, share: float
+) -> None:
+    """Hypothesis-drawn small programs (the twin's own strategy: the 8-carrier braid of 1 to
+    3 cycles with any pitch, convergence and take-up; a yarn of a random share of the largest
+    diameter that fits): no step of the relaxation passes a yarn through another, and every
+    contact still told keeps its side."""
+    machine, fill, _, instructions = case
+    twin = Twin(machine, fill, _fitting(machine, share))  # a yarn with a section
+    for ins in instructions:
+        try:
+            twin.apply(ins)
+        except BwsdError:
+            break  # refused (a jam, a closed shed): the program ends there
+    sk = twin.skeleton()
+    if sk.diameter == 0:
+        event("centreline only")
+        return  # a centreline-only model is left as it is (tested above)
+    event("3 contacts or more" if len(sk.contacts) >= 3 else "fewer than 3 contacts")
+    found: list[int] = []
+
+    def trace(old: np.ndarray, new: np.ndarray, chains: object) -> None:
+        lay = Layout.of(chains)  # type: ignore[arg-type]
+        found.append(passes_through(old, new, lay.a, lay.b, lay.yarn))
+
+    relaxed = relax(sk, Options(max_separate=100, max_steps=100), trace=trace)
+    assert sum(found) == 0
+    before, _, _ = contact_sides(sk)
+    after, _, apart = contact_sides(relaxed.skeleton)
+    told = (before != 0) & (after != 0) & (apart < 2 * sk.diameter)
+    event("sides told" if told.any() else "no side told")
+    assert np.array_equal(before[told], after[told])
