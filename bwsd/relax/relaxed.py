@@ -67,6 +67,8 @@ def relax(
     """Relax ``sk`` (docs/relax.md). ``trace`` sees every step's motion (old and new
     positions, and the chains); ``progress`` each step's phase and number."""
     opts = options or Options()
+    if not sk.yarns:  # nothing to relax (a program whose fill holds no case)
+        return Relaxed(sk, (), Figures(), 0.0, 0, 0)
     chains = Chains.of(sk, opts.warp_tension, opts.weft_tension)
     out, figures = solve(chains, sk.diameter, opts, progress, trace)
     relaxed = out.skeleton(sk)

@@ -311,3 +311,12 @@ def test_small_random_programs_relax_without_a_pass_through_or_a_side_flipped(
     told = (before != 0) & (after != 0) & (apart < 2 * sk.diameter)
     event("sides told" if told.any() else "no side told")
     assert np.array_equal(before[told], after[told])
+
+
+def test_a_skeleton_without_yarns_relaxes_to_itself() -> None:
+    """A program whose fill holds no case (the API's fuzzing loaded one): nothing to relax."""
+    sk = Twin(Machine(4, 4, 10.0, 10.0, 100.0, 0.5), [], 1.0).skeleton()
+    relaxed = relax(sk)
+    assert relaxed.skeleton is sk and relaxed.sections == ()
+    document = relaxed_to_dict(relaxed)
+    assert document["yarns"] == [] and document["crimp"]["per_weft"] == []
