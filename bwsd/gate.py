@@ -21,7 +21,8 @@ import logging
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from enum import IntEnum
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.errors import BwsdError
@@ -192,32 +193,31 @@ def whole_of(value: Any, field: str, low: int, high: int) -> int:
     return value
 
 
+E = TypeVar("E", bound=IntEnum)  # Command, UnitMode
+
+
 def command_of(value: Any) -> Command:
     """A Command from itself, its number (1 Reset .. 9 Clear) or its name."""
-    if isinstance(value, Command):
-        return value
-    if isinstance(value, str):
-        try:
-            return Command[value.strip().upper()]
-        except KeyError:
-            names = ", ".join(c.name.lower() for c in Command)
-            raise Refused("range", f"command: {_shown(value)} is not one of {names}",
-                          "command") from None  # fmt: skip
-    return Command(whole_of(value, "command", min(Command), max(Command)))
+    return _member_of(Command, value, "command")
 
 
 def mode_of(value: Any) -> UnitMode:
     """A UnitMode from itself, its number (1 Production .. 3 Manual) or its name."""
-    if isinstance(value, UnitMode):
+    return _member_of(UnitMode, value, "mode")
+
+
+def _member_of(kind: type[E], value: Any, field: str) -> E:
+    """A member of the numbered enum ``kind`` from itself, its number or its name."""
+    if isinstance(value, kind):
         return value
     if isinstance(value, str):
         try:
-            return UnitMode[value.strip().upper()]
+            return kind[value.strip().upper()]
         except KeyError:
-            names = ", ".join(m.name.lower() for m in UnitMode)
-            raise Refused("range", f"mode: {_shown(value)} is not one of {names}",
-                          "mode") from None  # fmt: skip
-    return UnitMode(whole_of(value, "mode", min(UnitMode), max(UnitMode)))
+            names = ", ".join(m.name.lower() for m in kind)
+            raise Refused("range", f"{field}: {_shown(value)} is not one of {names}",
+                          field) from None  # fmt: skip
+    return kind(whole_of(value, field, min(kind), max(kind)))
 
 
 def flag_of(value: Any, field: str) -> bool:
