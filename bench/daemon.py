@@ -44,8 +44,14 @@ from tests.test_daemon import Served  # noqa: E402
 
 def machine_table() -> dict[str, Any]:
     m = load_config(ROOT / "config" / "braid-24x24.toml").machine
-    return {"rows": m.rows, "cols": m.cols, "pitch_x": m.pitch_x, "pitch_y": m.pitch_y,
-            "d_mat": m.d_mat, "c_mat": m.c_mat}  # fmt: skip
+    return {
+        "rows": m.rows,
+        "cols": m.cols,
+        "pitch_x": m.pitch_x,
+        "pitch_y": m.pitch_y,
+        "d_mat": m.d_mat,
+        "c_mat": m.c_mat,
+    }
 
 
 def loom(tmp: Path, program: str) -> Mock:
@@ -55,11 +61,17 @@ def loom(tmp: Path, program: str) -> Mock:
 
 def write_config(path: Path, ports: dict[str, int], plc: bool = True) -> Path:
     """A daemon config for the 24x24 machine on the mock loom's ports (API and PLC: any)."""
-    path.write_text(toml({
-        "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
-        "fieldbus.modbus": {"port": ports["modbus"]},
-        "api": {"port": 0}, "plc": {"port": 0, "enabled": plc},
-    }))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": machine_table(),
+                "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
+                "fieldbus.modbus": {"port": ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0, "enabled": plc},
+            }
+        )
+    )
     return path
 
 
@@ -73,8 +85,9 @@ def start(tmp: Path, program: str) -> tuple[Mock, Served]:
 
 def braid_24x24(cycles: int) -> str:
     """The benchmarks' 24x24 braid program (624 carriers)."""
-    return braid4(24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
-                  diameter=0.5).program  # fmt: skip
+    return braid4(
+        24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3, diameter=0.5
+    ).program
 
 
 @contextmanager
@@ -89,8 +102,9 @@ def serving(program: str) -> Iterator[Served]:
             mock.stop()
 
 
-async def measure(served: Served, program: str, rate: float,
-                  idle_s: float) -> dict[str, list[float]]:  # fmt: skip
+async def measure(
+    served: Served, program: str, rate: float, idle_s: float
+) -> dict[str, list[float]]:
     """GET state at ``rate`` while idle for ``idle_s``, then during the run; events' timings.
 
     The events are read in a process of their own, so that the load generator's work does
@@ -130,8 +144,7 @@ async def measure(served: Served, program: str, rate: float,
 
 def read_events(ws_url: str, results: Any, listening: Any) -> None:
     """The event reader's process: lags and the instructions' timings, until the run ends."""
-    out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus",
-                                                   "commit")}  # fmt: skip
+    out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus", "commit")}
 
     async def main() -> None:
         async with websockets.connect(ws_url, max_size=None) as ws:
@@ -149,8 +162,11 @@ def read_events(ws_url: str, results: Any, listening: Any) -> None:
                     out["predict"].append(event["predict_s"])
                     out["bus"].append(event["bus_s"])
                     out["commit"].append(commit)
-                if event.get("event") == "state" and event.get("to") in ("Complete", "Held",
-                                                                          "Aborted"):  # fmt: skip
+                if event.get("event") == "state" and event.get("to") in (
+                    "Complete",
+                    "Held",
+                    "Aborted",
+                ):
                     return
 
     asyncio.run(main())
@@ -167,18 +183,21 @@ class Requester:
     def __init__(self, base: str, token: str, conns: int = 8) -> None:
         host, port = base.removeprefix("http://").split("/")[0].split(":")
         self.host, self.port, self.conns = host, int(port), conns
-        self.request = (f"GET /api/v1/state HTTP/1.1\r\nHost: {host}\r\n"
-                        f"Authorization: Bearer {token}\r\n\r\n").encode()  # fmt: skip
+        self.request = (
+            f"GET /api/v1/state HTTP/1.1\r\nHost: {host}\r\nAuthorization: Bearer {token}\r\n\r\n"
+        ).encode()
 
     async def run(self, rate: float, into: list[float], done: asyncio.Event) -> None:
         """Requests at ``rate`` per second in all (spread over the connections) until done."""
         period = self.conns / rate
         start = time.perf_counter()
-        await asyncio.gather(*(self._one(start + i / rate, period, into, done)
-                               for i in range(self.conns)))  # fmt: skip
+        await asyncio.gather(
+            *(self._one(start + i / rate, period, into, done) for i in range(self.conns))
+        )
 
-    async def _one(self, first: float, period: float, into: list[float],
-                   done: asyncio.Event) -> None:  # fmt: skip
+    async def _one(
+        self, first: float, period: float, into: list[float], done: asyncio.Event
+    ) -> None:
         reader, writer = await asyncio.open_connection(self.host, self.port)
         sock = writer.get_extra_info("socket")
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -234,14 +253,28 @@ def restart(folder: Path, state: Path, mock_ports: dict[str, int]) -> tuple[floa
     store = TokenStore.load(tokens_file(load_config(config), state))
     token = store.add(f"bench-{len(store.entries) + 1}", "viewer")
     begun = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-                             "--state-dir", str(state)], stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True, cwd=ROOT)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bwsd.cli",
+            "serve",
+            "--config",
+            str(config),
+            "--state-dir",
+            str(state),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         assert proc.stdout is not None
         api = dict(p.split("=", 1) for p in proc.stdout.readline().split()[1:])["api"]
-        with httpx.Client(base_url=api + "/api/v1", timeout=30,
-                          headers={"Authorization": f"Bearer {token}"}) as http:  # fmt: skip
+        with httpx.Client(
+            base_url=api + "/api/v1", timeout=30, headers={"Authorization": f"Bearer {token}"}
+        ) as http:
             while True:
                 try:
                     first = http.get("/state")
@@ -302,8 +335,10 @@ def main() -> None:
     program = braid_24x24(args.cycles)
     with serving(program) as served:
         result = asyncio.run(measure(served, program, args.rate, args.idle))
-    print(f"24x24 braid (624 carriers), {args.cycles} cycles, zero travel time, GET state at "
-          f"{args.rate:g} requests/s for {args.idle:g} s idle, then during the run.\n")  # fmt: skip
+    print(
+        f"24x24 braid (624 carriers), {args.cycles} cycles, zero travel time, GET state at "
+        f"{args.rate:g} requests/s for {args.idle:g} s idle, then during the run.\n"
+    )
     print("| measure | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
     print(row("twin predict (for reference)", result["predict"]))
     print(row("bus: moves, waits and read-back (for reference)", result["bus"]))
@@ -314,10 +349,14 @@ def main() -> None:
     print(row("WebSocket event lag", result["lag"]))
     idle, busy = (np.percentile(result[k], 99) for k in ("idle", "state"))
     idle50, busy50 = (statistics.median(result[k]) for k in ("idle", "state"))
-    print(f"\nGET state during the run over idle: {busy50 / idle50:.2f}x at p50, "
-          f"{busy / idle:.2f}x at p99.\n")  # fmt: skip
-    print(f"Restart of a held {args.restart_cycles}-cycle 24x24 job, `bwsd serve` spawned "
-          f"{args.restarts} times each (median, worst):\n")  # fmt: skip
+    print(
+        f"\nGET state during the run over idle: {busy50 / idle50:.2f}x at p50, "
+        f"{busy / idle:.2f}x at p99.\n"
+    )
+    print(
+        f"Restart of a held {args.restart_cycles}-cycle 24x24 job, `bwsd serve` spawned "
+        f"{args.restarts} times each (median, worst):\n"
+    )
     print("| journal | instructions | API up s | worst | recovered s | worst |")
     print("|---|---:|---:|---:|---:|---:|")
     for line in restart_rows(args.restart_cycles, args.restarts):

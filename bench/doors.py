@@ -46,8 +46,9 @@ def address(served: Served) -> tuple[str, int]:
     return host, int(port)
 
 
-def upload(where: tuple[str, int], token: str | None, chunk: int,
-           client: int) -> tuple[socket.socket, float]:  # fmt: skip
+def upload(
+    where: tuple[str, int], token: str | None, chunk: int, client: int
+) -> tuple[socket.socket, float]:
     """Open a chunked upload from 127.0.1.``client``, send ``chunk`` bytes of it; (the
     socket, seconds until the server closed it, or inf while it stays open)."""
     sock = socket.create_connection(where, timeout=10, source_address=(f"127.0.1.{client}", 0))
@@ -73,8 +74,9 @@ def upload(where: tuple[str, int], token: str | None, chunk: int,
 
 
 def state_latency(where: tuple[str, int], token: str, n: int) -> list[float]:
-    request = (f"GET /api/v1/state HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {token}"
-               "\r\n\r\n").encode()  # fmt: skip
+    request = (
+        f"GET /api/v1/state HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {token}\r\n\r\n"
+    ).encode()
     times = []
     with socket.create_connection(where, timeout=10) as sock:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -128,8 +130,10 @@ def main() -> None:
         rows = []
         for name, who in (("no token (the attack)", None), ("operator token (baseline)", token)):
             grown, closed, still = held(served, who, args.uploads, args.chunk)
-            rows.append(f"| {name} | {args.uploads} | {args.chunk >> 10} | {grown:.1f} | "
-                        f"{closed * 1e3:.1f} | {still} |")  # fmt: skip
+            rows.append(
+                f"| {name} | {args.uploads} | {args.chunk >> 10} | {grown:.1f} | "
+                f"{closed * 1e3:.1f} | {still} |"
+            )
         pairs = [upload(where, None, args.chunk, 1 + i) for i in range(args.uploads)]
         during = state_latency(where, token, 2000)
         for sock, _ in pairs:
@@ -137,8 +141,10 @@ def main() -> None:
         end_rss = rss_mb(served.proc.pid)
     print(f"daemon RSS at start of the measure: {start_rss:.1f} MB; at the end: {end_rss:.1f} MB")
     print()
-    print("| uploads held | n | KiB sent each | RSS growth MB | median ms until closed | "
-          "still open after 1 s |")  # fmt: skip
+    print(
+        "| uploads held | n | KiB sent each | RSS growth MB | median ms until closed | "
+        "still open after 1 s |"
+    )
     print("|---|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
     print()

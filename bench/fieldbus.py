@@ -71,8 +71,13 @@ async def modbus_floor(mock: Mock, rounds: int) -> list[float]:
 
 def canopen_network(mock: Mock) -> canopen.Network:
     network = canopen.Network()
-    network.connect(interface="socketcand", channel="can0", host="127.0.0.1",
-                    port=mock.ports["socketcand"], tcp_tune=True)  # fmt: skip
+    network.connect(
+        interface="socketcand",
+        channel="can0",
+        host="127.0.0.1",
+        port=mock.ports["socketcand"],
+        tcp_tune=True,
+    )
     return network
 
 
@@ -120,8 +125,9 @@ def pdo_floor(mock: Mock, rounds: int) -> list[float]:
         network.disconnect()
 
 
-async def shifts(mock: Mock, backend: str, machine: dict[str, Any], rows: list[int],
-                 rounds: int) -> list[float]:  # fmt: skip
+async def shifts(
+    mock: Mock, backend: str, machine: dict[str, Any], rows: list[int], rounds: int
+) -> list[float]:
     """Shift ``rows`` together by one cell and back, alternately: one execute a round."""
     bus: Fieldbus = open_bus(client_config(backend, mock.ports, machine=machine))
     await bus.connect()
@@ -130,8 +136,10 @@ async def shifts(mock: Mock, backend: str, machine: dict[str, Any], rows: list[i
     signs = [1 if state.occupancy[r, 0] else -1 for r in rows]  # at the left: go right first
 
     async def step() -> None:
-        moves = [AxisMove(a.index, shift_stroke_um(bus.machine, a, k))
-                 for a, k in zip(axes, signs, strict=True)]  # fmt: skip
+        moves = [
+            AxisMove(a.index, shift_stroke_um(bus.machine, a, k))
+            for a, k in zip(axes, signs, strict=True)
+        ]
         await bus.execute(moves)
         signs[:] = [-k for k in signs]
 
@@ -148,8 +156,10 @@ def row(name: str, values: list[float], base: list[float] | None) -> str:
 
 
 def small(rounds: int) -> list[str]:
-    rows = ["| round trip (4 x 4, 11 axes) | n | p50 ms | p99 ms | p50 / floor |",
-            "|---|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| round trip (4 x 4, 11 axes) | n | p50 ms | p99 ms | p50 / floor |",
+        "|---|---:|---:|---:|---:|",
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         mock = start_mock(Path(tmp), {})
         try:
@@ -169,8 +179,10 @@ def small(rounds: int) -> list[str]:
 
 
 def large(rounds: int) -> list[str]:
-    rows = ["| 24 x 24 (51 axes) | n | p50 ms | p99 ms | p50 / one axis |",
-            "|---|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| 24 x 24 (51 axes) | n | p50 ms | p99 ms | p50 / one axis |",
+        "|---|---:|---:|---:|---:|",
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         mock = start_mock(Path(tmp), {}, machine=M24, program=FILL24)
         try:

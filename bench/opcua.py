@@ -42,8 +42,15 @@ from tests.test_daemon import Served  # noqa: E402
 CHANGES_PER_CYCLE = 6  # Resetting, Idle, Starting, Execute, Completing, Complete
 
 
-def read_changes(urls: dict[str, str], token: str, cert: Any, intervals: list[int],
-                 expected: int, results: Any, listening: Any) -> None:  # fmt: skip
+def read_changes(
+    urls: dict[str, str],
+    token: str,
+    cert: Any,
+    intervals: list[int],
+    expected: int,
+    results: Any,
+    listening: Any,
+) -> None:
     """The reader's process: every state change's lag, per channel, until ``expected``."""
     lags: dict[str, list[float]] = {
         "websocket": [],
@@ -103,15 +110,22 @@ async def drive(served: Served, cycles: int) -> None:
 def row(name: str, lags: list[float], base: float) -> str:
     ms = np.array(lags) * 1000
     median = statistics.median(ms)
-    return (f"| {name} | {len(ms)} | {median:.2f} | {np.percentile(ms, 99):.2f} | "
-            f"{ms.max():.2f} | {median / base:.2f} |")  # fmt: skip
+    return (
+        f"| {name} | {len(ms)} | {median:.2f} | {np.percentile(ms, 99):.2f} | "
+        f"{ms.max():.2f} | {median / base:.2f} |"
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=50)
-    parser.add_argument("--intervals", type=int, nargs="+", default=[10, 50, 100],
-                        help="OPC UA publishing intervals (ms)")  # fmt: skip
+    parser.add_argument(
+        "--intervals",
+        type=int,
+        nargs="+",
+        default=[10, 50, 100],
+        help="OPC UA publishing intervals (ms)",
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         tmp = Path(folder)
@@ -127,8 +141,10 @@ def main() -> None:
             spawn = multiprocessing.get_context("spawn")
             results, listening = spawn.Queue(), spawn.Event()
             expected = args.cycles * CHANGES_PER_CYCLE
-            reader = spawn.Process(target=read_changes, args=(served.urls, token, cert,
-                                   args.intervals, expected, results, listening))  # fmt: skip
+            reader = spawn.Process(
+                target=read_changes,
+                args=(served.urls, token, cert, args.intervals, expected, results, listening),
+            )
             reader.start()
             while not listening.is_set():
                 time.sleep(0.01)

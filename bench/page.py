@@ -78,7 +78,10 @@ class Listener(threading.Thread):
                     self.lag.append((now - event["at"]) * 1e3)
                     self.sizes.append(len(text.encode()))
                 if event.get("event") == "state" and event.get("to") in (
-                    "Complete", "Held", "Aborted"):  # fmt: skip
+                    "Complete",
+                    "Held",
+                    "Aborted",
+                ):
                     self.finished.set()
                     return
 
@@ -91,11 +94,17 @@ def serving(program: str, speed: float) -> Iterator[Served]:
         speeds = {"stroke_speed": speed, "takeup_speed": speed}
         mock = start_mock(tmp, speeds, machine=machine_table(), program=program)
         config = tmp / "bwsd.toml"
-        config.write_text(toml({
-            "machine": machine_table(), "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
-            "fieldbus.modbus": {"port": mock.ports["modbus"]},
-            "api": {"port": 0}, "plc": {"port": 0},
-        }))  # fmt: skip
+        config.write_text(
+            toml(
+                {
+                    "machine": machine_table(),
+                    "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0},
+                    "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                    "api": {"port": 0},
+                    "plc": {"port": 0},
+                }
+            )
+        )
         state = state_folder(load_config(config), tmp / "state")
         token = TokenStore.load(tokens_file(load_config(config), state)).add("bench", "operator")
         served = Served(config, state, token)
@@ -110,8 +119,10 @@ def row(name: str, ms: list[float], unit: float = 1.0) -> str:
     if not ms:
         return f"| {name} | 0 | | |"
     values = [v * unit for v in ms]
-    return (f"| {name} | {len(values)} | {statistics.median(values):.1f} | "
-            f"{np.percentile(values, 99):.1f} |")  # fmt: skip
+    return (
+        f"| {name} | {len(values)} | {statistics.median(values):.1f} | "
+        f"{np.percentile(values, 99):.1f} |"
+    )
 
 
 def tenths(values: list[Any]) -> tuple[list[Any], list[Any]]:
@@ -133,8 +144,9 @@ def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
         page.goto(f"{base}/#token={token}")
         page.wait_for_function("() => window.bwsd && window.bwsd.ready", timeout=60_000)
         # the load dry-runs the whole program first: minutes for a large preform
-        loaded = served.http.post("/programs", json={"name": "b.bws", "text": program},
-                                  timeout=3600)  # fmt: skip
+        loaded = served.http.post(
+            "/programs", json={"name": "b.bws", "text": program}, timeout=3600
+        )
         count = int(loaded.raise_for_status().json()["instructions"])
         served.command("reset")
         page.wait_for_function("() => window.bwsd.state === 'Idle'", timeout=60_000)
@@ -142,8 +154,9 @@ def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
         began = time.monotonic()
         while not listener.finished.wait(5):
             done = page.evaluate("window.bwsd.done")
-            print(f"  {done}/{count} instructions, {time.monotonic() - began:.0f} s",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"  {done}/{count} instructions, {time.monotonic() - began:.0f} s", file=sys.stderr
+            )
             if done == count:
                 break
         page.wait_for_function(f"() => window.bwsd.done === {count}", timeout=120_000)
@@ -180,8 +193,10 @@ def main() -> None:
     first, last = tenths(work)
     size_first, size_last = tenths(result["sizes"])
     travel = f"actuators at {args.speed:g} mm/s" if args.speed else "zero travel time"
-    print(f"24x24 braid (624 carriers), {args.cycles} cycles ({count} instructions), {travel}; "
-          f"headless chromium (software WebGL), 1280x800.\n")  # fmt: skip
+    print(
+        f"24x24 braid (624 carriers), {args.cycles} cycles ({count} instructions), {travel}; "
+        f"headless chromium (software WebGL), 1280x800.\n"
+    )
     print("| measure | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
     print(row("instruction event to a Python WebSocket client (baseline)", result["lag"]))
     print(row("instruction event to the page's frame that drew it", hooks["latencies"]))
@@ -192,10 +207,11 @@ def main() -> None:
     print(row(f"page work per frame, first tenth (~{nodes0:,} nodes)", [w["ms"] for w in first]))
     print(row(f"page work per frame, last tenth (~{nodes1:,} nodes)", [w["ms"] for w in last]))
     if first and last:
-        ratio = statistics.median(w["ms"] for w in last) / statistics.median(
-            w["ms"] for w in first)  # fmt: skip
-        print(f"\nPage work per frame, last tenth over first tenth (p50): {ratio:.2f}x "
-              f"for {nodes1 / max(nodes0, 1):.1f}x the nodes.")  # fmt: skip
+        ratio = statistics.median(w["ms"] for w in last) / statistics.median(w["ms"] for w in first)
+        print(
+            f"\nPage work per frame, last tenth over first tenth (p50): {ratio:.2f}x "
+            f"for {nodes1 / max(nodes0, 1):.1f}x the nodes."
+        )
     if size_first and size_last:
         print(
             f"Instruction event size, p50: {statistics.median(size_first) / 1e3:.1f} kB "
@@ -209,11 +225,15 @@ def main() -> None:
     )
     stats = hooks.get("stats")
     if stats:
-        print(f"Settled image: drawn whole {len(stats['images'])} times, split from scratch "
-              f"{stats['splits']} times, {stats['increments']} incremental draws.")  # fmt: skip
+        print(
+            f"Settled image: drawn whole {len(stats['images'])} times, split from scratch "
+            f"{stats['splits']} times, {stats['increments']} incremental draws."
+        )
     if result["listener"]:
-        print(f"The baseline client's stream ended early ({result['listener']}): its row "
-              f"covers {len(result['lag'])} of {count} instructions.")  # fmt: skip
+        print(
+            f"The baseline client's stream ended early ({result['listener']}): its row "
+            f"covers {len(result['lag'])} of {count} instructions."
+        )
 
 
 if __name__ == "__main__":

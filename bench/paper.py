@@ -84,9 +84,11 @@ def reference_seconds(machine: Machine, program: Program) -> float:
 
 
 def paper_table(repeat: int, reference: bool) -> list[str]:
-    rows = ["| case | example | yarns | instructions | interferences (paper) | contacts (bwsd) "
-            "| nodes (bwsd) | bwsd median s | p99 s | reference s |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| case | example | yarns | instructions | interferences (paper) | contacts (bwsd) "
+        "| nodes (bwsd) | bwsd median s | p99 s | reference s |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for case in CASES:
         machine, program = load(case.stem)
         twin = simulate(machine, program)
@@ -114,34 +116,40 @@ def preform(stem: str) -> dict[str, Any]:
     named = section_header((ROOT / "examples" / f"{stem}.bws").read_text(encoding="utf-8"))
     takeups = takeups_of(program)
     if named is None:
-        return metrics(simulate(machine, program).skeleton(), program.cycle_length,
-                       takeups=takeups)  # fmt: skip
+        return metrics(simulate(machine, program).skeleton(), program.cycle_length, takeups=takeups)
     twin, visits = simulate_with_visits(machine, program, named.section)
-    return metrics(twin.skeleton(), program.cycle_length, takeups=takeups, named=named,
-                   visits=visits)  # fmt: skip
+    return metrics(
+        twin.skeleton(), program.cycle_length, takeups=takeups, named=named, visits=visits
+    )
 
 
 def preform_table() -> list[str]:
-    rows = ["| example | contact groups | yarns without contact | carriers mixed | K reached "
-            "| K of the rule | measuring band z mm | width mm | thickness mm |",
-            "|---|---:|---:|---|---|---|---|---:|---:|"]  # fmt: skip
+    rows = [
+        "| example | contact groups | yarns without contact | carriers mixed | K reached "
+        "| K of the rule | measuring band z mm | width mm | thickness mm |",
+        "|---|---:|---:|---|---|---|---|---:|---:|",
+    ]
     for case in CASES:
         m = preform(case.stem)
         mix, sec = m["mixing"], m["section"]
         mixed = f"{mix['complete']} of {mix['carriers']}" if mix else "(no section)"
         k = ("no" if mix["k"] is None else f"cycle {mix['k']}") if mix else ""
         band = f"{sec['z'][0]:.1f} to {sec['z'][1]:.1f}"
-        rows.append(f"| {case.stem} | {m['groups']['count']} | {m['unconnected']['count']} "
-                    f"| {mixed} | {k} | {rule_k(case.stem)} | {band} "
-                    f"| {sec['width']:.1f} | {sec['thickness']:.1f} |")  # fmt: skip
+        rows.append(
+            f"| {case.stem} | {m['groups']['count']} | {m['unconnected']['count']} "
+            f"| {mixed} | {k} | {rule_k(case.stem)} | {band} "
+            f"| {sec['width']:.1f} | {sec['thickness']:.1f} |"
+        )
     return rows
 
 
 def formed_table() -> list[str]:
     """The formed zone of each example: its warp angle, interpenetration, volume fraction."""
-    rows = ["| example | formed cycles | formed z mm | warp angle | whole-skeleton warp angle "
-            "| within d of another yarn | worst mm | p95 mm | yarn volume fraction |",
-            "|---|---|---|---:|---:|---:|---:|---:|---|"]  # fmt: skip
+    rows = [
+        "| example | formed cycles | formed z mm | warp angle | whole-skeleton warp angle "
+        "| within d of another yarn | worst mm | p95 mm | yarn volume fraction |",
+        "|---|---|---|---:|---:|---:|---:|---:|---|",
+    ]
     for case in CASES:
         m = preform(case.stem)
         zone, over = m["formed"], m["interpenetration"]["formed"]["all"]
@@ -149,11 +157,13 @@ def formed_table() -> list[str]:
             rows.append(f"| {case.stem} | none: {zone['reason']} | | | | | | | |")
             continue
         fractions = ", ".join(f"{100 * h['fraction']:.1f}" for h in m["volume_fraction"])
-        rows.append(f"| {case.stem} | {zone['cycles'][0]} to {zone['cycles'][1]} "
-                    f"| {zone['z'][0]:.1f} to {zone['z'][1]:.1f} "
-                    f"| {m['angles']['warp']['all']['mean']:.1f} "
-                    f"| {m['skeleton_angles']['warp']['mean']:.1f} | {100 * over['share']:.1f} % "
-                    f"| {over['worst']:.2f} | {over['p95']:.2f} | {fractions} % |")  # fmt: skip
+        rows.append(
+            f"| {case.stem} | {zone['cycles'][0]} to {zone['cycles'][1]} "
+            f"| {zone['z'][0]:.1f} to {zone['z'][1]:.1f} "
+            f"| {m['angles']['warp']['all']['mean']:.1f} "
+            f"| {m['skeleton_angles']['warp']['mean']:.1f} | {100 * over['share']:.1f} % "
+            f"| {over['worst']:.2f} | {over['p95']:.2f} | {fractions} % |"
+        )
     return rows
 
 
@@ -164,19 +174,39 @@ MACHINE = {"pitch": 10.0, "d_mat": 100.0, "c_mat": 0.4, "diameter": 1.0}
 L_CHOSEN = {"flange": (3, 8), "web": (7, 3), "takeup": 6.0}
 U_CHOSEN = {"layers": 3, "warps": 6, "leg": 2, "base": 2, "takeup": 3.0}
 L_AROUND: list[dict[str, Any]] = [
-    {}, {"flange": (3, 7), "web": (7, 4)}, {"flange": (5, 8), "web": (3, 3)},
-    {"flange": (5, 5), "web": (7, 4)}, {"flange": (2, 11), "web": (7, 3)},
-    {"flange": (3, 10), "web": (6, 2)}, {"flange": (3, 7), "web": (7, 3)},
-    {"flange": (3, 8), "web": (6, 4)}, {"takeup": 5.0}, {"takeup": 8.0},
-    {"takeup": 3.0}, {"diameter": 0.8}, {"diameter": 1.2}, {"c_mat": 0.35},
-    {"c_mat": 0.45}, {"d_mat": 110.0}, {"segments": False}, {"cycles": 10},
-]  # fmt: skip
+    {},
+    {"flange": (3, 7), "web": (7, 4)},
+    {"flange": (5, 8), "web": (3, 3)},
+    {"flange": (5, 5), "web": (7, 4)},
+    {"flange": (2, 11), "web": (7, 3)},
+    {"flange": (3, 10), "web": (6, 2)},
+    {"flange": (3, 7), "web": (7, 3)},
+    {"flange": (3, 8), "web": (6, 4)},
+    {"takeup": 5.0},
+    {"takeup": 8.0},
+    {"takeup": 3.0},
+    {"diameter": 0.8},
+    {"diameter": 1.2},
+    {"c_mat": 0.35},
+    {"c_mat": 0.45},
+    {"d_mat": 110.0},
+    {"segments": False},
+    {"cycles": 10},
+]
 U_AROUND: list[dict[str, Any]] = [
-    {}, {"warps": 5}, {"warps": 7}, {"layers": 4, "warps": 5}, {"takeup": 2.5},
-    {"takeup": 3.5}, {"takeup": 4.0}, {"diameter": 0.9}, {"diameter": 1.2},
-    {"c_mat": 0.45}, {"c_mat": 0.5},
+    {},
+    {"warps": 5},
+    {"warps": 7},
+    {"layers": 4, "warps": 5},
+    {"takeup": 2.5},
+    {"takeup": 3.5},
+    {"takeup": 4.0},
+    {"diameter": 0.9},
+    {"diameter": 1.2},
+    {"c_mat": 0.45},
+    {"c_mat": 0.5},
     {"takeup": 5.0, "c_mat": 0.6},  # the weave-3d defaults
-]  # fmt: skip
+]
 
 
 def _braid(change: dict[str, Any]) -> Generated:
@@ -192,13 +222,16 @@ def _weave(change: dict[str, Any]) -> Generated:
 def _changed(change: dict[str, Any]) -> str:
     if not change:
         return "**chosen**"
-    return ", ".join(f"{k} {'x'.join(map(str, v)) if isinstance(v, tuple) else v}"
-                     for k, v in change.items())  # fmt: skip
+    return ", ".join(
+        f"{k} {'x'.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in change.items()
+    )
 
 
 def neighbours_table() -> list[str]:
-    rows = ["| case | change from the chosen | warps | instructions | contacts "
-            "| against the paper |", "|---|---|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| case | change from the chosen | warps | instructions | contacts | against the paper |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
     for case, make, around in ((CASES[0], _braid, L_AROUND), (CASES[1], _weave, U_AROUND)):
         for change in around:
             try:
@@ -210,12 +243,16 @@ def neighbours_table() -> list[str]:
             try:
                 twin: Twin = simulate(generated.machine, program)
             except JamError as exc:
-                rows.append(f"| {case.stem} | {_changed(change)} | {len(program.fill)} "
-                            f"| refused: a jam at instruction {exc.instruction} | | |")  # fmt: skip
+                rows.append(
+                    f"| {case.stem} | {_changed(change)} | {len(program.fill)} "
+                    f"| refused: a jam at instruction {exc.instruction} | | |"
+                )
                 continue
             delta = twin.contact_count - case.interferences
-            rows.append(f"| {case.stem} | {_changed(change)} | {len(program.fill)} "
-                        f"| {twin.done} | {twin.contact_count} | {delta:+d} |")  # fmt: skip
+            rows.append(
+                f"| {case.stem} | {_changed(change)} | {len(program.fill)} "
+                f"| {twin.done} | {twin.contact_count} | {delta:+d} |"
+            )
             print(rows[-1], file=sys.stderr)
     return rows
 
@@ -224,13 +261,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeat", type=int, default=20)
     parser.add_argument("--skip", default="", help="comma list: reference,preform")
-    parser.add_argument("--neighbours", action="store_true",
-                        help="also the sizes and settings around the chosen ones")  # fmt: skip
+    parser.add_argument(
+        "--neighbours",
+        action="store_true",
+        help="also the sizes and settings around the chosen ones",
+    )
     args = parser.parse_args()
     skip = set(filter(None, args.skip.split(",")))
     pinned = one_core()
-    print(f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
-          f"{pinned}, {args.repeat} runs each\n")  # fmt: skip
+    print(
+        f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
+        f"{pinned}, {args.repeat} runs each\n"
+    )
     print("### The paper's case studies against bwsd\n")
     print("\n".join(paper_table(args.repeat, "reference" not in skip)) + "\n")
     if "preform" not in skip:

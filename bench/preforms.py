@@ -42,10 +42,17 @@ def _pct(value: float | None) -> str:
 
 def overlap_row(stem: str, m: dict[str, Any]) -> str:
     whole, formed = m["interpenetration"]["skeleton"]["all"], m["interpenetration"]["formed"]["all"]
-    cells = [stem, f"{m['diameter']:g}", f"{whole['length']:.0f}", _pct(whole["share"]),
-             f"{whole['worst']:.3f}", f"{whole['p95']:.3f}", _pct(formed["share"]),
-             f"{formed['worst']:.3f}" if formed["length"] else "",
-             f"{formed['p95']:.3f}" if formed["length"] else ""]  # fmt: skip
+    cells = [
+        stem,
+        f"{m['diameter']:g}",
+        f"{whole['length']:.0f}",
+        _pct(whole["share"]),
+        f"{whole['worst']:.3f}",
+        f"{whole['p95']:.3f}",
+        _pct(formed["share"]),
+        f"{formed['worst']:.3f}" if formed["length"] else "",
+        f"{formed['p95']:.3f}" if formed["length"] else "",
+    ]
     return "| " + " | ".join(cells) + " |"
 
 
@@ -61,23 +68,34 @@ def formed_row(stem: str, m: dict[str, Any]) -> str:
     fractions = ", ".join(f"{100 * h['fraction']:.1f}" for h in m["volume_fraction"])
     wefts = m["wefts"]["contacts"]
     held = "" if wefts is None else f"{wefts['min']}, {wefts['median']:g}"
-    cells = [stem, f"{zone['cycles'][0]} to {zone['cycles'][1]}",
-             f"{zone['z'][0]:.1f} to {zone['z'][1]:.1f}", _angle(warp["all"]),
-             _angle(warp["interior"]), _angle(warp["surface"]),
-             f"{m['skeleton_angles']['warp']['mean']:.1f}", fractions + " %", held]  # fmt: skip
+    cells = [
+        stem,
+        f"{zone['cycles'][0]} to {zone['cycles'][1]}",
+        f"{zone['z'][0]:.1f} to {zone['z'][1]:.1f}",
+        _angle(warp["all"]),
+        _angle(warp["interior"]),
+        _angle(warp["surface"]),
+        f"{m['skeleton_angles']['warp']['mean']:.1f}",
+        fractions + " %",
+        held,
+    ]
     return "| " + " | ".join(cells) + " |"
 
 
 def main() -> None:
     found = {stem: measured(stem) for stem in STEMS}
-    print("| example | d mm | yarn mm | within d of another yarn | worst mm | p95 mm "
-          "| formed: within d | formed: worst mm | formed: p95 mm |")  # fmt: skip
+    print(
+        "| example | d mm | yarn mm | within d of another yarn | worst mm | p95 mm "
+        "| formed: within d | formed: worst mm | formed: p95 mm |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for stem in STEMS:
         print(overlap_row(stem, found[stem]))
-    print("\n| example | formed cycles | formed z mm | warp angle | interior | surface "
-          "| whole-skeleton angle | yarn volume fraction at 1/4, 1/2, 3/4 | weft contacts "
-          "min, median |")  # fmt: skip
+    print(
+        "\n| example | formed cycles | formed z mm | warp angle | interior | surface "
+        "| whole-skeleton angle | yarn volume fraction at 1/4, 1/2, 3/4 | weft contacts "
+        "min, median |"
+    )
     print("|---|---|---|---:|---:|---:|---:|---|---|")
     for stem in STEMS:
         print(formed_row(stem, found[stem]))

@@ -51,13 +51,22 @@ QUICK = {"stroke_speed": 200.0, "takeup_speed": 200.0}
 
 def config_file(tmp: Path, mock: Mock, backend: str = "modbus") -> Path:
     path = tmp / "bwsd.toml"
-    path.write_text(toml({
-        "machine": MACHINE, "fieldbus": {"backend": backend, **BUS, "timeout": 30.0},
-        "fieldbus.modbus": {"port": mock.ports["modbus"]},
-        "fieldbus.canopen": {"interface": "socketcand", "port": mock.ports["socketcand"],
-                             "heartbeat_ms": 50},
-        "api": {"port": 0}, "plc": {"port": 0, "enabled": False},
-    }))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": MACHINE,
+                "fieldbus": {"backend": backend, **BUS, "timeout": 30.0},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "fieldbus.canopen": {
+                    "interface": "socketcand",
+                    "port": mock.ports["socketcand"],
+                    "heartbeat_ms": 50,
+                },
+                "api": {"port": 0},
+                "plc": {"port": 0, "enabled": False},
+            }
+        )
+    )
     return path
 
 
@@ -98,8 +107,12 @@ def resume(served: Served) -> None:
         state = served.state()
         if state["name"] == "Execute":
             return
-        step = {"Aborted": ("clear", {}), "Stopped": ("reset", {}), "Held": ("unhold", {}),
-                "Idle": ("start", {"resume": state["resumable"]})}.get(state["name"])  # fmt: skip
+        step = {
+            "Aborted": ("clear", {}),
+            "Stopped": ("reset", {}),
+            "Held": ("unhold", {}),
+            "Idle": ("start", {"resume": state["resumable"]}),
+        }.get(state["name"])
         if step is not None:
             served.http.post(f"/commands/{step[0]}", json=step[1])
         time.sleep(0.02)
@@ -122,8 +135,9 @@ def cut(served: Served, mock: Mock, command: str, rng: random.Random) -> tuple[f
 
 def aborts(count: int) -> dict[str, list[float]]:
     rng = random.Random(27)
-    out: dict[str, list[float]] = {k: [] for k in ("abort", "abort answer", "stop",
-                                                   "stop answer", "hold answer")}  # fmt: skip
+    out: dict[str, list[float]] = {
+        k: [] for k in ("abort", "abort answer", "stop", "stop answer", "hold answer")
+    }
     with serving(SLOW) as ([mock], served):
         served.command("start")
         for n in range(count):
@@ -176,16 +190,18 @@ def losses(count: int, backend: str, how: str = "kill") -> list[float]:
             if how == "kill":
                 mock.proc.kill()
             else:
-                asyncio.run(request("127.0.0.1", mock.ports["control"],
-                                    {"cmd": "fault", "kind": "mute"}))  # fmt: skip
+                asyncio.run(
+                    request("127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "mute"})
+                )
             while served.state()["name"] == "Execute":
                 time.sleep(0.005)
             took.append(time.monotonic() - lost)
             if how == "kill":
                 mock.proc.wait(10)
                 mock.stop()
-                mock = start_mock(Path(served.log).parent, {**QUICK, "state_file": "loom.json"},
-                                  mock.ports)  # fmt: skip
+                mock = start_mock(
+                    Path(served.log).parent, {**QUICK, "state_file": "loom.json"}, mock.ports
+                )
                 looms[0] = mock
             else:
                 asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "clear"}))
@@ -197,8 +213,10 @@ def row(name: str, values: list[float], target: str = "") -> str:
     ms = [v * 1e3 for v in values if v == v]
     if not ms:
         return f"| {name} | 0 | | | | {target} |"
-    return (f"| {name} | {len(ms)} | {statistics.median(ms):.1f} | {np.percentile(ms, 99):.1f} "
-            f"| {max(ms):.1f} | {target} |")  # fmt: skip
+    return (
+        f"| {name} | {len(ms)} | {statistics.median(ms):.1f} | {np.percentile(ms, 99):.1f} "
+        f"| {max(ms):.1f} | {target} |"
+    )
 
 
 def main() -> None:

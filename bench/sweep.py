@@ -87,8 +87,15 @@ def split(candidate: Candidate) -> tuple[float, float] | None:
     arrays = Arrays.of(sk)
     band = section(sk, arrays)
     z = None if band is None else (band["z"][0] + band["z"][1]) / 2
-    metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
-            visits=visits, arrays=arrays)  # fmt: skip
+    metrics(
+        sk,
+        program.cycle_length,
+        takeups=takeups_of(program),
+        z=z,
+        named=named,
+        visits=visits,
+        arrays=arrays,
+    )
     return twin_s, time.perf_counter() - start
 
 
@@ -102,11 +109,15 @@ def split_table(candidates: list[Candidate], repeat: int) -> None:
     )
     print("|---|---:|---:|---:|")
     print(f"| the twin alone: simulate (baseline) | {len(twin)} | {' | '.join(ms(twin))} |")
-    print(f"| the metrics alone: skeleton, section, metrics() | {len(metric)} | "
-          f"{' | '.join(ms(metric))} |")  # fmt: skip
+    print(
+        f"| the metrics alone: skeleton, section, metrics() | {len(metric)} | "
+        f"{' | '.join(ms(metric))} |"
+    )
     ratio = statistics.median(m / t for t, m in runs)
-    print(f"\n- Metrics over the twin, median of the candidates' own ratios: {ratio:.2f}x "
-          "(target: at most 1x).\n")  # fmt: skip
+    print(
+        f"\n- Metrics over the twin, median of the candidates' own ratios: {ratio:.2f}x "
+        "(target: at most 1x).\n"
+    )
 
 
 def in_process(candidate: Candidate) -> float:
@@ -156,13 +167,19 @@ def table(size: int, cycles: list[int], repeat: int) -> None:
     full = [in_process(c) for _ in range(repeat) for c in candidates]
     runs = {w: [sweep(the_spec, w) for _ in range(repeat)] for w in (1, 2)}
     plains = {w: statistics.median(plain(candidates, w) for _ in range(repeat)) for w in (1, 2)}
-    print(f"### {n} candidates: braid4 {size} x {size}, cycles {cycles}, 8 take-ups, "
-          f"3 c_mat; {repeat} repeats\n")  # fmt: skip
+    print(
+        f"### {n} candidates: braid4 {size} x {size}, cycles {cycles}, 8 take-ups, "
+        f"3 c_mat; {repeat} repeats\n"
+    )
     print("| per candidate | n | p50 ms | p99 ms |\n|---|---:|---:|---:|")
-    print(f"| bare twin run: generate, parse, simulate (baseline) | {len(base)} | "
-          f"{' | '.join(ms(base))} |")  # fmt: skip
-    print(f"| in-process candidate: the same and the metrics | {len(full)} | "
-          f"{' | '.join(ms(full))} |\n")  # fmt: skip
+    print(
+        f"| bare twin run: generate, parse, simulate (baseline) | {len(base)} | "
+        f"{' | '.join(ms(base))} |"
+    )
+    print(
+        f"| in-process candidate: the same and the metrics | {len(full)} | "
+        f"{' | '.join(ms(full))} |\n"
+    )
     print(
         "| sweep (local cluster) | wall s | cluster start s | running s | candidates/s "
         "(wall) | candidates/s (running) | running, vs 1 process | a candidate in its "
@@ -172,18 +189,23 @@ def table(size: int, cycles: list[int], repeat: int) -> None:
     one = statistics.median(r[2] for r in runs[1])
     for w in (1, 2):
         wall, start, running, own = (statistics.median(r[i] for r in runs[w]) for i in range(4))
-        print(f"| {w} process{'es' * (w > 1)} | {wall:.2f} | {start:.2f} | {running:.2f} | "
-              f"{n / wall:.1f} | {n / running:.1f} | {one / running:.2f}x | "
-              f"{1e3 * own:.2f} |")  # fmt: skip
+        print(
+            f"| {w} process{'es' * (w > 1)} | {wall:.2f} | {start:.2f} | {running:.2f} | "
+            f"{n / wall:.1f} | {n / running:.1f} | {one / running:.2f}x | "
+            f"{1e3 * own:.2f} |"
+        )
     for w in (1, 2):
         name, seconds = f"no Dask: {w} plain process{'es' * (w > 1)} (ceiling)", plains[w]
-        print(f"| {name} | | | {seconds:.2f} | | {n / seconds:.1f} | "
-              f"{plains[1] / seconds:.2f}x | |")  # fmt: skip
+        print(
+            f"| {name} | | | {seconds:.2f} | | {n / seconds:.1f} | {plains[1] / seconds:.2f}x | |"
+        )
     bare_s, full_s, per = statistics.median(base), statistics.median(full), one / n
-    print(f"\n- Per candidate on 1 process (running time / {n}): {1e3 * per:.2f} ms; over "
-          f"the bare twin run ({1e3 * bare_s:.2f} ms): {1e3 * (per - bare_s):.2f} ms more "
-          f"({per / bare_s:.2f}x), of which the metrics {1e3 * (full_s - bare_s):.2f} ms and "
-          f"Dask, pickling and the row log {1e3 * (per - full_s):.2f} ms.\n")  # fmt: skip
+    print(
+        f"\n- Per candidate on 1 process (running time / {n}): {1e3 * per:.2f} ms; over "
+        f"the bare twin run ({1e3 * bare_s:.2f} ms): {1e3 * (per - bare_s):.2f} ms more "
+        f"({per / bare_s:.2f}x), of which the metrics {1e3 * (full_s - bare_s):.2f} ms and "
+        f"Dask, pickling and the row log {1e3 * (per - full_s):.2f} ms.\n"
+    )
     split_table(candidates, repeat)
 
 

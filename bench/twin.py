@@ -82,9 +82,11 @@ def predict_times(machine: Machine, program: Program) -> list[float]:
 
 def examples_table(repeat: int) -> tuple[list[str], dict[str, tuple[int, float]]]:
     """The table, and each example's contacts and median simulate time (for the paper line)."""
-    rows = ["| example | yarns | instructions | contacts | simulate median s | p99 s "
-            "| predict p50 ms | p99 ms | max ms |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| example | yarns | instructions | contacts | simulate median s | p99 s "
+        "| predict p50 ms | p99 ms | max ms |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     measured: dict[str, tuple[int, float]] = {}
     for stem in EXAMPLES:
         machine, program = load(stem)
@@ -110,30 +112,41 @@ def run_reference(machine: Machine, program: Program) -> RefTwin:
 
 
 def reference_table(repeat: int) -> list[str]:
-    rows = ["| program | contacts | reference s | twin median s | speed-up | target |",
-            "|---|---:|---:|---:|---:|---|"]  # fmt: skip
+    rows = [
+        "| program | contacts | reference s | twin median s | speed-up | target |",
+        "|---|---:|---:|---:|---:|---|",
+    ]
     cases: list[tuple[str, Machine, Program, str]] = [
         (stem, *load(stem), "at least 3000x" if stem == "braid-2x2" else "")
         for stem in REFERENCE_CASES
     ]
     generated = braid4(4, 4, cycles=10)
-    cases.append(("braid4 4x4, 24 carriers", generated.machine,
-                  parse_program(generated.program), "twin under 20 ms"))  # fmt: skip
+    cases.append(
+        (
+            "braid4 4x4, 24 carriers",
+            generated.machine,
+            parse_program(generated.program),
+            "twin under 20 ms",
+        )
+    )
     for name, machine, program, target in cases:
         start = time.perf_counter()
         ref = run_reference(machine, program)
         ref_s = time.perf_counter() - start
         times = timed(lambda m=machine, p=program: simulate(m, p), repeat)  # type: ignore[misc]
         fast = statistics.median(times)
-        rows.append(f"| {name} | {len(ref.contacts)} | {ref_s:.3f} | {fast:.5f} "
-                    f"| {ref_s / fast:.0f}x | {target} |")  # fmt: skip
+        rows.append(
+            f"| {name} | {len(ref.contacts)} | {ref_s:.3f} | {fast:.5f} "
+            f"| {ref_s / fast:.0f}x | {target} |"
+        )
         print(rows[-1], file=sys.stderr)
     return rows
 
 
 def big_braid(cycles: int) -> tuple[Machine, Program]:
-    generated = braid4(24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
-                       diameter=0.5)  # fmt: skip
+    generated = braid4(
+        24, 24, cycles=cycles, takeup=8.0, pitch=10.0, d_mat=300.0, c_mat=0.3, diameter=0.5
+    )
     return generated.machine, parse_program(generated.program)
 
 
@@ -141,9 +154,11 @@ def latency_table(checkpoints: list[int], samples: int) -> list[str]:
     machine, program = big_braid(max(checkpoints) + samples)
     per_cycle = program.cycle_length or 1
     twin = Twin.from_program(machine, program)
-    rows = ["| cycle | p50 ms | p99 ms | max ms | p99 / p99 at first | contacts | nodes "
-            "| RSS MB | snapshot MB | snapshot ms | restore ms |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    rows = [
+        "| cycle | p50 ms | p99 ms | max ms | p99 / p99 at first | contacts | nodes "
+        "| RSS MB | snapshot MB | snapshot ms | restore ms |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     first = 0.0
     for cycle in checkpoints:
         while twin.done < cycle * per_cycle:
@@ -163,10 +178,12 @@ def latency_table(checkpoints: list[int], samples: int) -> list[str]:
         start = time.perf_counter()
         Twin.from_snapshot(machine, Snapshot.from_bytes(data))
         restored = time.perf_counter() - start
-        rows.append(f"| {cycle} | {statistics.median(lat):.2f} | {p99(lat):.2f} | {max(lat):.2f} "
-                    f"| {p99(lat) / first:.2f} | {twin.contact_count} | {twin.node_count} "
-                    f"| {rss:.0f} | {len(data) / 2**20:.1f} | {1e3 * taken:.0f} "
-                    f"| {1e3 * restored:.0f} |")  # fmt: skip
+        rows.append(
+            f"| {cycle} | {statistics.median(lat):.2f} | {p99(lat):.2f} | {max(lat):.2f} "
+            f"| {p99(lat) / first:.2f} | {twin.contact_count} | {twin.node_count} "
+            f"| {rss:.0f} | {len(data) / 2**20:.1f} | {1e3 * taken:.0f} "
+            f"| {1e3 * restored:.0f} |"
+        )
         print(rows[-1], file=sys.stderr)
     return rows
 
@@ -205,13 +222,18 @@ def responsiveness_table(seconds: float) -> list[str]:
     busy = asyncio.run(_lateness(seconds))
     stop.set()
     worker.join()
-    rows = ["| event loop | timer late p50 ms | p99 ms | max ms | predicts meanwhile | target |",
-            "|---|---:|---:|---:|---:|---|"]  # fmt: skip
-    for name, late, count, target in (("idle (baseline)", idle, 0, ""),
-                                      ("a 24x24 predict always running in a thread", busy,
-                                       predicts[0], "p99 under 2 ms")):  # fmt: skip
-        rows.append(f"| {name} | {statistics.median(late):.3f} | {p99(late):.3f} "
-                    f"| {max(late):.3f} | {count} | {target} |")  # fmt: skip
+    rows = [
+        "| event loop | timer late p50 ms | p99 ms | max ms | predicts meanwhile | target |",
+        "|---|---:|---:|---:|---:|---|",
+    ]
+    for name, late, count, target in (
+        ("idle (baseline)", idle, 0, ""),
+        ("a 24x24 predict always running in a thread", busy, predicts[0], "p99 under 2 ms"),
+    ):
+        rows.append(
+            f"| {name} | {statistics.median(late):.3f} | {p99(late):.3f} "
+            f"| {max(late):.3f} | {count} | {target} |"
+        )
         print(rows[-1], file=sys.stderr)
     return rows
 
@@ -222,12 +244,15 @@ def main() -> None:
     parser.add_argument("--cycles", default="10,100", help="latency checkpoints (24x24 braid)")
     parser.add_argument("--samples", type=int, default=10, help="cycles measured per checkpoint")
     parser.add_argument("--seconds", type=float, default=5.0, help="per responsiveness run")
-    parser.add_argument("--skip", default="",
-                        help="comma list: examples,reference,latency,responsiveness")  # fmt: skip
+    parser.add_argument(
+        "--skip", default="", help="comma list: examples,reference,latency,responsiveness"
+    )
     args = parser.parse_args()
     skip = set(filter(None, args.skip.split(",")))
-    print(f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
-          f"switch interval {sys.getswitchinterval() * 1e3:g} ms\n")  # fmt: skip
+    print(
+        f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
+        f"switch interval {sys.getswitchinterval() * 1e3:g} ms\n"
+    )
     if "examples" not in skip:
         print("### Examples\n")
         rows, _ = examples_table(args.repeat)

@@ -199,15 +199,20 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
         return _point(where, value)
     if isinstance(spec, Flag):
         if not isinstance(value, bool):
-            raise ConfigError(f"must be true or false, got {value!r}", path=path, table=table,
-                              key=key)  # fmt: skip
+            raise ConfigError(
+                f"must be true or false, got {value!r}", path=path, table=table, key=key
+            )
         return value
     if isinstance(spec, Text):
         if not isinstance(value, str):
             raise ConfigError(f"must be a string, got {value!r}", path=path, table=table, key=key)
         if spec.choices and value not in spec.choices:
-            raise ConfigError(f"must be one of {', '.join(spec.choices)}, got {value!r}",
-                              path=path, table=table, key=key)  # fmt: skip
+            raise ConfigError(
+                f"must be one of {', '.join(spec.choices)}, got {value!r}",
+                path=path,
+                table=table,
+                key=key,
+            )
         return value
     if isinstance(value, Decimal | float):
         value = _exact_number(where, value)
@@ -216,23 +221,32 @@ def _value(where: tuple[str, str, str], value: Any, spec: Spec) -> Any:
     if spec.kind is int and not isinstance(value, int):
         raise ConfigError(f"must be an integer, got {value!r}", path=path, table=table, key=key)
     if not spec.low <= value <= spec.high:
-        raise ConfigError(f"must lie in [{spec.low:g}, {spec.high:g}], got {value!r}",
-                          path=path, table=table, key=key)  # fmt: skip
+        raise ConfigError(
+            f"must lie in [{spec.low:g}, {spec.high:g}], got {value!r}",
+            path=path,
+            table=table,
+            key=key,
+        )
     return spec.kind(value)
 
 
 def _segments(where: tuple[str, str, str], value: Any) -> tuple[Segment, ...]:
     path, table, key = where
     if not isinstance(value, list):
-        raise ConfigError('must be a list of segments like "ROW 3[0..3]"', path=path,
-                          table=table, key=key)  # fmt: skip
+        raise ConfigError(
+            'must be a list of segments like "ROW 3[0..3]"', path=path, table=table, key=key
+        )
     found = []
     for i, text in enumerate(value):
         match = _SEGMENT.fullmatch(text) if isinstance(text, str) else None
         if match is None:
-            raise ConfigError(f'entry {i + 1}: {str(text)[:40]!r} is not a segment like '
-                              '"ROW 3[0..3]" or "COL 2[4..9]"', path=path, table=table,
-                              key=key)  # fmt: skip
+            raise ConfigError(
+                f"entry {i + 1}: {str(text)[:40]!r} is not a segment like "
+                '"ROW 3[0..3]" or "COL 2[4..9]"',
+                path=path,
+                table=table,
+                key=key,
+            )
         axis: Literal["row", "col"] = "row" if match[1].lower() == "row" else "col"
         found.append(Segment(axis, int(match[2]), int(match[3]), int(match[4])))
     return tuple(found)
@@ -284,8 +298,9 @@ def _table(raw: Any, name: str, path: str) -> dict[str, Any]:
         if f"{name}.{key}" in SCHEMA:
             continue  # a sub-table, validated on its own
         if key not in spec:
-            raise ConfigError(f"unknown key (known: {', '.join(spec)})", path=path, table=name,
-                              key=key)  # fmt: skip
+            raise ConfigError(
+                f"unknown key (known: {', '.join(spec)})", path=path, table=name, key=key
+            )
         out[key] = _value((path, name, key), value, spec[key])
     for key, key_spec in spec.items():
         if key not in out:
@@ -356,24 +371,36 @@ def _check_geometry(machine: Machine, path: str) -> None:
     except TwinError as exc:
         raise ConfigError(str(exc), path=path, table="machine") from None
     if 0 < machine.yarn_diameter < float(MIN_LENGTH):
-        raise ConfigError(f"must be 0 or at least {float(MIN_LENGTH):g} mm", path=path,
-                          table="yarn", key="diameter")  # fmt: skip
+        raise ConfigError(
+            f"must be 0 or at least {float(MIN_LENGTH):g} mm",
+            path=path,
+            table="yarn",
+            key="diameter",
+        )
 
 
 def _check_modbus_map(machine: Machine, path: str) -> None:
     """Occupancy sensors are discrete inputs 0 .. R*C-1 (e-stop R*C); an axis block per row,
     column, weft and take-up axis and segment, ending at holding register 65535."""
     if machine.rows * machine.cols > MODBUS_MAX_CELLS:
-        raise ConfigError(f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
-                          f"most {MODBUS_MAX_CELLS}", path=path, table="fieldbus",
-                          key="backend")  # fmt: skip
+        raise ConfigError(
+            f"{machine.rows * machine.cols} cells: the Modbus map addresses at "
+            f"most {MODBUS_MAX_CELLS}",
+            path=path,
+            table="fieldbus",
+            key="backend",
+        )
     axes = axis_count(machine)
     if axes > MODBUS_MAX_AXES:  # only segments get there while rows and cols are <= 1000
-        raise ConfigError(f"the Modbus map addresses at most {MODBUS_MAX_AXES} axes, the machine "
-                          f"has {axes} ({machine.rows} rows, {machine.cols} cols, "
-                          f"{3 + len(machine.weft_axes)} weft and take-up axes, "
-                          f"{len(machine.segments)} segments)", path=path,
-                          table="machine", key="segments" if machine.segments else "")  # fmt: skip
+        raise ConfigError(
+            f"the Modbus map addresses at most {MODBUS_MAX_AXES} axes, the machine "
+            f"has {axes} ({machine.rows} rows, {machine.cols} cols, "
+            f"{3 + len(machine.weft_axes)} weft and take-up axes, "
+            f"{len(machine.segments)} segments)",
+            path=path,
+            table="machine",
+            key="segments" if machine.segments else "",
+        )
 
 
 def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) -> None:
@@ -384,11 +411,19 @@ def _check_canopen_ids(table: Mapping[str, Any], machine: Machine, path: str) ->
     last = table["node_base"] + axes - 1
     if last > 127:
         what = f" ({len(machine.segments)} of them segments)" if machine.segments else ""
-        raise ConfigError(f"{axes} axes{what} from node {table['node_base']} pass node id 127",
-                          path=path, table="fieldbus.canopen", key="node_base")  # fmt: skip
+        raise ConfigError(
+            f"{axes} axes{what} from node {table['node_base']} pass node id 127",
+            path=path,
+            table="fieldbus.canopen",
+            key="node_base",
+        )
     if table["node_base"] <= table["io_node"] <= last:
-        raise ConfigError(f"collides with the drives' node ids {table['node_base']}..{last}",
-                          path=path, table="fieldbus.canopen", key="io_node")  # fmt: skip
+        raise ConfigError(
+            f"collides with the drives' node ids {table['node_base']}..{last}",
+            path=path,
+            table="fieldbus.canopen",
+            key="io_node",
+        )
 
 
 def axis_count(machine: Machine) -> int:
@@ -411,8 +446,9 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"not valid TOML: {exc}", path=text_path) from exc
     except UnicodeDecodeError as exc:
         byte = exc.object[exc.start]
-        raise ConfigError(f"not UTF-8 text: byte 0x{byte:02x} at offset {exc.start}",
-                          path=text_path) from None  # fmt: skip
+        raise ConfigError(
+            f"not UTF-8 text: byte 0x{byte:02x} at offset {exc.start}", path=text_path
+        ) from None
     except RecursionError:
         raise ConfigError("not valid TOML: nested too deeply", path=text_path) from None
     return parse_config(data, text_path)

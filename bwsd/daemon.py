@@ -134,8 +134,11 @@ async def _serve_api(daemon: Daemon) -> None:
         gate=daemon.gate,
         tensions=(yarn["tension"], yarn["weft_tension"]),
     )
-    server = uvicorn.Server(server_config(app, doors, host=table["host"], port=table["port"],
-                                          log_level="warning", lifespan="off"))  # fmt: skip
+    server = uvicorn.Server(
+        server_config(
+            app, doors, host=table["host"], port=table["port"], log_level="warning", lifespan="off"
+        )
+    )
     where = f"{table['host']}:{table['port']}"
     family = socket.AF_INET6 if ":" in table["host"] else socket.AF_INET
     try:  # bound here, so that a port in use is an error of ours, not the server's exit

@@ -54,8 +54,14 @@ class JamError(TwinError):
     ``yarns`` are the moving and the hit yarn, ``z`` the contact's height (mm, preform frame).
     """
 
-    def __init__(self, message: str, *, instruction: int = 0, yarns: tuple[int, int] = (-1, -1),
-                 z: float = 0.0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        message: str,
+        *,
+        instruction: int = 0,
+        yarns: tuple[int, int] = (-1, -1),
+        z: float = 0.0,
+    ) -> None:
         super().__init__(message, instruction=instruction)
         self.yarns = yarns
         self.z = z

@@ -39,8 +39,12 @@ MAX_REASON_CHARS = 500
 MAX_NAME_CHARS = 200
 MAX_PROGRAM_CHARS = 1_000_000
 Kind = Literal["type", "range", "who", "role"]
-NEEDS: dict[str, Role] = {"command": "operator", "load": "operator", "mode": "admin",
-                          "read": "viewer"}  # fmt: skip
+NEEDS: dict[str, Role] = {
+    "command": "operator",
+    "load": "operator",
+    "mode": "admin",
+    "read": "viewer",
+}
 
 
 class Refused(BwsdError):
@@ -103,8 +107,9 @@ class Gate:
         return role
 
     # ----- requests -----
-    async def command(self, caller: Caller, command: Any, *, reason: Any = "",
-                      resume: Any = False) -> State:  # fmt: skip
+    async def command(
+        self, caller: Caller, command: Any, *, reason: Any = "", resume: Any = False
+    ) -> State:
         """A PackML command (a Command, its number or its name), with its reason and resume."""
         try:
             typed = command_of(command)
@@ -129,8 +134,9 @@ class Gate:
         await self.controller.set_mode(typed, caller.who)
         return typed
 
-    async def load(self, caller: Caller, name: Any, text: Any,
-                   cancel: threading.Event | None = None) -> int:  # fmt: skip
+    async def load(
+        self, caller: Caller, name: Any, text: Any, cancel: threading.Event | None = None
+    ) -> int:
         """Check and load a program's text (refusals name the line and column)."""
         try:
             program = text_of(name, "name", MAX_NAME_CHARS, empty=False)
@@ -142,8 +148,9 @@ class Gate:
         with _logged(caller, f"load of {program!r}"):
             return await self.controller.load(program, source, caller.who, cancel)
 
-    async def check(self, caller: Caller, name: Any, text: Any,
-                    cancel: threading.Event | None = None) -> DryRun:  # fmt: skip
+    async def check(
+        self, caller: Caller, name: Any, text: Any, cancel: threading.Event | None = None
+    ) -> DryRun:
         """Check a program without loading it (a dry run)."""
         try:
             program = text_of(name, "name", MAX_NAME_CHARS, empty=False)
@@ -215,8 +222,9 @@ def _member_of(kind: type[E], value: Any, field: str) -> E:
             return kind[value.strip().upper()]
         except KeyError:
             names = ", ".join(m.name.lower() for m in kind)
-            raise Refused("range", f"{field}: {_shown(value)} is not one of {names}",
-                          field) from None  # fmt: skip
+            raise Refused(
+                "range", f"{field}: {_shown(value)} is not one of {names}", field
+            ) from None
     return kind(whole_of(value, field, min(kind), max(kind)))
 
 

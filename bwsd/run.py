@@ -65,9 +65,12 @@ def refused_at_line(program: Program, source: str) -> Iterator[None]:
     try:
         yield
     except TwinError as exc:
-        raise ProgramError(f"instruction {exc.instruction}: {exc.reason}",
-                           line=program.line_of(exc.instruction), column=1,
-                           source=source) from None  # fmt: skip
+        raise ProgramError(
+            f"instruction {exc.instruction}: {exc.reason}",
+            line=program.line_of(exc.instruction),
+            column=1,
+            source=source,
+        ) from None
 
 
 @contextmanager
@@ -87,8 +90,9 @@ def _progress(enabled: bool) -> Iterator[ProgressFn | None]:
         yield report
 
 
-def _summary(twin: Twin, seconds: float, timings: list[float],
-             loose: list[tuple[int, int]]) -> dict[str, Any]:  # fmt: skip
+def _summary(
+    twin: Twin, seconds: float, timings: list[float], loose: list[tuple[int, int]]
+) -> dict[str, Any]:
     return {
         "yarns": twin.yarn_count,
         "nodes": twin.node_count,
@@ -109,16 +113,21 @@ def loose_wefts(twin: Twin, program: Program) -> list[tuple[int, int]]:
     touched = {y for c in sk.contacts for y in (c.moving_yarn, c.hit_yarn)}
     inserted = [i for i, ins in enumerate(program.instructions, start=1) if isinstance(ins, Weft)]
     wefts = [y.id for y in sk.yarns if y.kind == "weft"]
-    return [(yarn, program.line_of(index)) for yarn, index in zip(wefts, inserted, strict=False)
-            if yarn not in touched]  # fmt: skip
+    return [
+        (yarn, program.line_of(index))
+        for yarn, index in zip(wefts, inserted, strict=False)
+        if yarn not in touched
+    ]
 
 
 def _warn_loose(loose: list[tuple[int, int]], source: str) -> None:
     if loose:
         shown = ", ".join(f"yarn {yarn} ({source}:{line})" for yarn, line in loose[:10])
         more = f" and {len(loose) - 10} more" if len(loose) > 10 else ""
-        print(f"bwsd: warning: {len(loose)} weft(s) without any contact lie loose: {shown}{more}",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"bwsd: warning: {len(loose)} weft(s) without any contact lie loose: {shown}{more}",
+            file=sys.stderr,
+        )
 
 
 def _percentiles(seconds: list[float]) -> dict[str, float]:
@@ -183,6 +192,8 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
             from bwsd.relax.cli import summary_line
 
             print("relaxed: " + summary_line(summary.pop("relaxed")))
-        print(", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "
-              f"{ms['p50']} p99 {ms['p99']} max {ms['max']}")  # fmt: skip
+        print(
+            ", ".join(f"{k} {v}" for k, v in summary.items()) + ", predict ms p50 "
+            f"{ms['p50']} p99 {ms['p99']} max {ms['max']}"
+        )
     return 0

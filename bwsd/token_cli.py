@@ -83,8 +83,10 @@ def _add(args: argparse.Namespace) -> int:
     store = _store(args, create=True)
     token = store.add(args.name, args.role)
     print(token)
-    print(f"token {args.name!r} ({args.role}) added to {store.path}; it is not shown again",
-          file=sys.stderr)  # fmt: skip
+    print(
+        f"token {args.name!r} ({args.role}) added to {store.path}; it is not shown again",
+        file=sys.stderr,
+    )
     return 0
 
 

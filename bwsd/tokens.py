@@ -84,8 +84,10 @@ class TokenStore:
     def add(self, name: str, role: str) -> str:
         """Create a token for ``name`` with ``role``; the clear token, returned this once."""
         if not _NAME.fullmatch(name):
-            raise TokenError(f"token name {name!r}: 1 to 64 letters, digits, '.', '_' or '-', "
-                             "starting with a letter or digit")  # fmt: skip
+            raise TokenError(
+                f"token name {name!r}: 1 to 64 letters, digits, '.', '_' or '-', "
+                "starting with a letter or digit"
+            )
         checked = check_role(role)
         self._refresh()
         if any(entry.name == name for entry in self._entries):

@@ -33,8 +33,9 @@ def with_ports(config: Config, ports: dict[str, int]) -> Config:
     return dataclasses.replace(config, tables={**config.tables, "simulator": simulator})
 
 
-async def serve(config_path: str, program_path: str | None,
-                ports: dict[str, int] | None = None) -> None:  # fmt: skip
+async def serve(
+    config_path: str, program_path: str | None, ports: dict[str, int] | None = None
+) -> None:
     from bwsd.extras import CANOPEN, missing_message
     from simulator_hw.app import CANOPEN_PART, MockLoom, canopen_ids_problem, canopen_installed
 

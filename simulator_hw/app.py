@@ -40,8 +40,10 @@ def canopen_ids_problem(config: Config) -> str:
     base, io_node = can["node_base"], can["io_node"]
     last = base + len(machine_axes(config.machine)) - 1
     if last > 127 or base <= io_node <= last:
-        return (f"the drives of its {last - base + 1} axes (nodes {base}..{last}) and the "
-                f"I/O node {io_node} do not fit CANopen node ids 1..127")  # fmt: skip
+        return (
+            f"the drives of its {last - base + 1} axes (nodes {base}..{last}) and the "
+            f"I/O node {io_node} do not fit CANopen node ids 1..127"
+        )
     return ""
 
 
@@ -53,8 +55,11 @@ def keep_mechanics(loom: Loom, path: Path) -> None:
         try:
             loom.restore(json.loads(path.read_text()))
         except (OSError, ValueError, TypeError, AttributeError) as exc:
-            raise ConfigError(f"{path}: not the saved state of this machine ({exc})",
-                              table="simulator", key="state_file") from None  # fmt: skip
+            raise ConfigError(
+                f"{path}: not the saved state of this machine ({exc})",
+                table="simulator",
+                key="state_file",
+            ) from None
 
     def save() -> None:
         new = path.with_name(path.name + ".new")
@@ -90,8 +95,9 @@ class MockLoom:
             keep_mechanics(self.loom, Path(config.path).parent / sim["state_file"])
         host = sim["host"]
         modbus = config.table("fieldbus.modbus")
-        self.modbus = ModbusLoomServer(self.loom, host, sim["modbus_port"], modbus["device_id"],
-                                       modbus["map"])  # fmt: skip
+        self.modbus = ModbusLoomServer(
+            self.loom, host, sim["modbus_port"], modbus["device_id"], modbus["map"]
+        )
         ids = canopen_ids_problem(config)
         if canopen is None:
             canopen = canopen_installed() and not ids
@@ -115,10 +121,14 @@ class MockLoom:
             from simulator_hw.canopen_drives import CanopenLoom
 
             await self.hub.start()
-            self.drives = CanopenLoom(self.loom, self.hub.local_channel,
-                                      node_base=can["node_base"], io_node=can["io_node"],
-                                      heartbeat_ms=sim["heartbeat_ms"],
-                                      loop=asyncio.get_running_loop())  # fmt: skip
+            self.drives = CanopenLoom(
+                self.loom,
+                self.hub.local_channel,
+                node_base=can["node_base"],
+                io_node=can["io_node"],
+                heartbeat_ms=sim["heartbeat_ms"],
+                loop=asyncio.get_running_loop(),
+            )
             self.drives.start()
         await self.control.start()
 

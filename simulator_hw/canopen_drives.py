@@ -134,8 +134,16 @@ class _Drive:
         node.rpdo[1].add_callback(self.on_rpdo)
 
     def on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
-        live = (STATUSWORD, MODE_DISPLAY, POSITION, ERROR_CODE, LAST_STROKE, DONE_SEQ, FAULT_CODE,
-                STROKES)  # fmt: skip
+        live = (
+            STATUSWORD,
+            MODE_DISPLAY,
+            POSITION,
+            ERROR_CODE,
+            LAST_STROKE,
+            DONE_SEQ,
+            FAULT_CODE,
+            STROKES,
+        )
         return self.owner.call(self._live, index) if index in live else None
 
     def on_rpdo(self, pdo_map: PdoMap) -> None:
@@ -155,8 +163,11 @@ class _Drive:
     def _drops_setpoint_bit(self, word: int) -> bool:
         """``word`` only lowers bit 4 (and 6) of the controlword in "operation enabled"."""
         bits = CW_NEW_SETPOINT | CW_RELATIVE
-        return (self.state is S.OPERATION_ENABLED and not word & CW_NEW_SETPOINT
-                and word | bits == self.controlword | bits)  # fmt: skip
+        return (
+            self.state is S.OPERATION_ENABLED
+            and not word & CW_NEW_SETPOINT
+            and word | bits == self.controlword | bits
+        )
 
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = int(od.decode_raw(data))
@@ -368,8 +379,9 @@ class CanopenLoom:
                     pdo_map.transmit()
                     self._sent[key] = sent
 
-    def _follow_mapping(self, node: LocalNode, index: int, subindex: int, od: ODVariable,
-                        data: bytes) -> None:  # fmt: skip
+    def _follow_mapping(
+        self, node: LocalNode, index: int, subindex: int, od: ODVariable, data: bytes
+    ) -> None:
         """A PDO's COB-ID written by a master makes its mapping (written before) take effect;
         an on-change PDO is sent at the next SYNC whatever it holds."""
         if subindex != 1 or not (RPDO_COM <= index < TPDO_COM or TPDO_COM <= index < TPDO_MAP):

@@ -67,8 +67,10 @@ def _fault(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:
     if kind == "sensor":
         return _sensor(loom, request.get("cell"))
     if kind not in AXIS_FAULTS:
-        return {"ok": False, "error": f"unknown fault kind {kind!r} ({', '.join(AXIS_FAULTS)}, "
-                "mute, drop, sensor)"}  # fmt: skip
+        return {
+            "ok": False,
+            "error": f"unknown fault kind {kind!r} ({', '.join(AXIS_FAULTS)}, mute, drop, sensor)",
+        }
     names = {sim.axis.name for sim in loom.axes}
     axis = request.get("axis")
     if axis not in names:
@@ -79,11 +81,16 @@ def _fault(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:
 
 def _sensor(loom: Loom, cell: Any) -> dict[str, Any]:
     m = loom.machine
-    if (not isinstance(cell, list) or len(cell) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) for v in cell)
-            or not (0 <= cell[0] < m.rows and 0 <= cell[1] < m.cols)):  # fmt: skip
-        return {"ok": False, "error": f'"cell" must be [row, col] inside the {m.rows}x{m.cols} '
-                "matrix"}  # fmt: skip
+    if (
+        not isinstance(cell, list)
+        or len(cell) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) for v in cell)
+        or not (0 <= cell[0] < m.rows and 0 <= cell[1] < m.cols)
+    ):
+        return {
+            "ok": False,
+            "error": f'"cell" must be [row, col] inside the {m.rows}x{m.cols} matrix',
+        }
     loom.faults.sensors.add((cell[0], cell[1]))
     return {"ok": True}
 

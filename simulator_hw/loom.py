@@ -114,10 +114,15 @@ class Loom:
         positions and every axis's stroke counter (a relative axis is home at power-on)."""
         return {
             "occupied": [row[:] for row in self.occupied],
-            "axes": {sim.axis.name: {"position": 0 if sim.axis.relative else sim.position,
-                                     "strokes": sim.strokes, "done_seq": sim.done_seq}
-                     for sim in self.axes},
-        }  # fmt: skip
+            "axes": {
+                sim.axis.name: {
+                    "position": 0 if sim.axis.relative else sim.position,
+                    "strokes": sim.strokes,
+                    "done_seq": sim.done_seq,
+                }
+                for sim in self.axes
+            },
+        }
 
     def restore(self, saved: dict[str, Any]) -> None:
         """Power on with the mechanics a ``mechanics()`` saved (ValueError if they are not of
@@ -182,8 +187,9 @@ class Loom:
 
     def sensed(self) -> list[list[bool]]:
         """Every occupancy sensor, row by row."""
-        return [[self.sensor(r, c) for c in range(self.machine.cols)]
-                for r in range(self.machine.rows)]  # fmt: skip
+        return [
+            [self.sensor(r, c) for c in range(self.machine.cols)] for r in range(self.machine.rows)
+        ]
 
     def quick_stop(self, now: float) -> None:
         """Stop every axis where it is; moving axes are left faulted (stall)."""
@@ -283,8 +289,10 @@ class Loom:
         lo, hi = moved_cells(self.machine, axis)
         line = axis.line if axis.line is not None else 0
         carried = set(at)
-        return all(lo <= i + k <= hi and (i + k in carried or not self._get(axis.kind, line, i + k))
-                   for i in at)  # fmt: skip
+        return all(
+            lo <= i + k <= hi and (i + k in carried or not self._get(axis.kind, line, i + k))
+            for i in at
+        )
 
     def _latch(self, sim: AxisSim) -> None:
         """The stroke reached its far end: the cases of the line sit in their new cells (an

@@ -71,18 +71,28 @@ def axis_words(sim: AxisSim) -> list[int]:
         | (AXIS_FAULTED if sim.fault else 0)
         | (AXIS_HOMED if sim.homed else 0)
     )
-    return [status, *int32_words(sim.position), sim.done_seq, sim.fault,
-            *int32_words(sim.last_stroke)]  # fmt: skip
+    return [
+        status,
+        *int32_words(sim.position),
+        sim.done_seq,
+        sim.fault,
+        *int32_words(sim.last_stroke),
+    ]
 
 
 def status_image(loom: Loom) -> list[int]:
     """The whole status image (map 3): machine status, occupancy bits (16 a register, cell 0
     in bit 0, bits past the last cell 0), then each axis's record."""
     cells = [v for row in loom.sensed() for v in row]
-    occupancy = [sum(1 << j for j, v in enumerate(cells[at : at + 16]) if v)
-                 for at in range(0, len(cells), 16)]  # fmt: skip
-    return [machine_status(loom), *occupancy,
-            *(w for sim in loom.axes for w in (*axis_words(sim), sim.strokes))]  # fmt: skip
+    occupancy = [
+        sum(1 << j for j, v in enumerate(cells[at : at + 16]) if v)
+        for at in range(0, len(cells), 16)
+    ]
+    return [
+        machine_status(loom),
+        *occupancy,
+        *(w for sim in loom.axes for w in (*axis_words(sim), sim.strokes)),
+    ]
 
 
 def machine_status(loom: Loom) -> int:
@@ -106,16 +116,21 @@ def input_words(loom: Loom, first: int, count: int) -> list[int]:
     ]
 
 
-def build_device(loom: Loom, device_id: int, action: SimAction,
-                 version: int = MAP_VERSION) -> SimDevice:  # fmt: skip
+def build_device(
+    loom: Loom, device_id: int, action: SimAction, version: int = MAP_VERSION
+) -> SimDevice:
     """The map (``version`` 2 or 3) as a SimDevice: read-only registers marked, gaps left
     invalid."""
     m = loom.machine
     holding = [
-        SimData(0, values=[version, len(loom.axes), m.rows, m.cols, 0],
-                datatype=DataType.REGISTERS, readonly=True),
+        SimData(
+            0,
+            values=[version, len(loom.axes), m.rows, m.cols, 0],
+            datatype=DataType.REGISTERS,
+            readonly=True,
+        ),
         SimData(REG_COMMAND, values=CMD_NONE, datatype=DataType.REGISTERS),
-    ]  # fmt: skip
+    ]
     if version >= 3:
         holding.append(SimData(REG_OWNER, count=OWNER_WORDS, datatype=DataType.REGISTERS))
     for i, sim in enumerate(loom.axes):
@@ -124,12 +139,14 @@ def build_device(loom: Loom, device_id: int, action: SimAction,
         read_only = [0] * (OFF_SHAPE - OFF_STATUS) + axis_shape(m, sim.axis)
         read_only += [0] * (AXIS_STRIDE - OFF_SHAPE - SHAPE_WORDS)
         holding.append(SimData(base, count=OFF_STATUS, datatype=DataType.REGISTERS))
-        holding.append(SimData(base + OFF_STATUS, values=read_only, datatype=DataType.REGISTERS,
-                               readonly=True))  # fmt: skip
+        holding.append(
+            SimData(base + OFF_STATUS, values=read_only, datatype=DataType.REGISTERS, readonly=True)
+        )
     inputs = [SimData(0, count=m.rows * m.cols + 1, values=False, datatype=DataType.BITS)]
     coils = [SimData(0, values=False, datatype=DataType.BITS, readonly=True)]
-    image = [SimData(0, count=image_words(m.rows * m.cols, len(loom.axes)),
-                     datatype=DataType.REGISTERS)]  # fmt: skip
+    image = [
+        SimData(0, count=image_words(m.rows * m.cols, len(loom.axes)), datatype=DataType.REGISTERS)
+    ]
     if version < 3:
         image = [SimData(0, datatype=DataType.INVALID)]  # map 2 has no input registers
     return SimDevice(id=device_id, simdata=(coils, inputs, holding, image), action=action)
@@ -141,8 +158,14 @@ class ModbusLoomServer:
     A machine the map cannot address (too many cells or axes) is a FieldbusError.
     """
 
-    def __init__(self, loom: Loom, host: str = "127.0.0.1", port: int = 15020,
-                 device_id: int = 1, version: int = MAP_VERSION) -> None:  # fmt: skip
+    def __init__(
+        self,
+        loom: Loom,
+        host: str = "127.0.0.1",
+        port: int = 15020,
+        device_id: int = 1,
+        version: int = MAP_VERSION,
+    ) -> None:
         problem = map_problem(loom.machine)
         if version not in MAP_VERSIONS:
             problem = f"Modbus map {version}: the mock loom serves maps 2 and 3"

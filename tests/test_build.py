@@ -27,8 +27,14 @@ def test_without_a_compiler_the_build_fails_with_a_clear_message(tmp_path):
         ignore=shutil.ignore_patterns("*.so", "node_modules", "__pycache__"),
     )
     env = {**os.environ, "CC": str(tmp_path / "no-such-compiler")}
-    run = subprocess.run([sys.executable, "setup.py", "-q", "build_ext"], cwd=tmp_path, env=env,
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "setup.py", "-q", "build_ext"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode != 0
     assert "bwsd: cannot build its twin kernel" in run.stderr
     assert "C compiler (gcc or clang) and the Python headers" in run.stderr
@@ -41,23 +47,45 @@ def test_the_compiled_kernel_has_no_fused_multiply_add():
     error bounds (docs/twin.md, "Exactness")."""
     from bwsd.twin import _kernel
 
-    code = subprocess.run(["objdump", "-d", _kernel.__file__], capture_output=True, text=True,
-                          check=True).stdout  # fmt: skip
+    code = subprocess.run(
+        ["objdump", "-d", _kernel.__file__], capture_output=True, text=True, check=True
+    ).stdout
     assert "cvtsi2sd" in code or "scvtf" in code  # it is the float code we think it is
     assert not re.search(r"\b(v?fn?m(add|sub)\w*)\b", code)
 
 
 # The files of three.js the preview page imports (docs/preview.md), shipped in the wheel when
 # `npm ci` has put them in bwsd/web/node_modules before the build.
-THREE = ("LICENSE", "package.json", "build/three.module.js", "build/three.core.js",
-         "examples/jsm/controls/OrbitControls.js")  # fmt: skip
+THREE = (
+    "LICENSE",
+    "package.json",
+    "build/three.module.js",
+    "build/three.core.js",
+    "examples/jsm/controls/OrbitControls.js",
+)
 THREE_ROOT = ROOT / "bwsd" / "web" / "node_modules" / "three"
 # The extras' distributions, and meshio, which nothing needs any more.
 NOT_CORE = ("vtk", "pytexgen", "matplotlib", "canopen", "python-can", "meshio")
-ALL_FREE = ["--api-port", "0", "--plc-port", "0", "--modbus-port", "0", "--socketcand-port",
-            "0", "--control-port", "0"]  # fmt: skip
-_OFFLINE = ("NewConnectionError", "Temporary failure in name resolution", "Network is unreachable",
-            "ConnectTimeout", "ReadTimeout", "Could not fetch URL")  # fmt: skip
+ALL_FREE = [
+    "--api-port",
+    "0",
+    "--plc-port",
+    "0",
+    "--modbus-port",
+    "0",
+    "--socketcand-port",
+    "0",
+    "--control-port",
+    "0",
+]
+_OFFLINE = (
+    "NewConnectionError",
+    "Temporary failure in name resolution",
+    "Network is unreachable",
+    "ConnectTimeout",
+    "ReadTimeout",
+    "Could not fetch URL",
+)
 
 
 def unavailable(message: str) -> None:
@@ -101,11 +129,17 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
     """A new venv at ``folder`` with ``install`` put in by pip from the package index; its
     bin folder and an environment that leaves this test run's Python out of it."""
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}  # fmt: skip
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
+    }
     env.update(PIP_DISABLE_PIP_VERSION_CHECK="1", PIP_NO_INPUT="1", PYTHONUNBUFFERED="1")
-    made = subprocess.run([sys.executable, "-m", "venv", str(folder)], capture_output=True,
-                          text=True, timeout=300, env=env)  # fmt: skip
+    made = subprocess.run(
+        [sys.executable, "-m", "venv", str(folder)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
     if made.returncode != 0:
         unavailable(f"python -m venv failed: {made.stderr.strip()[-500:]}")
     bin_dir = folder / "bin"
@@ -114,8 +148,13 @@ def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
 
 
 def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
-    run = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", *install],
-                         capture_output=True, text=True, timeout=900, env=env)  # fmt: skip
+    run = subprocess.run(
+        [str(bin_dir / "python"), "-m", "pip", "install", "-q", *install],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env=env,
+    )
     if run.returncode != 0 and any(sign in run.stderr for sign in _OFFLINE):
         unavailable(f"the package index cannot be reached: {run.stderr.strip()[-500:]}")
     assert run.returncode == 0, run.stderr[-3000:]
@@ -123,10 +162,18 @@ def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
 
 def installed(bin_dir: Path, env: dict[str, str]) -> dict[str, str]:
     """Name -> version of every distribution in the venv."""
-    code = ("import importlib.metadata as m\n"
-            "for d in m.distributions(): print(d.metadata['Name'].lower(), d.version)")  # fmt: skip
-    out = subprocess.run([str(bin_dir / "python"), "-c", code], capture_output=True, text=True,
-                         timeout=60, env=env, check=True).stdout  # fmt: skip
+    code = (
+        "import importlib.metadata as m\n"
+        "for d in m.distributions(): print(d.metadata['Name'].lower(), d.version)"
+    )
+    out = subprocess.run(
+        [str(bin_dir / "python"), "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        check=True,
+    ).stdout
     return {_normal(name): version for name, version in (line.split() for line in out.splitlines())}
 
 
@@ -137,12 +184,20 @@ def _normal(name: str) -> str:
 def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
     """``bwsd demo --exit-when-done`` on free ports in ``cwd``: its output, once it completed."""
     cwd.mkdir()
-    done = subprocess.run([str(bin_dir / "bwsd"), "demo", "--exit-when-done", *ALL_FREE],
-                          capture_output=True, text=True, timeout=300, env=env,
-                          cwd=cwd)  # fmt: skip
+    done = subprocess.run(
+        [str(bin_dir / "bwsd"), "demo", "--exit-when-done", *ALL_FREE],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+        cwd=cwd,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
-    assert re.search(r"^mock loom: modbus=127\.0\.0\.1:\d+ .*control=127\.0\.0\.1:\d+$",
-                     done.stdout, re.MULTILINE), done.stdout  # fmt: skip
+    assert re.search(
+        r"^mock loom: modbus=127\.0\.0\.1:\d+ .*control=127\.0\.0\.1:\d+$",
+        done.stdout,
+        re.MULTILINE,
+    ), done.stdout
     assert re.search(r"^api: http://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert re.search(r"^plc: modbus-tcp://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert "Complete: 50 instructions done, 73 contacts" in done.stdout
@@ -214,15 +269,37 @@ def test_the_wheel_runs_the_demo_in_a_fresh_venv_from_an_empty_folder(wheel, tmp
     bin_dir, env = fresh_venv(tmp_path / "venv", str(wheel))
     assert not set(installed(bin_dir, env)) & {_normal(name) for name in NOT_CORE}
     run_demo(bin_dir, env, tmp_path / "empty")
-    export = subprocess.run([str(bin_dir / "bwsd"), "simulate", str(ROOT / "examples/twist.bws"),
-                             "--config", str(ROOT / "config/twist.toml"), "--export", "x.vtu"],
-                            capture_output=True, text=True, timeout=120, env=env,
-                            cwd=tmp_path)  # fmt: skip
+    export = subprocess.run(
+        [
+            str(bin_dir / "bwsd"),
+            "simulate",
+            str(ROOT / "examples/twist.bws"),
+            "--config",
+            str(ROOT / "config/twist.toml"),
+            "--export",
+            "x.vtu",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        cwd=tmp_path,
+    )
     assert export.returncode == 2
     assert export.stderr == "bwsd: error: writing .vtu needs VTK: pip install 'bwsd[export]'\n"
-    page = subprocess.run([str(bin_dir / "python"), "-c", "from bwsd.api.web import WEB_ROOT, "
-                           "missing; print(WEB_ROOT, missing(WEB_ROOT))"], capture_output=True,
-                          text=True, timeout=60, env=env, cwd=tmp_path, check=True)  # fmt: skip
+    page = subprocess.run(
+        [
+            str(bin_dir / "python"),
+            "-c",
+            "from bwsd.api.web import WEB_ROOT, missing; print(WEB_ROOT, missing(WEB_ROOT))",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        cwd=tmp_path,
+        check=True,
+    )
     root, lacking = page.stdout.split(" ", 1)
     assert Path(root).is_relative_to(tmp_path / "venv")
     if (THREE_ROOT / "build" / "three.module.js").is_file():
@@ -235,8 +312,9 @@ def _lower_bounds() -> list[str]:
     for requirement in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
         "dependencies"
     ]:
-        match = re.fullmatch(r"([A-Za-z0-9_.-]+)(\[[^\]]*\])?\s*(>=|~=|==)\s*([0-9][^,;\s]*)",
-                             requirement.strip())  # fmt: skip
+        match = re.fullmatch(
+            r"([A-Za-z0-9_.-]+)(\[[^\]]*\])?\s*(>=|~=|==)\s*([0-9][^,;\s]*)", requirement.strip()
+        )
         assert match, f"no lower bound in {requirement!r}"
         pins.append(f"{match[1]}=={match[4]}")
     return pins
@@ -250,11 +328,19 @@ def test_the_wheel_runs_on_the_lowest_versions_it_admits(wheel, tmp_path):
     constraints = tmp_path / "lowest.txt"
     constraints.write_text("\n".join(pins) + "\n")
     bin_dir, env = fresh_venv(tmp_path / "venv", "-c", str(constraints), str(wheel))
-    code = ("import importlib.metadata as m, re\n"
-            "print(next(re.search(r'>=\\s*([0-9][^,;\\s]*)', r)[1] for r in m.requires('fastapi')"
-            " if re.match(r'starlette\\b', r)))")  # fmt: skip
-    found = subprocess.run([str(bin_dir / "python"), "-c", code], capture_output=True,
-                           text=True, timeout=60, env=env, check=True)  # fmt: skip
+    code = (
+        "import importlib.metadata as m, re\n"
+        "print(next(re.search(r'>=\\s*([0-9][^,;\\s]*)', r)[1] for r in m.requires('fastapi')"
+        " if re.match(r'starlette\\b', r)))"
+    )
+    found = subprocess.run(
+        [str(bin_dir / "python"), "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        check=True,
+    )
     starlette = found.stdout.strip()
     pip_install(bin_dir, env, "-c", str(constraints), f"starlette=={starlette}")
     versions = installed(bin_dir, env)

@@ -115,9 +115,12 @@ def test_modbus_map_limits_the_axes_segments_included():
     fits = parse_config({"machine": {**square, "segments": _row_segments(100, 39)[:3883]}})
     assert len(fits.machine.segments) == 3883  # 100 + 100 + 3 + 3883 + 3 = 4089 axes
     over = {"machine": {**square, "segments": _row_segments(100, 39)[:3884]}}
-    with pytest.raises(ConfigError, match=r"\[machine\.segments\]: the Modbus map addresses at "
-                       r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 6 weft and "
-                       r"take-up axes, 3884 segments\)"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"\[machine\.segments\]: the Modbus map addresses at "
+        r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 6 weft and "
+        r"take-up axes, 3884 segments\)",
+    ):
         parse_config(over)
     with pytest.raises(ConfigError, match=r"\[fieldbus.canopen.node_base\]: 4090 axes \(3884 of"):
         parse_config({**over, "fieldbus": {"backend": "canopen"}})  # the bus's own limit
@@ -175,8 +178,10 @@ def test_numbers_are_the_exact_decimals_written(tmp_path):
     from bwsd.twin.geometry import Geometry
 
     path = tmp_path / "m.toml"
-    path.write_text("[machine]\nrows = 1\ncols = 2\npitch_x = 1.0000180559\npitch_y = 1\n"
-                    "d_mat = 10\nc_mat = 0.5\n")  # fmt: skip
+    path.write_text(
+        "[machine]\nrows = 1\ncols = 2\npitch_x = 1.0000180559\npitch_y = 1\n"
+        "d_mat = 10\nc_mat = 0.5\n"
+    )
     assert Geometry(load_config(path).machine).gx[1] == 4295044845
 
 
@@ -190,8 +195,14 @@ def test_numbers_are_the_exact_decimals_written(tmp_path):
     ],
 )
 def test_numbers_the_twin_cannot_keep_are_refused_with_their_key(tmp_path, line, message):
-    base = {"rows": "300", "cols": "300", "pitch_x": "1", "pitch_y": "1", "d_mat": "10",
-            "c_mat": "0.5"}  # fmt: skip
+    base = {
+        "rows": "300",
+        "cols": "300",
+        "pitch_x": "1",
+        "pitch_y": "1",
+        "d_mat": "10",
+        "c_mat": "0.5",
+    }
     key = line.split(" = ")[0]
     body = "".join(f"{k} = {v}\n" for k, v in base.items() if k != key)
     path = tmp_path / "m.toml"
@@ -209,9 +220,12 @@ def test_a_yarn_too_thick_for_the_gap_at_the_fell_is_refused_at_its_key():
     """Warps start c_mat x the smaller pitch apart at the fell (0.4 x 10 mm here): d = 20 mm
     on a 10 mm pitch put contacts 19 mm outside the matrix, d = 1023 mm a metre out."""
     for diameter in (4, 20.0, 1000):
-        with pytest.raises(ConfigError, match=r"\[yarn.diameter\]: a yarn diameter of [\d.]+ mm "
-                           r"does not fit: it must be less than c_mat x the smaller pitch "
-                           r"\(4 mm\)"):  # fmt: skip
+        with pytest.raises(
+            ConfigError,
+            match=r"\[yarn.diameter\]: a yarn diameter of [\d.]+ mm "
+            r"does not fit: it must be less than c_mat x the smaller pitch "
+            r"\(4 mm\)",
+        ):
             parse_config(_with("yarn", "diameter", diameter))
     assert parse_config(_with("yarn", "diameter", 3.999)).machine.yarn_diameter == 3.999
     narrow = _with("machine", "pitch_y", 2.5)  # the smaller pitch decides: 0.4 x 2.5 = 1 mm

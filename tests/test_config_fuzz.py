@@ -63,19 +63,31 @@ def test_a_good_file_with_bytes_spliced_in_is_a_config_or_a_config_error(tmp_pat
 
 
 values: Any = st.recursive(
-    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=10)
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats()
+    | st.text(max_size=10)
     | st.decimals(allow_nan=True, allow_infinity=True),
-    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner,
-                                                                  max_size=3),
+    lambda inner: (
+        st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3)
+    ),
     max_leaves=10,
-)  # fmt: skip
+)
 tables = st.dictionaries(
-    st.sampled_from(["machine", "yarn", "fieldbus", "controller", "api", "plc", "journal",
-                     "simulator", "bogus"]),
-    st.dictionaries(st.sampled_from([*MACHINE, "port", "host", "backend", "max_contacts",
-                                     "diameter", "modbus", "x"]), values, max_size=4) | values,
+    st.sampled_from(
+        ["machine", "yarn", "fieldbus", "controller", "api", "plc", "journal", "simulator", "bogus"]
+    ),
+    st.dictionaries(
+        st.sampled_from(
+            [*MACHINE, "port", "host", "backend", "max_contacts", "diameter", "modbus", "x"]
+        ),
+        values,
+        max_size=4,
+    )
+    | values,
     max_size=4,
-)  # fmt: skip
+)
 
 
 @settings(max_examples=400, deadline=None)

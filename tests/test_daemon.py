@@ -44,13 +44,17 @@ KILLS = int(os.environ.get("BWSD_CRASH_KILLS", "100"))
 def daemon_config(tmp: Path, mock: Mock, path: Path | None = None) -> Path:
     """A daemon config on the mock loom's Modbus port (API and PLC on any free port)."""
     path = path or tmp / "bwsd.toml"
-    path.write_text(toml({
-        "machine": MACHINE,
-        "fieldbus": {"backend": "modbus", **BUS},
-        "fieldbus.modbus": {"port": mock.ports["modbus"]},
-        "api": {"port": 0},
-        "plc": {"port": 0},
-    }))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": MACHINE,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0},
+            }
+        )
+    )
     return path
 
 
@@ -61,18 +65,32 @@ class Served:
         self.log = state.parent / "daemon.log"  # appended to by every daemon of the test
         with self.log.open("a") as log:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-                 "--state-dir", str(state)],
-                stdout=subprocess.PIPE, stderr=log, stdin=subprocess.DEVNULL, text=True,
-            )  # fmt: skip
+                [
+                    sys.executable,
+                    "-m",
+                    "bwsd.cli",
+                    "serve",
+                    "--config",
+                    str(config),
+                    "--state-dir",
+                    str(state),
+                ],
+                stdout=subprocess.PIPE,
+                stderr=log,
+                stdin=subprocess.DEVNULL,
+                text=True,
+            )
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline()
         if not line.startswith("ready "):
             self.proc.kill()
             raise RuntimeError(f"daemon did not start: {line!r} {self.log.read_text()[-2000:]!r}")
         self.urls = urls = dict(part.split("=", 1) for part in line.split()[1:])
-        self.http = httpx.Client(base_url=urls["api"] + "/api/v1", timeout=30,
-                                 headers={"Authorization": f"Bearer {token}"})  # fmt: skip
+        self.http = httpx.Client(
+            base_url=urls["api"] + "/api/v1",
+            timeout=30,
+            headers={"Authorization": f"Bearer {token}"},
+        )
 
     def state(self) -> dict[str, Any]:
         answer: dict[str, Any] = self.http.get("/state").raise_for_status().json()
@@ -168,8 +186,12 @@ def fire(served: Served, name: str, body: dict[str, Any]) -> None:
 
     def send() -> None:
         with contextlib.suppress(httpx.HTTPError):
-            httpx.post(f"{served.urls['api']}/api/v1/commands/{name}", json=body, timeout=5,
-                       headers=served.http.headers)  # fmt: skip
+            httpx.post(
+                f"{served.urls['api']}/api/v1/commands/{name}",
+                json=body,
+                timeout=5,
+                headers=served.http.headers,
+            )
 
     threading.Thread(target=send, daemon=True).start()
 
@@ -198,8 +220,9 @@ def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
     assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
 
 
-def kill_anywhere(served: Served, config: Path, state: Path, token: str,
-                  rng: random.Random) -> Served:  # fmt: skip
+def kill_anywhere(
+    served: Served, config: Path, state: Path, token: str, rng: random.Random
+) -> Served:
     """KILLS kills at random moments, each followed by a restart and a resume; the daemon
     serving at the end."""
     for kill in range(KILLS):
@@ -287,8 +310,9 @@ def test_the_log_says_who_commanded_what_and_why_in_timestamped_lines(rig):
     assert "command Reset from tester" in text and "command Start from tester" in text
     assert "state Stopped -> Resetting (Reset)" in text
     assert "command Unhold from tester refused: Unhold is not accepted in state Idle" in text
-    assert re.search(r"command Start from tester refused: the machine cannot be read: .*no answer",
-                     text)  # fmt: skip
+    assert re.search(
+        r"command Start from tester refused: the machine cannot be read: .*no answer", text
+    )
     assert "program 1 complete" in text
     assert "Traceback" not in text and ">>>>>" not in text  # no library frame dumps
 
@@ -304,10 +328,21 @@ def test_serve_talks_to_systemd(rig, tmp_path):
         sock.settimeout(30)
         env = {**os.environ, "NOTIFY_SOCKET": path, "WATCHDOG_USEC": "400000"}
         proc = subprocess.Popen(
-            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-             "--state-dir", str(state)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "bwsd.cli",
+                "serve",
+                "--config",
+                str(config),
+                "--state-dir",
+                str(state),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
         try:
             messages = [sock.recv(4096).decode() for _ in range(3)]
             assert messages[0].startswith("READY=1\nSTATUS=Stopped, instruction 0, http://")
@@ -332,10 +367,21 @@ def test_a_port_in_use_is_a_clear_error_and_nothing_stays_open(rig):
         config.write_text(config.read_text().replace("port = 0", f"port = {port}", 1))
         assert f"port = {port}" in config.read_text()
         done = subprocess.run(
-            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-             "--state-dir", str(state)],
-            capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "bwsd.cli",
+                "serve",
+                "--config",
+                str(config),
+                "--state-dir",
+                str(state),
+            ],
+            capture_output=True,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            timeout=60,
+        )
     assert done.returncode == 2, done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith(f"bwsd: error: [api] cannot listen on 127.0.0.1:{port}: "), last
@@ -353,10 +399,21 @@ def test_a_damaged_journal_stops_the_start_with_the_reason(rig):
     data[4096:8192] = bytes(range(256)) * 16  # garbage over the second page
     journal.write_bytes(bytes(data))
     done = subprocess.run(
-        [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config), "--state-dir",
-         str(state)],
-        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "bwsd.cli",
+            "serve",
+            "--config",
+            str(config),
+            "--state-dir",
+            str(state),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert done.returncode != 0 and done.stdout == ""  # never ready
     assert "journal.db" in done.stderr and "damaged" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
@@ -377,8 +434,12 @@ def test_serve_speaks_tls_with_the_configured_files_relative_to_the_config(rig):
         assert str(served.http.base_url).startswith("https://127.0.0.1:")
         context = ssl.create_default_context()
         ca.configure_trust(context)
-        with httpx.Client(base_url=served.http.base_url, verify=context, timeout=10,
-                          headers={"Authorization": f"Bearer {token}"}) as client:  # fmt: skip
+        with httpx.Client(
+            base_url=served.http.base_url,
+            verify=context,
+            timeout=10,
+            headers={"Authorization": f"Bearer {token}"},
+        ) as client:
             assert client.get("/state").json()["name"] == "Stopped"
     finally:
         served.stop()
@@ -389,10 +450,21 @@ def test_a_tls_file_that_cannot_serve_is_a_clear_error(rig):
     (config.parent / "api.pem").write_text("not a certificate\n")
     config.write_text(config.read_text().replace("[api]\n", '[api]\ncertfile = "api.pem"\n', 1))
     done = subprocess.run(
-        [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config),
-         "--state-dir", str(state)],
-        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "bwsd.cli",
+            "serve",
+            "--config",
+            str(config),
+            "--state-dir",
+            str(state),
+        ],
+        capture_output=True,
+        text=True,
+        stdin=subprocess.DEVNULL,
+        timeout=60,
+    )
     assert done.returncode == 2 and done.stdout == "", done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("bwsd: error: [api.certfile]: cannot serve TLS with "), last
@@ -466,8 +538,10 @@ def test_a_start_with_a_damaged_program_warns_holds_with_the_fix_and_aborts(rig)
         time.sleep(0.01)
     served.stop()  # held, its session closed; then the file is damaged
     journal = sqlite3.connect(state / "journal.db", isolation_level=None)
-    journal.executescript("BEGIN; DROP TRIGGER programs_fixed; UPDATE programs SET "
-                          "text = text || '# edited' WHERE id = 1; COMMIT;")  # fmt: skip
+    journal.executescript(
+        "BEGIN; DROP TRIGGER programs_fixed; UPDATE programs SET "
+        "text = text || '# edited' WHERE id = 1; COMMIT;"
+    )
     journal.close()
     served = Served(config, state, token)
     try:

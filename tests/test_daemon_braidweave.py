@@ -36,8 +36,7 @@ SPEEDS = {"stroke_speed": 200.0, "takeup_speed": 400.0}
 
 @pytest.fixture(scope="module")
 def generated() -> Generated:
-    return braid_weave(shape="L", flange=(2, 6), web=(4, 2), cycles=4, weft_every=2,
-                       angles=(0, 90))  # fmt: skip
+    return braid_weave(shape="L", flange=(2, 6), web=(4, 2), cycles=4, weft_every=2, angles=(0, 90))
 
 
 def machine_table(generated: Generated) -> dict[str, Any]:
@@ -48,9 +47,17 @@ def machine_table(generated: Generated) -> dict[str, Any]:
 
 def daemon_config(tmp: Path, mock: Mock, machine: dict[str, Any]) -> Path:
     path = tmp / "bwsd.toml"
-    path.write_text(toml({"machine": machine, "fieldbus": {"backend": "modbus", **BUS},
-                          "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                          "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": machine,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0},
+            }
+        )
+    )
     return path
 
 
@@ -114,8 +121,9 @@ def test_a_braid_weave_on_segments_runs_to_complete_and_equals_simulate(rig, gen
     served, mock = rig
     program = parse_program(generated.program)
     twin = simulate(generated.machine, program)
-    loaded = served.http.post("/programs", json={"name": "braid-weave.bws",
-                                                 "text": generated.program})  # fmt: skip
+    loaded = served.http.post(
+        "/programs", json={"name": "braid-weave.bws", "text": generated.program}
+    )
     assert loaded.status_code == 201, loaded.text
     served.command("reset")
     watch = InsertWatch(("127.0.0.1", mock.ports["control"]))

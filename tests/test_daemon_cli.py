@@ -21,8 +21,12 @@ def test_demo_runs_the_example_braid_on_the_mock_loom_to_complete(tmp_path):
     assert bwsd
     done = subprocess.run(
         [bwsd, "demo", "--exit-when-done", "--state-dir", str(tmp_path / "state"), *FREE],
-        capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     assert re.search(r"^api: http://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert "operator token: " in done.stdout
@@ -70,11 +74,16 @@ def test_demos_run_at_once_on_free_ports_while_the_configs_ports_are_taken(tmp_p
     try:
         for name in ("a", "b"):
             (tmp_path / name).mkdir()
-            demos.append(subprocess.Popen(
-                [bwsd, "demo", "--exit-when-done", "--config", str(config), *FREE],
-                cwd=tmp_path / name, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                stdin=subprocess.DEVNULL, text=True,
-            ))  # fmt: skip
+            demos.append(
+                subprocess.Popen(
+                    [bwsd, "demo", "--exit-when-done", "--config", str(config), *FREE],
+                    cwd=tmp_path / name,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    stdin=subprocess.DEVNULL,
+                    text=True,
+                )
+            )
         results = [demo.communicate(timeout=300) for demo in demos]
     finally:
         for demo in demos:
@@ -114,10 +123,23 @@ def test_demo_runs_the_config_and_program_given(tmp_path):
         (ROOT / "examples/braid-2x2.bws").read_text().replace("REPEAT 10", "REPEAT 2")
     )
     done = subprocess.run(
-        [bwsd, "demo", "--exit-when-done", "--config", str(config), "--program", str(program),
-         "--state-dir", str(tmp_path / "state")],
-        capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path,
-    )  # fmt: skip
+        [
+            bwsd,
+            "demo",
+            "--exit-when-done",
+            "--config",
+            str(config),
+            "--program",
+            str(program),
+            "--state-dir",
+            str(tmp_path / "state"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     found = _addresses(done.stdout)
     assert set(found) == {"modbus", "socketcand", "control", "api"}, done.stdout
@@ -128,16 +150,39 @@ def test_demo_runs_the_config_and_program_given(tmp_path):
 def test_demo_port_options_take_0_to_65535(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
-    shown = subprocess.run([bwsd, "demo", "--help"], capture_output=True, text=True, timeout=60,
-                           check=True, cwd=tmp_path).stdout  # fmt: skip
-    for option in ("--config", "--program", "--state-dir", "--api-port", "--plc-port",
-                   "--modbus-port", "--socketcand-port", "--control-port"):  # fmt: skip
+    shown = subprocess.run(
+        [bwsd, "demo", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+        cwd=tmp_path,
+    ).stdout
+    for option in (
+        "--config",
+        "--program",
+        "--state-dir",
+        "--api-port",
+        "--plc-port",
+        "--modbus-port",
+        "--socketcand-port",
+        "--control-port",
+    ):
         assert option in shown
     assert len(re.findall(r"0:\s+any\s+free\s+port", shown)) == 5
-    for bad, why in (("-1", "a port lies in 0..65535"), ("65536", "a port lies in 0..65535"),
-                     ("http", "not a port number")):  # fmt: skip
-        run = subprocess.run([bwsd, "demo", "--api-port", bad], capture_output=True, text=True,
-                             timeout=60, check=False, cwd=tmp_path)  # fmt: skip
+    for bad, why in (
+        ("-1", "a port lies in 0..65535"),
+        ("65536", "a port lies in 0..65535"),
+        ("http", "not a port number"),
+    ):
+        run = subprocess.run(
+            [bwsd, "demo", "--api-port", bad],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+            cwd=tmp_path,
+        )
         assert run.returncode == 2
         assert "--api-port" in run.stderr and why in run.stderr and run.stdout == ""
     assert list(tmp_path.iterdir()) == []

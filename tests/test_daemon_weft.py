@@ -67,8 +67,10 @@ def killed_while(slow: tuple[Path, Path, str, Mock], text: str, axis: str) -> Se
     served.command("start")
     until(lambda: loom(mock, axis)["busy"], f"{axis} never moved")
     served.kill()
-    until(lambda: not loom(mock, "weft_insert")["busy"] and not loom(mock, axis)["busy"],
-          "the loom did not come to rest")  # fmt: skip
+    until(
+        lambda: not loom(mock, "weft_insert")["busy"] and not loom(mock, axis)["busy"],
+        "the loom did not come to rest",
+    )
     served = Served(config, state, token)
     until(lambda: "pending" not in served.recovered()["reason"], "the weft was never settled")
     return served

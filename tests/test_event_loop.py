@@ -66,8 +66,14 @@ class SlowCallbacks:
 
 def machine() -> dict[str, Any]:
     m = load_config(ROOT / "config" / "braid-24x24.toml").machine
-    return {"rows": m.rows, "cols": m.cols, "pitch_x": m.pitch_x, "pitch_y": m.pitch_y,
-            "d_mat": m.d_mat, "c_mat": m.c_mat}  # fmt: skip
+    return {
+        "rows": m.rows,
+        "cols": m.cols,
+        "pitch_x": m.pitch_x,
+        "pitch_y": m.pitch_y,
+        "d_mat": m.d_mat,
+        "c_mat": m.c_mat,
+    }
 
 
 def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
@@ -79,8 +85,10 @@ def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
     headers = {"Authorization": f"Bearer {token}"}
     try:
         events = base.replace("http", "ws") + f"/api/v1/events?token={token}"
-        with httpx.Client(base_url=base + "/api/v1", headers=headers, timeout=60) as http, \
-                connect(events) as ws:  # fmt: skip
+        with (
+            httpx.Client(base_url=base + "/api/v1", headers=headers, timeout=60) as http,
+            connect(events) as ws,
+        ):
             http.post("/programs", json={"name": "b.bws", "text": program}).raise_for_status()
             http.post("/commands/reset", json={}).raise_for_status()
             http.get("/skeleton").raise_for_status()
@@ -106,16 +114,24 @@ def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
 
 
 def test_a_24x24_job_never_holds_the_event_loop_for_20_ms(tmp_path: Path, monkeypatch) -> None:
-    program = braid4(24, 24, cycles=2, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3,
-                     diameter=1.5).program  # fmt: skip
+    program = braid4(
+        24, 24, cycles=2, takeup=3.0, pitch=10.0, d_mat=300.0, c_mat=0.3, diameter=1.5
+    ).program
     mock = start_mock(tmp_path, {}, machine=machine(), program=program)
     ports = mock.ports
-    config = parse_config({
-        "machine": machine(),
-        "fieldbus": {"backend": "modbus", **BUS, "timeout": 30.0,
-                     "modbus": {"port": ports["modbus"]}},
-        "api": {"port": 0}, "plc": {"port": 0},
-    })  # fmt: skip
+    config = parse_config(
+        {
+            "machine": machine(),
+            "fieldbus": {
+                "backend": "modbus",
+                **BUS,
+                "timeout": 30.0,
+                "modbus": {"port": ports["modbus"]},
+            },
+            "api": {"port": 0},
+            "plc": {"port": 0},
+        }
+    )
     state = tmp_path / "state"
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")

@@ -40,8 +40,15 @@ def blocked(tmp_path_factory) -> dict[str, str]:
 def bwsd(
     env: dict[str, str], *args: str, cwd: Path, timeout: float = 120
 ) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "bwsd.cli", *args], capture_output=True,
-                          text=True, timeout=timeout, env=env, cwd=cwd, check=False)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "bwsd.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        cwd=cwd,
+        check=False,
+    )
 
 
 def test_the_block_holds(blocked, tmp_path):
@@ -54,8 +61,14 @@ def test_the_block_holds(blocked, tmp_path):
         "        continue\n"
         "    raise SystemExit(name)\n"
     )
-    run = subprocess.run([sys.executable, "-c", code, *BLOCKED], env=blocked, cwd=tmp_path,
-                         capture_output=True, text=True, check=False)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-c", code, *BLOCKED],
+        env=blocked,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
 
 
@@ -69,12 +82,28 @@ def test_the_core_imports_and_simulates_without_the_extras(blocked, tmp_path):
         f"                if m is not None and n.partition('.')[0] in {BLOCKED!r})\n"
         "print(loaded)\n"
     )
-    run = subprocess.run([sys.executable, "-c", code], env=blocked, cwd=tmp_path,
-                         capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-c", code],
+        env=blocked,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == "[]"
-    done = bwsd(blocked, "simulate", PROGRAM, "--config", CONFIG, "--json",
-                "--export", str(tmp_path / "s.json"), cwd=tmp_path)  # fmt: skip
+    done = bwsd(
+        blocked,
+        "simulate",
+        PROGRAM,
+        "--config",
+        CONFIG,
+        "--json",
+        "--export",
+        str(tmp_path / "s.json"),
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     assert '"contacts": 73' in done.stdout
     assert (tmp_path / "s.json").is_file()
@@ -88,12 +117,16 @@ def test_the_core_imports_and_simulates_without_the_extras(blocked, tmp_path):
     [
         (["simulate", "--export", "x.vtu"], "writing .vtu needs VTK: pip install 'bwsd[export]'"),
         (["simulate", "--export", "x.vtp"], "writing .vtp needs VTK: pip install 'bwsd[export]'"),
-        (["simulate", "--export", "x.tg3"],
-         "writing .tg3 needs TexGen (pytexgen): pip install 'bwsd[export]'"),
-        (["slice", "--z", "10", "-o", "x.png"],
-         "drawing a slice needs matplotlib: pip install 'bwsd[export]'"),
+        (
+            ["simulate", "--export", "x.tg3"],
+            "writing .tg3 needs TexGen (pytexgen): pip install 'bwsd[export]'",
+        ),
+        (
+            ["slice", "--z", "10", "-o", "x.png"],
+            "drawing a slice needs matplotlib: pip install 'bwsd[export]'",
+        ),
     ],
-)  # fmt: skip
+)
 def test_an_export_without_the_extra_is_one_line_naming_it(blocked, tmp_path, args, message):
     run = bwsd(blocked, args[0], PROGRAM, "--config", CONFIG, *args[1:], cwd=tmp_path)
     assert run.returncode == 2
@@ -106,33 +139,75 @@ def test_the_canopen_backend_without_the_extra_is_one_line_naming_it(blocked, tm
     config.write_text(CONFIG_TEXT.replace('backend = "modbus"', 'backend = "canopen"'))
     run = bwsd(blocked, "hw", "status", "--config", str(config), cwd=tmp_path)
     assert run.returncode == 2
-    assert run.stderr == (f"bwsd: error: {config}: [fieldbus.backend]: backend 'canopen' needs "
-                          "canopen and python-can: pip install 'bwsd[canopen]'\n")  # fmt: skip
-    mock = subprocess.run([sys.executable, "-m", "simulator_hw", "--config", str(config)],
-                          env=blocked, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=60, check=False)  # fmt: skip
+    assert run.stderr == (
+        f"bwsd: error: {config}: [fieldbus.backend]: backend 'canopen' needs "
+        "canopen and python-can: pip install 'bwsd[canopen]'\n"
+    )
+    mock = subprocess.run(
+        [sys.executable, "-m", "simulator_hw", "--config", str(config)],
+        env=blocked,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert mock.returncode == 2
-    assert mock.stderr == ("simulator_hw: error: the CANopen side of the mock loom needs canopen "
-                           "and python-can: pip install 'bwsd[canopen]'\n")  # fmt: skip
+    assert mock.stderr == (
+        "simulator_hw: error: the CANopen side of the mock loom needs canopen "
+        "and python-can: pip install 'bwsd[canopen]'\n"
+    )
 
 
 def test_the_mock_loom_serves_modbus_alone_without_the_canopen_extra(blocked, tmp_path):
     config = tmp_path / "mock.toml"
-    config.write_text(toml({"machine": {"rows": 2, "cols": 2, "pitch_x": 10.0, "pitch_y": 10.0,
-                                        "d_mat": 100.0, "c_mat": 0.5}}))  # fmt: skip
-    command = [sys.executable, "-m", "simulator_hw", "--config", str(config), "--modbus-port",
-               "0", "--socketcand-port", "0", "--control-port", "0"]  # fmt: skip
+    config.write_text(
+        toml(
+            {
+                "machine": {
+                    "rows": 2,
+                    "cols": 2,
+                    "pitch_x": 10.0,
+                    "pitch_y": 10.0,
+                    "d_mat": 100.0,
+                    "c_mat": 0.5,
+                }
+            }
+        )
+    )
+    command = [
+        sys.executable,
+        "-m",
+        "simulator_hw",
+        "--config",
+        str(config),
+        "--modbus-port",
+        "0",
+        "--socketcand-port",
+        "0",
+        "--control-port",
+        "0",
+    ]
     pipe = subprocess.PIPE
-    mock = subprocess.Popen(command, env=blocked, cwd=tmp_path, stdout=pipe, stderr=pipe,
-                            stdin=subprocess.DEVNULL, text=True)  # fmt: skip
+    mock = subprocess.Popen(
+        command,
+        env=blocked,
+        cwd=tmp_path,
+        stdout=pipe,
+        stderr=pipe,
+        stdin=subprocess.DEVNULL,
+        text=True,
+    )
     try:
         assert mock.stdout is not None and mock.stderr is not None
         line = mock.stdout.readline()
         assert line.startswith("ready "), line + mock.stderr.read()
         assert [p.split("=")[0] for p in line.split()[1:]] == ["modbus", "control"]
-        assert mock.stderr.readline() == ("simulator_hw: serving Modbus only: the CANopen side "
-                                          "of the mock loom needs canopen and python-can: pip "
-                                          "install 'bwsd[canopen]'\n")  # fmt: skip
+        assert mock.stderr.readline() == (
+            "simulator_hw: serving Modbus only: the CANopen side "
+            "of the mock loom needs canopen and python-can: pip "
+            "install 'bwsd[canopen]'\n"
+        )
     finally:
         mock.terminate()
         mock.communicate(timeout=20)
@@ -141,9 +216,25 @@ def test_the_mock_loom_serves_modbus_alone_without_the_canopen_extra(blocked, tm
 @pytest.mark.slow
 def test_the_demo_runs_without_the_extras(blocked, tmp_path):
     """The daemon, its API and PLC tags, and the mock loom over Modbus: all of the core."""
-    run = bwsd(blocked, "demo", "--exit-when-done", "--state-dir", "state", "--api-port", "0",
-               "--plc-port", "0", "--modbus-port", "0", "--socketcand-port", "0",
-               "--control-port", "0", cwd=tmp_path, timeout=300)  # fmt: skip
+    run = bwsd(
+        blocked,
+        "demo",
+        "--exit-when-done",
+        "--state-dir",
+        "state",
+        "--api-port",
+        "0",
+        "--plc-port",
+        "0",
+        "--modbus-port",
+        "0",
+        "--socketcand-port",
+        "0",
+        "--control-port",
+        "0",
+        cwd=tmp_path,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     assert "Complete: 50 instructions done, 73 contacts" in run.stdout
     assert "socketcand=" not in run.stdout
@@ -161,8 +252,15 @@ def test_needs_names_the_extra_only_for_its_own_modules():
 def test_the_core_requires_none_of_the_extras():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     names = {_name(r) for r in project["dependencies"]}
-    assert names == {"numpy", "scipy", "pymodbus", "rich", "fastapi", "uvicorn",
-                     "prometheus-client"}  # fmt: skip
+    assert names == {
+        "numpy",
+        "scipy",
+        "pymodbus",
+        "rich",
+        "fastapi",
+        "uvicorn",
+        "prometheus-client",
+    }
     extras = {k: {_name(r) for r in v} for k, v in project["optional-dependencies"].items()}
     assert extras["export"] == {"vtk", "pytexgen", "matplotlib"}
     assert extras["canopen"] == {"canopen", "python-can"}

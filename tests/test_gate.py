@@ -51,19 +51,35 @@ async def rig(mock: Any, tmp_path: Any) -> AsyncIterator[tuple[Controller, Gate,
 
 @pytest.mark.parametrize(
     ("wire", "command"),
-    [(1, Command.RESET), (Command.STOP, Command.STOP), ("start", Command.START),
-     (" Abort ", Command.ABORT), ("CLEAR", Command.CLEAR), (9, Command.CLEAR)],
-)  # fmt: skip
+    [
+        (1, Command.RESET),
+        (Command.STOP, Command.STOP),
+        ("start", Command.START),
+        (" Abort ", Command.ABORT),
+        ("CLEAR", Command.CLEAR),
+        (9, Command.CLEAR),
+    ],
+)
 def test_a_command_is_taken_as_itself_its_number_or_its_name(wire: Any, command: Command):
     assert command_of(wire) is command
 
 
 @pytest.mark.parametrize(
     ("wire", "kind"),
-    [(0, "range"), (10, "range"), (-1, "range"), (65535, "range"), (2.0, "type"),
-     (True, "type"), (None, "type"), ("2", "range"), ("go", "range"), (b"start", "type"),
-     ([2], "type")],
-)  # fmt: skip
+    [
+        (0, "range"),
+        (10, "range"),
+        (-1, "range"),
+        (65535, "range"),
+        (2.0, "type"),
+        (True, "type"),
+        (None, "type"),
+        ("2", "range"),
+        ("go", "range"),
+        (b"start", "type"),
+        ([2], "type"),
+    ],
+)
 def test_a_command_of_a_wrong_type_or_out_of_range_is_refused(wire: Any, kind: str):
     with pytest.raises(Refused) as refused:
         command_of(wire)

@@ -100,14 +100,20 @@ def test_relative_files_are_taken_from_the_state_folder(tmp_path):
     config = parse_config({"machine": MACHINE})
     assert tokens_file(config, tmp_path) == tmp_path / "tokens.json"
     assert journal_file(config, tmp_path) == tmp_path / "journal.db"
-    nested = parse_config({"machine": MACHINE, "api": {"tokens_file": "keys/t.json"},
-                           "journal": {"path": "db/j.db"}})  # fmt: skip
+    nested = parse_config(
+        {"machine": MACHINE, "api": {"tokens_file": "keys/t.json"}, "journal": {"path": "db/j.db"}}
+    )
     assert tokens_file(nested, tmp_path) == tmp_path / "keys" / "t.json"
     assert journal_file(nested, tmp_path) == tmp_path / "db" / "j.db"
 
 
 def test_absolute_files_are_kept(tmp_path):
-    config = parse_config({"machine": MACHINE, "api": {"tokens_file": str(tmp_path / "t.json")},
-                           "journal": {"path": str(tmp_path / "j.db")}})  # fmt: skip
+    config = parse_config(
+        {
+            "machine": MACHINE,
+            "api": {"tokens_file": str(tmp_path / "t.json")},
+            "journal": {"path": str(tmp_path / "j.db")},
+        }
+    )
     assert tokens_file(config, Path("/elsewhere")) == tmp_path / "t.json"
     assert journal_file(config, Path("/elsewhere")) == tmp_path / "j.db"

@@ -20,9 +20,18 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-STEPS = ("bwsd init loom", "bwsd mock ", "bwsd serve ", "/healthz", "bwsd token add",
-         '"$API/programs"', "commands/reset", "commands/start", '"name":"(Complete',
-         "/#token=$TOKEN")  # fmt: skip
+STEPS = (
+    "bwsd init loom",
+    "bwsd mock ",
+    "bwsd serve ",
+    "/healthz",
+    "bwsd token add",
+    '"$API/programs"',
+    "commands/reset",
+    "commands/start",
+    '"name":"(Complete',
+    "/#token=$TOKEN",
+)
 
 
 def readme_commands(text: str) -> str:
@@ -45,8 +54,13 @@ def _namespaced() -> list[str]:
     if not unshare or not ip:
         _unavailable("unshare and ip (util-linux, iproute2) are needed")
     prefix = [unshare, "--net", "--map-root-user"] if os.geteuid() else [unshare, "--net"]
-    probe = subprocess.run([*prefix, ip, "link", "set", "lo", "up"], capture_output=True,
-                           text=True, timeout=60, check=False)  # fmt: skip
+    probe = subprocess.run(
+        [*prefix, ip, "link", "set", "lo", "up"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     if probe.returncode != 0:
         _unavailable(f"no network namespace here: {probe.stderr.strip()}")
     return [*prefix, "sh", "-c", f'{ip} link set lo up && exec "$@"', "sh"]
@@ -69,8 +83,15 @@ def test_the_readme_commands_run_as_written_from_an_empty_folder(tmp_path):
     here = tmp_path / "empty"
     here.mkdir()
     command = [*_namespaced(), "bash", "-euo", "pipefail", str(tmp_path / "walk.sh")]
-    run = subprocess.Popen(command, cwd=here, env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+    run = subprocess.Popen(
+        command,
+        cwd=here,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = run.communicate(timeout=600)
     finally:
@@ -85,8 +106,15 @@ def test_the_readme_commands_run_as_written_from_an_empty_folder(tmp_path):
     assert token and len(token[1]) >= 32
     loaded = json.loads(re.findall(r'^\{"id".*$', out, re.MULTILINE)[0])
     assert loaded["name"] == "braid-2x2.bws" and loaded["instructions"] == 50
-    for made in ("loom/loom.toml", "loom/state/journal.db", "loom/state/tokens.json",
-                 "out/braid-L.json", "out/braid-L.vtp", "slice.png", "my.bws",
-                 "braid-angle.parquet"):  # fmt: skip
+    for made in (
+        "loom/loom.toml",
+        "loom/state/journal.db",
+        "loom/state/tokens.json",
+        "out/braid-L.json",
+        "out/braid-L.vtp",
+        "slice.png",
+        "my.bws",
+        "braid-angle.parquet",
+    ):
         assert (here / made).is_file(), made
     assert "bwsd: warning" not in err  # the token went where the daemon reads it

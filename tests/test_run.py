@@ -115,8 +115,12 @@ def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     try:
         done = subprocess.run(
             [BWSD, "simulate", program, "--config", config],
-            stdout=subprocess.PIPE, stderr=follower, text=True, timeout=300, check=False,
-        )  # fmt: skip
+            stdout=subprocess.PIPE,
+            stderr=follower,
+            text=True,
+            timeout=300,
+            check=False,
+        )
         os.close(follower)
         chunks = []
         while True:
@@ -147,9 +151,13 @@ def test_simulate_takes_the_expansion_limit_from_the_config(tmp_path):
 
 @pytest.mark.parametrize(
     ("line", "where"),
-    [("TAKEUP 1e999", "6:8"), ("WEFT x=5 y=5 z=1 angle=1e999 length=5", "6:24"),
-     ("WEFT x=5 y=5 z=1 angle=0 length=1e999", "6:33"), ("TAKEUP \u0661", "6:8")],
-)  # fmt: skip
+    [
+        ("TAKEUP 1e999", "6:8"),
+        ("WEFT x=5 y=5 z=1 angle=1e999 length=5", "6:24"),
+        ("WEFT x=5 y=5 z=1 angle=0 length=1e999", "6:33"),
+        ("TAKEUP \u0661", "6:8"),
+    ],
+)
 def test_simulate_json_refuses_hostile_numbers_at_their_place(tmp_path, line, where):
     """Once infinity, a traceback or ``Infinity`` on stdout; now one line naming line:col."""
     program = tmp_path / "p.bws"
@@ -182,8 +190,10 @@ def test_a_jam_names_its_line_and_writes_nothing(tmp_path):
 def test_simulate_warns_about_a_loose_weft(tmp_path):
     """A hand-written 30 degree weft that nothing touches: accepted, but it lies loose."""
     program = tmp_path / "loose.bws"
-    program.write_text("YARN diameter=1\nFILL row=0 col=0\nX.\n.X\nEND\nTAKEUP 1\n"
-                       "WEFT x=5 y=5 z=50 angle=30 length=3\nROW 0:+1 1:-1\n")  # fmt: skip
+    program.write_text(
+        "YARN diameter=1\nFILL row=0 col=0\nX.\n.X\nEND\nTAKEUP 1\n"
+        "WEFT x=5 y=5 z=50 angle=30 length=3\nROW 0:+1 1:-1\n"
+    )
     done = bwsd("simulate", str(program), "--config", example("twist")[1], "--json")
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["loose_wefts"] == [2]
@@ -198,8 +208,15 @@ def test_simulate_warns_about_a_loose_weft(tmp_path):
 def test_simulate_runs_shipped_examples_by_name_and_makes_the_output_folder(tmp_path):
     """`example:NAME` for the program and the config (it worked for `bwsd sweep` only), and
     `--skeleton out/...` from a folder without out/ (it failed)."""
-    done = bwsd("simulate", "example:twist.bws", "--config", "example:twist.toml",
-                "--skeleton", "out/twist.json", cwd=tmp_path)  # fmt: skip
+    done = bwsd(
+        "simulate",
+        "example:twist.bws",
+        "--config",
+        "example:twist.toml",
+        "--skeleton",
+        "out/twist.json",
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     written = json.loads((tmp_path / "out" / "twist.json").read_text())
     machine = load_config(ROOT / "config" / "twist.toml").machine

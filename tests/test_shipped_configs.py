@@ -42,11 +42,26 @@ def test_the_loom_config_drives_the_mock_loom_on_both_buses(tmp_path):
     fill = set(load_program(ROOT / "examples/braid-2x2.bws", machine).fill)
     shifted = {(r, c + 1) if r == 1 else (r, c) for r, c in fill}
     mock = subprocess.Popen(
-        [sys.executable, "-m", "simulator_hw", "--config", "config/loom.toml", "--program",
-         "examples/braid-2x2.bws", "--modbus-port", "0", "--socketcand-port", "0",
-         "--control-port", "0"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "simulator_hw",
+            "--config",
+            "config/loom.toml",
+            "--program",
+            "examples/braid-2x2.bws",
+            "--modbus-port",
+            "0",
+            "--socketcand-port",
+            "0",
+            "--control-port",
+            "0",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert mock.stdout is not None
         ready = mock.stdout.readline()

@@ -55,10 +55,18 @@ def test_a_loom_folders_unit_verifies_without_a_single_warning(folder, unit):
 @pytest.mark.parametrize("unit", UNITS)
 def test_installed_unit_is_hardened(installed, unit):
     done = subprocess.run(
-        ["systemd-analyze", "security", "--offline=true", f"--threshold={THRESHOLD}",
-         str(installed / unit)],
-        capture_output=True, text=True, timeout=60, check=False,
-    )  # fmt: skip
+        [
+            "systemd-analyze",
+            "security",
+            "--offline=true",
+            f"--threshold={THRESHOLD}",
+            str(installed / unit),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert done.returncode == 0, done.stdout[-2000:]
     assert "Overall exposure level" in done.stdout
 
@@ -73,6 +81,12 @@ def test_a_unit_naming_a_missing_executable_is_caught(installed, tmp_path):
 
 def test_daemon_unit_is_a_notify_service_with_a_watchdog_and_a_state_folder():
     text = (ROOT / "systemd" / "bwsd.service").read_text()
-    for line in ("Type=notify", "WatchdogSec=", "StateDirectory=bwsd", "DynamicUser=yes",
-                 "ProtectSystem=strict", "AF_CAN"):  # fmt: skip
+    for line in (
+        "Type=notify",
+        "WatchdogSec=",
+        "StateDirectory=bwsd",
+        "DynamicUser=yes",
+        "ProtectSystem=strict",
+        "AF_CAN",
+    ):
         assert line in text

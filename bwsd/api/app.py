@@ -43,11 +43,18 @@ operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the 
 
 
 def create_app(
-    controller: Controller, tokens: TokenStore, open_reads: bool = False, *,
-    queue_size: int = QUEUE_SIZE, web_root: Path = web.WEB_ROOT, origins: Iterable[str] = (),
-    doors: Doors = DEFAULT_DOORS, hosts: Iterable[str] | None = None, gate: Gate | None = None,
+    controller: Controller,
+    tokens: TokenStore,
+    open_reads: bool = False,
+    *,
+    queue_size: int = QUEUE_SIZE,
+    web_root: Path = web.WEB_ROOT,
+    origins: Iterable[str] = (),
+    doors: Doors = DEFAULT_DOORS,
+    hosts: Iterable[str] | None = None,
+    gate: Gate | None = None,
     tensions: tuple[float, float] = (1.0, 1.0),
-) -> FastAPI:  # fmt: skip
+) -> FastAPI:
     """The API of ``controller`` and the page at ``/`` (from ``web_root``); requests must
     name one of ``hosts`` (by default ``default_hosts`` of loopback) as their Host;
     ``tensions`` (warp, weft) are the relaxed preform's (``GET /skeleton?relaxed=true``).
@@ -61,8 +68,14 @@ def create_app(
     ctx = Context(controller, view, metrics, hub, RelaxedView(view, *tensions))
     # No /docs or /redoc: FastAPI's pages load their scripts from a public CDN at a floating
     # version, on the origin that holds the tokens. /openapi.json serves the schema.
-    app = FastAPI(title="bwsd", version=__version__, description=DESCRIPTION,
-                  lifespan=_lifespan(ctx), docs_url=None, redoc_url=None)  # fmt: skip
+    app = FastAPI(
+        title="bwsd",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=_lifespan(ctx),
+        docs_url=None,
+        redoc_url=None,
+    )
     app.state.ctx = ctx
     app.state.auth = Auth(tokens, open_reads)
     app.state.origins = frozenset(o.rstrip("/") for o in origins)
@@ -78,25 +91,44 @@ def create_app(
     control.router.install(app, PREFIX, ["machine"], MAX_BODY_BYTES)
     data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
     app.add_api_websocket_route(f"{PREFIX}/events", _events(ctx))
-    app.add_api_route("/healthz", healthz, methods=["GET"], response_model=Health,
-                      responses={503: {"model": Health}}, tags=["service"])  # fmt: skip
-    app.add_api_route("/metrics", _metrics(metrics), methods=["GET"], tags=["service"],
-                      dependencies=[Depends(require("viewer"))], response_class=Response,
-                      responses={200: {"content": {CONTENT_TYPE: {}}}, 401: {"model": Error},
-                                 403: {"model": Error}})  # fmt: skip
+    app.add_api_route(
+        "/healthz",
+        healthz,
+        methods=["GET"],
+        response_model=Health,
+        responses={503: {"model": Health}},
+        tags=["service"],
+    )
+    app.add_api_route(
+        "/metrics",
+        _metrics(metrics),
+        methods=["GET"],
+        tags=["service"],
+        dependencies=[Depends(require("viewer"))],
+        response_class=Response,
+        responses={
+            200: {"content": {CONTENT_TYPE: {}}},
+            401: {"model": Error},
+            403: {"model": Error},
+        },
+    )
     web.install(app, web_root)
     ctx.install()
     _redact_server_logs()
     return app
 
 
-def server(app: FastAPI, host: str = "127.0.0.1", port: int = 8080, doors: Doors = DEFAULT_DOORS,
-           **options: Any) -> uvicorn.Server:  # fmt: skip
+def server(
+    app: FastAPI,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    doors: Doors = DEFAULT_DOORS,
+    **options: Any,
+) -> uvicorn.Server:
     """A uvicorn server for ``app`` behind ``doors``; run ``await server.serve()`` on the
     controller's loop (``options`` go to ``uvicorn.Config``)."""
     settings: dict[str, Any] = {"lifespan": "on", "log_level": "info", "access_log": False}
-    return uvicorn.Server(server_config(app, doors, host=host, port=port,
-                                        **(settings | options)))  # fmt: skip
+    return uvicorn.Server(server_config(app, doors, host=host, port=port, **(settings | options)))
 
 
 class HandshakeRefused(logging.Filter):
@@ -116,8 +148,9 @@ class RedactTokens(logging.Filter):
         if isinstance(record.msg, str):
             record.msg = self._TOKEN.sub(r"\1***", record.msg)
         if isinstance(record.args, tuple):
-            record.args = tuple(self._TOKEN.sub(r"\1***", a) if isinstance(a, str) else a
-                                for a in record.args)  # fmt: skip
+            record.args = tuple(
+                self._TOKEN.sub(r"\1***", a) if isinstance(a, str) else a for a in record.args
+            )
         return True
 
 
@@ -215,15 +248,23 @@ async def _deny(websocket: WebSocket, exc: ApiError) -> None:
 
 def _hello(ctx: Context) -> dict[str, Any]:
     st = ctx.controller.status()
-    return {"event": "hello", "state": int(st.state), "name": st.state.label,
-            "program_id": st.program_id, "index": st.index}  # fmt: skip
+    return {
+        "event": "hello",
+        "state": int(st.state),
+        "name": st.state.label,
+        "program_id": st.program_id,
+        "index": st.index,
+    }
 
 
 async def _serve(websocket: WebSocket, sub: Subscriber, still: Callable[[], object]) -> None:
     """Send the queue while reading (and ignoring) what the client says, until it leaves, or
     until its token no longer allows it (``still`` raises: removed, or its role changed)."""
-    tasks = {asyncio.create_task(_pump(websocket, sub)), asyncio.create_task(_drain(websocket)),
-             asyncio.create_task(_recheck(websocket, still))}  # fmt: skip
+    tasks = {
+        asyncio.create_task(_pump(websocket, sub)),
+        asyncio.create_task(_drain(websocket)),
+        asyncio.create_task(_recheck(websocket, still)),
+    }
     try:
         await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
     finally:

@@ -23,8 +23,20 @@ from bwsd.tokens import (
     digest,
 )
 
-__all__ = ["LOGINS", "RANK", "ROLES", "Auth", "Principal", "Role", "TokenEntry", "TokenError",
-           "TokenStore", "check_role", "digest", "require"]  # fmt: skip
+__all__ = [
+    "LOGINS",
+    "RANK",
+    "ROLES",
+    "Auth",
+    "Principal",
+    "Role",
+    "TokenEntry",
+    "TokenError",
+    "TokenStore",
+    "check_role",
+    "digest",
+    "require",
+]
 
 log = logging.getLogger("bwsd.api")
 # Every refused login of the REST API and its event stream, whatever the method: one line,
@@ -76,8 +88,12 @@ class Auth:
             raise unauthorized("the bearer token is not known")
         name, held = holder
         if RANK[held] < RANK[role]:
-            raise ApiError(403, f"token {name!r} has role {held}; this needs {role} or above",
-                           role=held, needs=role)  # fmt: skip
+            raise ApiError(
+                403,
+                f"token {name!r} has role {held}; this needs {role} or above",
+                role=held,
+                needs=role,
+            )
         return Principal(name, held, token)
 
 

@@ -98,8 +98,12 @@ async def get_whoami(who: Viewer) -> WhoOut:
     return WhoOut(name=who.name, role=who.role)
 
 
-@router.get("/machine", response_model=MachineOut, dependencies=READ,
-            responses={**AUTH_ERRORS, 503: {"model": Error}})  # fmt: skip
+@router.get(
+    "/machine",
+    response_model=MachineOut,
+    dependencies=READ,
+    responses={**AUTH_ERRORS, 503: {"model": Error}},
+)
 async def get_machine(ctx: Ctx) -> MachineOut:
     """The axes, occupancy sensors and e-stop as the bus reports them now."""
     ctl = ctx.controller
@@ -128,18 +132,22 @@ async def get_machine(ctx: Ctx) -> MachineOut:
     )
 
 
-@router.post("/commands/{name}", response_model=CommandOut,
-             responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS,
-                        409: {"model": CommandErrorOut}})  # fmt: skip
-async def post_command(name: CommandName, ctx: Ctx, who: Operator, request: Request,
-                       body: CommandIn | None = None) -> CommandOut:  # fmt: skip
+@router.post(
+    "/commands/{name}",
+    response_model=CommandOut,
+    responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS, 409: {"model": CommandErrorOut}},
+)
+async def post_command(
+    name: CommandName, ctx: Ctx, who: Operator, request: Request, body: CommandIn | None = None
+) -> CommandOut:
     """Send a PackML command; answers once the acting state it enters has done its work."""
     ctl = ctx.controller
     gate: Gate = request.app.state.gate
     reason, resume = (body.reason, body.resume) if body is not None else ("", False)
     try:
-        await gate.command(Caller("rest", who.name, who.token, who.role), name,
-                           reason=reason, resume=resume)  # fmt: skip
+        await gate.command(
+            Caller("rest", who.name, who.token, who.role), name, reason=reason, resume=resume
+        )
     except Refused as exc:
         raise refused(exc) from None
     except InvalidCommand as exc:
@@ -149,8 +157,11 @@ async def post_command(name: CommandName, ctx: Ctx, who: Operator, request: Requ
     return _command_out(ctl)
 
 
-@router.put("/mode", response_model=ModeOut,
-            responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS, 409: {"model": Error}})  # fmt: skip
+@router.put(
+    "/mode",
+    response_model=ModeOut,
+    responses={**AUTH_ERRORS, **INVALID, **BODY_ERRORS, 409: {"model": Error}},
+)
 async def put_mode(body: ModeIn, ctx: Ctx, who: Admin, request: Request) -> ModeOut:
     """Change the unit mode (PackML allows it in Stopped, Idle and Aborted); needs admin."""
     ctl = ctx.controller
@@ -171,12 +182,20 @@ def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError
 
 def _command_out(ctl: Controller) -> CommandOut:
     st = ctl.status()
-    return CommandOut(state=int(st.state), name=st.state.label, reason=st.reason,
-                      allowed=command_names(st.allowed))  # fmt: skip
+    return CommandOut(
+        state=int(st.state),
+        name=st.state.label,
+        reason=st.reason,
+        allowed=command_names(st.allowed),
+    )
 
 
-@router.post("/preview", response_model=PreviewOut, dependencies=WRITE,
-             responses={**AUTH_ERRORS, 409: {"model": Error}})  # fmt: skip
+@router.post(
+    "/preview",
+    response_model=PreviewOut,
+    dependencies=WRITE,
+    responses={**AUTH_ERRORS, 409: {"model": Error}},
+)
 async def post_preview(ctx: Ctx) -> PreviewOut:
     """Predict the next instruction on the twin without committing it (nothing changes)."""
     try:
@@ -184,11 +203,19 @@ async def post_preview(ctx: Ctx) -> PreviewOut:
     except ControllerError as exc:
         raise ApiError(409, str(exc)) from None
     if found.prediction is None:
-        return PreviewOut(index=found.index, line=found.line,
-                          instruction=instruction_dict(found.instruction), refused=found.refused,
-                          contacts=[], inserted=[], free_nodes=[],
-                          occupancy=found.occupancy.tolist(), takeup=found.takeup, new_yarns=[],
-                          length_change=[])  # fmt: skip
+        return PreviewOut(
+            index=found.index,
+            line=found.line,
+            instruction=instruction_dict(found.instruction),
+            refused=found.refused,
+            contacts=[],
+            inserted=[],
+            free_nodes=[],
+            occupancy=found.occupancy.tolist(),
+            takeup=found.takeup,
+            new_yarns=[],
+            length_change=[],
+        )
     return _preview_out(found.prediction, found.line, found.refused)
 
 

@@ -55,15 +55,27 @@ MEDIA = {"tg3": "application/xml", "vtp": "application/xml"}
 SKELETON_CONTENT: dict[str, dict[str, str]] = {"application/json": {}, "application/xml": {}}
 
 
-@router.post("/programs", status_code=201, response_model=LoadedOut,
-             responses={200: {"model": LoadedOut, "description": "a dry run (nothing loaded)"},
-                        **AUTH_ERRORS, **BODY_ERRORS, 409: {"model": Error},
-                        422: {"model": ProgramErrorOut | InvalidOut},
-                        429: {"model": Error}})  # fmt: skip
+@router.post(
+    "/programs",
+    status_code=201,
+    response_model=LoadedOut,
+    responses={
+        200: {"model": LoadedOut, "description": "a dry run (nothing loaded)"},
+        **AUTH_ERRORS,
+        **BODY_ERRORS,
+        409: {"model": Error},
+        422: {"model": ProgramErrorOut | InvalidOut},
+        429: {"model": Error},
+    },
+)
 async def post_program(
-    body: ProgramIn, ctx: Ctx, response: Response, request: Request, who: Operator,
+    body: ProgramIn,
+    ctx: Ctx,
+    response: Response,
+    request: Request,
+    who: Operator,
     dry_run: Annotated[bool, Query(description="only check the program: load nothing")] = False,
-) -> LoadedOut:  # fmt: skip
+) -> LoadedOut:
     """Parse, validate and dry-run a program, and (unless ``dry_run``) make it the one to run.
 
     The check runs off the event loop, one at a time (429 while another runs), and stops when
@@ -80,8 +92,9 @@ async def post_program(
             pid = None
             response.status_code = 200
         else:
-            pid = await _until_gone(request, cancel,
-                                    gate.load(caller, body.name, body.text, cancel))  # fmt: skip
+            pid = await _until_gone(
+                request, cancel, gate.load(caller, body.name, body.text, cancel)
+            )
             assert ctl.dry_run is not None
             totals = ctl.dry_run
     except Refused as exc:
@@ -110,8 +123,12 @@ def _program_error(exc: ProgramError) -> ApiError:
     return ApiError(422, exc.reason, line=exc.line, column=exc.column)
 
 
-@router.get("/programs", response_model=list[ProgramOut], dependencies=READ,
-            responses={**AUTH_ERRORS, **INVALID})  # fmt: skip
+@router.get(
+    "/programs",
+    response_model=list[ProgramOut],
+    dependencies=READ,
+    responses={**AUTH_ERRORS, **INVALID},
+)
 async def get_programs(
     ctx: Ctx, limit: Limit = 50, before: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None
 ) -> list[ProgramOut]:
@@ -120,8 +137,12 @@ async def get_programs(
     return [ProgramOut(**asdict(r)) for r in records]
 
 
-@router.get("/programs/{program_id}", response_model=ProgramDetailOut, dependencies=READ,
-            responses={**AUTH_ERRORS, **INVALID, 404: {"model": Error}})  # fmt: skip
+@router.get(
+    "/programs/{program_id}",
+    response_model=ProgramDetailOut,
+    dependencies=READ,
+    responses={**AUTH_ERRORS, **INVALID, 404: {"model": Error}},
+)
 async def get_program(
     ctx: Ctx, program_id: Annotated[int, PathParam(ge=1, le=MAX_ID)]
 ) -> ProgramDetailOut:
@@ -132,13 +153,23 @@ async def get_program(
     return ProgramDetailOut(**asdict(found[0]), text=found[1])
 
 
-@router.post("/programs/{program_id}/load", status_code=201, response_model=LoadedOut,
-             responses={**AUTH_ERRORS, **INVALID, 409: {"model": Error},
-                        422: {"model": ProgramErrorOut | InvalidOut}})  # fmt: skip
+@router.post(
+    "/programs/{program_id}/load",
+    status_code=201,
+    response_model=LoadedOut,
+    responses={
+        **AUTH_ERRORS,
+        **INVALID,
+        409: {"model": Error},
+        422: {"model": ProgramErrorOut | InvalidOut},
+    },
+)
 async def load_stored(
-    ctx: Ctx, request: Request, who: Operator,
+    ctx: Ctx,
+    request: Request,
+    who: Operator,
     program_id: Annotated[int, PathParam(ge=1, le=MAX_ID)],
-) -> LoadedOut:  # fmt: skip
+) -> LoadedOut:
     """Load again a program the journal stores, by its id, as the PLC's ``LoadRequest``
     does; the load is stored under a new id, which the answer gives."""
     gate: Gate = request.app.state.gate
@@ -156,20 +187,25 @@ async def load_stored(
     return LoadedOut(id=pid, name=ctl.status().program_name or "", **asdict(ctl.dry_run))
 
 
-@router.get("/history", response_model=HistoryOut, dependencies=READ,
-            responses={**AUTH_ERRORS, **INVALID})  # fmt: skip
+@router.get(
+    "/history", response_model=HistoryOut, dependencies=READ, responses={**AUTH_ERRORS, **INVALID}
+)
 async def get_history(
     ctx: Ctx, after_state: After = 0, after_event: After = 0, limit: Limit = 100
 ) -> HistoryOut:
     """The journal's PackML state changes and events, oldest first, after the ids given."""
     states, events = await ctx.controller.records(after_state, after_event, limit)
-    return HistoryOut(states=[StateRecordOut(**asdict(s)) for s in states],
-                      events=[EventRecordOut(**asdict(e)) for e in events])  # fmt: skip
+    return HistoryOut(
+        states=[StateRecordOut(**asdict(s)) for s in states],
+        events=[EventRecordOut(**asdict(e)) for e in events],
+    )
 
 
-@router.get("/skeleton", dependencies=READ,
-            responses={**AUTH_ERRORS, **INVALID, 200: {"content": SKELETON_CONTENT},
-                       409: {"model": Error}})  # fmt: skip
+@router.get(
+    "/skeleton",
+    dependencies=READ,
+    responses={**AUTH_ERRORS, **INVALID, 200: {"content": SKELETON_CONTENT}, 409: {"model": Error}},
+)
 async def get_skeleton(
     ctx: Ctx,
     fmt: Annotated[Literal["json", "tg3", "vtp"], Query(alias="format")] = "json",
@@ -203,8 +239,12 @@ async def get_skeleton(
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
-    return FileResponse(target, media_type=MEDIA[fmt], filename=target.name,
-                        background=BackgroundTask(_remove, folder))  # fmt: skip
+    return FileResponse(
+        target,
+        media_type=MEDIA[fmt],
+        filename=target.name,
+        background=BackgroundTask(_remove, folder),
+    )
 
 
 def _json(sk: SkeletonData) -> bytes:

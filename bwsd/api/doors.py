@@ -57,8 +57,13 @@ class Doors:
             path = str(table[name])
             return str(folder / path) if path and folder is not None else path
 
-        return cls(table["max_connections"], table["max_connections_per_client"],
-                   table["body_timeout"], where("certfile"), where("keyfile"))  # fmt: skip
+        return cls(
+            table["max_connections"],
+            table["max_connections_per_client"],
+            table["body_timeout"],
+            where("certfile"),
+            where("keyfile"),
+        )
 
 
 DEFAULT_DOORS = Doors()
@@ -148,12 +153,14 @@ class BodyDeadline:
         with contextlib.suppress(BodyTimeout):
             await self.app(scope, timed_receive, tracked_send)
         if late:
-            SLOW.note("cut a request from %s: its body took more than %g s",
-                      _client(scope), self.seconds)  # fmt: skip
+            SLOW.note(
+                "cut a request from %s: its body took more than %g s", _client(scope), self.seconds
+            )
             if not started:
                 message = f"the request body did not arrive within {self.seconds:g} s"
-                response = JSONResponse(error_body(message), status_code=408,
-                                        headers={"Connection": "close"})  # fmt: skip
+                response = JSONResponse(
+                    error_body(message), status_code=408, headers={"Connection": "close"}
+                )
                 await response(scope, receive, send)
 
 
@@ -176,10 +183,16 @@ def guarded_protocol(doors: Doors) -> type[asyncio.Protocol]:
             total = len(self.connections)
             same = sum(1 for c in self.connections if _host(c) == client)
             if total > doors.max_connections or same > doors.max_connections_per_client:
-                CROWD.note("refused a connection from %s: %d open from it, %d in all "
-                           "(limits %d and %d: [api] max_connections_per_client, "
-                           "max_connections)", client, same - 1, total - 1,
-                           doors.max_connections_per_client, doors.max_connections)  # fmt: skip
+                CROWD.note(
+                    "refused a connection from %s: %d open from it, %d in all "
+                    "(limits %d and %d: [api] max_connections_per_client, "
+                    "max_connections)",
+                    client,
+                    same - 1,
+                    total - 1,
+                    doors.max_connections_per_client,
+                    doors.max_connections,
+                )
                 transport.abort()
                 return
             self._head_timer = self.loop.call_later(doors.body_timeout, self._head_late)
@@ -194,8 +207,11 @@ def guarded_protocol(doors: Doors) -> type[asyncio.Protocol]:
             if self.transport.get_protocol() is not self:
                 return  # upgraded to a WebSocket: its own protocol holds the connection now
             if self.cycle is None:  # no request has begun: a silent or slow client
-                SLOW.note("closed a connection from %s: no request head within %g s",
-                          self.client[0] if self.client else "?", doors.body_timeout)  # fmt: skip
+                SLOW.note(
+                    "closed a connection from %s: no request head within %g s",
+                    self.client[0] if self.client else "?",
+                    doors.body_timeout,
+                )
                 self.transport.close()
 
     return Guarded
@@ -227,6 +243,9 @@ def check_tls(doors: Doors) -> None:
     try:
         context.load_cert_chain(doors.certfile, doors.keyfile or None)
     except (OSError, ssl.SSLError) as exc:
-        raise ConfigError(f"cannot serve TLS with {doors.certfile!r} (keyfile "
-                          f"{doors.keyfile or 'none'!r}): {exc}", table="api",
-                          key="certfile") from None  # fmt: skip
+        raise ConfigError(
+            f"cannot serve TLS with {doors.certfile!r} (keyfile "
+            f"{doors.keyfile or 'none'!r}): {exc}",
+            table="api",
+            key="certfile",
+        ) from None

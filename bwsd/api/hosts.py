@@ -86,8 +86,11 @@ class HostCheck:
             await self.app(scope, receive, send)
             return
         client = scope.get("client")
-        REFUSED.note("refused a request from %s for Host %r: not one of [api] hosts",
-                     client[0] if client else "an unknown client", header[:100])  # fmt: skip
+        REFUSED.note(
+            "refused a request from %s for Host %r: not one of [api] hosts",
+            client[0] if client else "an unknown client",
+            header[:100],
+        )
         message = f"Host {header[:100]!r} is not served here ([api] hosts)"
         if scope["type"] == "http":
             await JSONResponse(error_body(message), status_code=421)(scope, receive, send)
@@ -100,8 +103,9 @@ async def _deny_handshake(scope: Scope, receive: Receive, send: Send, message: s
     await receive()  # websocket.connect
     if "websocket.http.response" in scope.get("extensions", {}):
         body = JSONResponse(error_body(message), status_code=403)
-        await send({"type": "websocket.http.response.start", "status": 403,
-                    "headers": body.raw_headers})  # fmt: skip
+        await send(
+            {"type": "websocket.http.response.start", "status": 403, "headers": body.raw_headers}
+        )
         await send({"type": "websocket.http.response.body", "body": body.body})
     else:
         await send({"type": "websocket.close", "code": 1008, "reason": message[:120]})

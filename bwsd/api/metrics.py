@@ -22,15 +22,18 @@ class Metrics:
         r = self.registry
         state = Gauge("bwsd_packml_state", "PackML state number (ISA-TR88.00.02)", registry=r)
         state.set_function(lambda: float(controller.status().state))
-        index = Gauge("bwsd_instruction_index", "Instructions done of the loaded program",
-                      registry=r)  # fmt: skip
+        index = Gauge(
+            "bwsd_instruction_index", "Instructions done of the loaded program", registry=r
+        )
         index.set_function(lambda: float(controller.index))
-        self.instructions = Counter("bwsd_instructions_done", "Instructions done since start",
-                                    registry=r)  # fmt: skip
+        self.instructions = Counter(
+            "bwsd_instructions_done", "Instructions done since start", registry=r
+        )
         self.contacts = Counter("bwsd_contacts", "Yarn contacts made since start", registry=r)
         self.faults = Counter("bwsd_faults", "Faults the controller reported", registry=r)
-        self.dropped = Counter("bwsd_events_dropped", "Events dropped for slow WebSocket clients",
-                               registry=r)  # fmt: skip
+        self.dropped = Counter(
+            "bwsd_events_dropped", "Events dropped for slow WebSocket clients", registry=r
+        )
         self.clients = Gauge("bwsd_event_clients", "Connected WebSocket clients", registry=r)
         self.latency = Histogram(
             "bwsd_http_request_duration_seconds",

@@ -81,8 +81,11 @@ class StateOut(BaseModel):
     )
     allowed: list[str] = Field(description="exactly the commands that will be accepted now")
     recovering: str = Field(description="why commands wait after a restart ('' if they do not)")
-    resumable: bool = Field(False, description="start with resume continues the loaded "
-                            "program where an Abort or a Stop left it")  # fmt: skip
+    resumable: bool = Field(
+        False,
+        description="start with resume continues the loaded "
+        "program where an Abort or a Stop left it",
+    )
     bus: BusHealth
     last_fault: str | None = Field(description="the controller's last fault report, if any")
     next: NextOut | None = Field(description="the instruction to run next; null if none")
@@ -143,8 +146,11 @@ class ProgramDetailOut(ProgramOut):
 
 class CommandIn(BaseModel):
     reason: str = Field("", max_length=MAX_REASON_CHARS)
-    resume: bool = Field(False, description="with start: continue the loaded program where "
-                         "an Abort or a Stop left it (see resumable in the state)")  # fmt: skip
+    resume: bool = Field(
+        False,
+        description="with start: continue the loaded program where "
+        "an Abort or a Stop left it (see resumable in the state)",
+    )
 
 
 class ModeIn(BaseModel):
@@ -229,8 +235,9 @@ class HistoryOut(BaseModel):
 class Health(BaseModel):
     ok: bool = Field(description="false (and HTTP 503) while a part of the daemon is down")
     open_reads: bool = Field(description="reads are served without a token")
-    problems: dict[str, str] = Field(default_factory=dict, description="what is down, by "
-                                     "part: a task, the recovery, the journal")  # fmt: skip
+    problems: dict[str, str] = Field(
+        default_factory=dict, description="what is down, by part: a task, the recovery, the journal"
+    )
 
 
 Responses = dict[int | str, dict[str, Any]]

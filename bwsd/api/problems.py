@@ -60,8 +60,9 @@ def _invalid_request(gate: Gate) -> Callable[[Request, Exception], Any]:
         first = errors[0] if errors else {}
         if first.get("type") == "json_invalid":  # not a malformed request: no JSON at all
             at = first.get("loc", ())[-1]
-            return JSONResponse(error_body(f"the body is not valid JSON (at character {at})"),
-                                status_code=400)  # fmt: skip
+            return JSONResponse(
+                error_body(f"the body is not valid JSON (at character {at})"), status_code=400
+            )
         where = _where(first.get("loc", ()))
         message = f"invalid request: {where}: {first.get('msg', 'invalid')}"
         return JSONResponse(error_body(message, details=jsonable_encoder(errors)), status_code=422)
@@ -91,8 +92,9 @@ def refused(exc: Refused) -> ApiError:
         return ApiError(401, str(exc), headers={"WWW-Authenticate": "Bearer"})
     if exc.kind == "role":
         return ApiError(403, str(exc))
-    details = [{"loc": ["body", exc.field] if exc.field else ["body"], "msg": str(exc),
-                "type": exc.kind}]  # fmt: skip
+    details = [
+        {"loc": ["body", exc.field] if exc.field else ["body"], "msg": str(exc), "type": exc.kind}
+    ]
     return ApiError(422, f"invalid request: {exc}", details=details)
 
 

@@ -37,5 +37,11 @@ class RouteTable:
     def install(self, app: FastAPI, prefix: str, tags: list[str], max_body: int) -> None:
         """Add every route under ``prefix``; a body of more than ``max_body`` bytes is a 413."""
         for method, path, endpoint, options in self.routes:
-            app.add_api_route(prefix + path, endpoint, methods=[method], tags=list(tags),
-                              max_body_size=max_body, **options)  # fmt: skip
+            app.add_api_route(
+                prefix + path,
+                endpoint,
+                methods=[method],
+                tags=list(tags),
+                max_body_size=max_body,
+                **options,
+            )

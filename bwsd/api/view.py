@@ -61,8 +61,9 @@ class RelaxedView:
     every refusal: nothing here reaches the controller.
     """
 
-    def __init__(self, skeleton: SkeletonView, warp_tension: float = 1.0,
-                 weft_tension: float = 1.0) -> None:  # fmt: skip
+    def __init__(
+        self, skeleton: SkeletonView, warp_tension: float = 1.0, weft_tension: float = 1.0
+    ) -> None:
         self._skeleton = skeleton
         self._tensions = (warp_tension, weft_tension)
         self._pool: ProcessPoolExecutor | None = None

@@ -29,8 +29,11 @@ log = logging.getLogger("bwsd.api")
 
 def missing(root: Path) -> list[str]:
     """What the page needs and ``root`` lacks (empty when the page can be served)."""
-    needed = [root / "index.html", root / "static",
-              root / "node_modules" / "three" / "build" / "three.module.js"]  # fmt: skip
+    needed = [
+        root / "index.html",
+        root / "static",
+        root / "node_modules" / "three" / "build" / "three.module.js",
+    ]
     return [str(p) for p in needed if not p.exists()]
 
 
@@ -41,16 +44,18 @@ def policy(index_html: str) -> str:
         for body in _INLINE_SCRIPT.findall(index_html)
         if body.strip()
     )
-    return "; ".join([
-        "default-src 'self'",
-        f"script-src 'self' {hashes}".rstrip(),
-        "style-src 'self' 'unsafe-inline'",
-        "img-src 'self' data: blob:",
-        "connect-src 'self'",
-        "object-src 'none'",
-        "base-uri 'self'",
-        "frame-ancestors 'none'",
-    ])  # fmt: skip
+    return "; ".join(
+        [
+            "default-src 'self'",
+            f"script-src 'self' {hashes}".rstrip(),
+            "style-src 'self' 'unsafe-inline'",
+            "img-src 'self' data: blob:",
+            "connect-src 'self'",
+            "object-src 'none'",
+            "base-uri 'self'",
+            "frame-ancestors 'none'",
+        ]
+    )
 
 
 class _Headers:
@@ -73,8 +78,11 @@ def install(app: FastAPI, root: Path = WEB_ROOT) -> None:
     """Serve the page at ``/`` from ``root``; a folder that lacks parts is logged, not fatal."""
     lacking = missing(root)
     if lacking:
-        log.warning("the preview page cannot be served: missing %s (run `npm ci` in %s)",
-                    ", ".join(lacking), root)  # fmt: skip
+        log.warning(
+            "the preview page cannot be served: missing %s (run `npm ci` in %s)",
+            ", ".join(lacking),
+            root,
+        )
     index = root / "index.html"
     static = {"Cache-Control": "no-cache", "X-Content-Type-Options": "nosniff"}
     # Only folders that exist are mounted: a missing one answers 404 like any unknown path.
@@ -89,10 +97,16 @@ def install(app: FastAPI, root: Path = WEB_ROOT) -> None:
         try:
             text = index.read_text(encoding="utf-8")
         except OSError:
-            return HTMLResponse("<h1>bwsd</h1><p>The preview page is not installed.</p>",
-                                status_code=503, headers=static)  # fmt: skip
-        headers = {"Content-Security-Policy": policy(text), "Referrer-Policy": "no-referrer",
-                   **static}  # fmt: skip
+            return HTMLResponse(
+                "<h1>bwsd</h1><p>The preview page is not installed.</p>",
+                status_code=503,
+                headers=static,
+            )
+        headers = {
+            "Content-Security-Policy": policy(text),
+            "Referrer-Policy": "no-referrer",
+            **static,
+        }
         return HTMLResponse(text, headers=headers)
 
     app.add_api_route("/", page, methods=["GET"], include_in_schema=False)

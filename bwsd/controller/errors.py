@@ -13,8 +13,9 @@ class ProgramRefused(ControllerError, ProgramError):
     """The controller refuses a program at its check: names the instruction, and the line
     and column where the program writes it."""
 
-    def __init__(self, message: str, *, instruction: int, line: int, column: int,
-                 source: str) -> None:  # fmt: skip
+    def __init__(
+        self, message: str, *, instruction: int, line: int, column: int, source: str
+    ) -> None:
         ProgramError.__init__(self, message, line=line, column=column, source=source)
         self.instruction = instruction
 

@@ -284,8 +284,9 @@ class Controller:
         text = await asyncio.to_thread(self.journal.program_text, program_id)
         return found[0], text
 
-    async def records(self, after_state: int = 0, after_event: int = 0,
-                      limit: int = 100) -> tuple[list[StateRecord], list[EventRecord]]:  # fmt: skip
+    async def records(
+        self, after_state: int = 0, after_event: int = 0, limit: int = 100
+    ) -> tuple[list[StateRecord], list[EventRecord]]:
         """The journal's state changes and events after the ids given, oldest first."""
         states = await asyncio.to_thread(self.journal.states, after_state, limit)
         events = await asyncio.to_thread(self.journal.events, after_event, limit)

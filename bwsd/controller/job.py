@@ -138,8 +138,9 @@ class Job:
                 pred = await asyncio.to_thread(self.twin.predict, instruction)
             except TwinError as exc:
                 twin = self.twin
-                return Preview(index, line, instruction, None, str(exc), twin.occupancy,
-                               twin.takeup)  # fmt: skip
+                return Preview(
+                    index, line, instruction, None, str(exc), twin.occupancy, twin.takeup
+                )
             if pred.index == index:  # else the run committed meanwhile: predict again
                 break
         try:

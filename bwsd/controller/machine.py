@@ -24,8 +24,12 @@ log = logging.getLogger("bwsd.controller")
 class MachineView:
     """The machine as last read over ``bus``; every change is published as ``BusChanged``."""
 
-    def __init__(self, bus: Fieldbus, publish: Callable[[Event], None],
-                 worse: Callable[[BusStatus, BusStatus], None] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        bus: Fieldbus,
+        publish: Callable[[Event], None],
+        worse: Callable[[BusStatus, BusStatus], None] | None = None,
+    ) -> None:
         self.bus = bus
         self._publish = publish
         self._worse = worse  # told (old, new) when the machine is lost or its e-stop pressed
@@ -51,16 +55,30 @@ class MachineView:
         """A failure: lost (no answer, no connection) or answered (a fault, the e-stop)."""
         lost = exc.lost
         estop = True if isinstance(exc, EStopError) else self.status.estop
-        self._set(replace(self.status, connected=not lost, last_error=str(exc),
-                          checked=time.time(), estop=estop))  # fmt: skip
+        self._set(
+            replace(
+                self.status,
+                connected=not lost,
+                last_error=str(exc),
+                checked=time.time(),
+                estop=estop,
+            )
+        )
 
     def observe(self, state: MachineState, twin: BoolGrid | None) -> None:
         """A good read; ``twin``: the twin's occupancy to compare with (None while moving)."""
         self.last = state
         faulted = tuple(self.bus.axes[i].name for i, a in enumerate(state.axes) if a.fault)
-        self._set(BusStatus(connected=True, last_error=None, checked=time.time(),
-                            estop=bool(state.estop), faulted=faulted,
-                            differs=self._differs(state, twin)))  # fmt: skip
+        self._set(
+            BusStatus(
+                connected=True,
+                last_error=None,
+                checked=time.time(),
+                estop=bool(state.estop),
+                faulted=faulted,
+                differs=self._differs(state, twin),
+            )
+        )
 
     def compare(self, twin: BoolGrid | None) -> None:
         """The twin changed at rest: compare it again with the last read."""

@@ -46,8 +46,10 @@ def check_limits(prediction: Prediction, limits: Limits) -> None:
     """Refuse a prediction that breaks a limit, naming it."""
     n = len(prediction.contacts)
     if limits.max_contacts and n > limits.max_contacts:
-        raise RefusedMove(f"instruction {prediction.index}: {n} contacts, more than the "
-                          f"limit of {limits.max_contacts}")  # fmt: skip
+        raise RefusedMove(
+            f"instruction {prediction.index}: {n} contacts, more than the "
+            f"limit of {limits.max_contacts}"
+        )
     if limits.tensioner_stroke:
         for yarn, change in sorted(prediction.length_change.items()):
             if abs(change) > limits.tensioner_stroke:
@@ -58,8 +60,9 @@ def check_limits(prediction: Prediction, limits: Limits) -> None:
                 )
 
 
-def setpoints(machine: Machine, instruction: Instruction, takeup_before: float,
-              origin_um: int = 0) -> list[list[AxisMove]]:  # fmt: skip
+def setpoints(
+    machine: Machine, instruction: Instruction, takeup_before: float, origin_um: int = 0
+) -> list[list[AxisMove]]:
     """The set-points of one instruction, as steps run one after the other.
 
     A shift is one step (every listed line at once); a take-up one step to the new absolute
@@ -110,14 +113,18 @@ def verify(prediction: Prediction, state: MachineState, takeup_um: int, toleranc
     """Compare the machine's read-back with the prediction; Mismatch names the difference."""
     expected = prediction.occupancy >= 0
     if state.occupancy.shape != expected.shape:
-        raise Mismatch(f"instruction {prediction.index}: the occupancy grid has shape "
-                       f"{state.occupancy.shape}, the machine {expected.shape}")  # fmt: skip
+        raise Mismatch(
+            f"instruction {prediction.index}: the occupancy grid has shape "
+            f"{state.occupancy.shape}, the machine {expected.shape}"
+        )
     wrong = np.argwhere(state.occupancy != expected)
     if len(wrong):
         cells = ", ".join(f"({r}, {c})" for r, c in wrong[:5].tolist())
-        raise Mismatch(f"instruction {prediction.index}: occupancy differs from the prediction "
-                       f"at {cells}")  # fmt: skip
+        raise Mismatch(
+            f"instruction {prediction.index}: occupancy differs from the prediction at {cells}"
+        )
     want = round(prediction.takeup * UM_PER_MM)
     if abs(takeup_um - want) > tolerance:
-        raise Mismatch(f"instruction {prediction.index}: take-up at {takeup_um} um, predicted "
-                       f"{want} um")  # fmt: skip
+        raise Mismatch(
+            f"instruction {prediction.index}: take-up at {takeup_um} um, predicted {want} um"
+        )

@@ -50,8 +50,7 @@ def step_dict(step: dict[str, Any] | None) -> dict[str, Any] | None:
     return {**step, "instruction": instruction_dict(step["instruction"])}
 
 
-def rebuild(machine: Machine, program: Program, done: int,
-             snap: tuple[int, bytes] | None) -> Twin:  # fmt: skip
+def rebuild(machine: Machine, program: Program, done: int, snap: tuple[int, bytes] | None) -> Twin:
     """The twin after ``done`` instructions: from the snapshot if there is one, then replay."""
     twin = None
     if snap is not None and snap[0] <= done:
@@ -66,8 +65,14 @@ def rebuild(machine: Machine, program: Program, done: int,
     return twin
 
 
-def check_program(machine: Machine, limits: Limits, most: int, name: str, text: str,
-           cancel: threading.Event | None) -> tuple[Program, DryRun]:  # fmt: skip
+def check_program(
+    machine: Machine,
+    limits: Limits,
+    most: int,
+    name: str,
+    text: str,
+    cancel: threading.Event | None,
+) -> tuple[Program, DryRun]:
     """Parse, validate, bound and dry-run a program (in a worker thread)."""
     program, positions = parse_program_with_positions(text, name, most)
     validate(program, machine, name, positions)  # a refusal names its line and column
@@ -88,14 +93,15 @@ def check_program(machine: Machine, limits: Limits, most: int, name: str, text: 
     except RefusedMove as exc:
         raise _refused(str(exc), pred.index, program, positions, name) from exc
     count = len(program.instructions)
-    return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count,
-                           twin.takeup)  # fmt: skip
+    return program, DryRun(count, twin.contact_count, twin.yarn_count, twin.node_count, twin.takeup)
 
 
-def _refused(message: str, index: int, program: Program, positions: SourceMap, name: str
-             ) -> ProgramRefused:  # fmt: skip
+def _refused(
+    message: str, index: int, program: Program, positions: SourceMap, name: str
+) -> ProgramRefused:
     """A refusal of instruction ``index`` at the line and column of its keyword."""
     i = index - 1
     column = positions.keywords[i] if 0 <= i < len(positions.keywords) else 0
-    return ProgramRefused(message, instruction=index, line=program.line_of(index), column=column,
-                          source=name)  # fmt: skip
+    return ProgramRefused(
+        message, instruction=index, line=program.line_of(index), column=column, source=name
+    )

@@ -86,8 +86,11 @@ class Recorder:
         if done is not None:
             await self._kept(functools.partial(self.journal.done, *done), done)
 
-    async def _kept(self, call: Callable[[], Any], done: tuple[int, int, dict[str, Any]] | None,
-                    ) -> None:  # fmt: skip
+    async def _kept(
+        self,
+        call: Callable[[], Any],
+        done: tuple[int, int, dict[str, Any]] | None,
+    ) -> None:
         """Run ``call`` (which writes ``done``) to its end whatever its caller does; a
         ``done`` it could not write is kept for the next try."""
         future = self.writer.queue(URGENT, call)

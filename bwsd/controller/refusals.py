@@ -37,8 +37,10 @@ def refusal(ctl: Controller, command: C, resume: bool = False) -> str | None:
             return f"the machine cannot be read: {bus.last_error}"
         if bus.faulted:
             route = "Clear and Reset" if command is C.START else "Abort, Clear and Reset"
-            return (f"axes {', '.join(bus.faulted)} report a fault: {route} clear it, then "
-                    "Start with resume continues the program")  # fmt: skip
+            return (
+                f"axes {', '.join(bus.faulted)} report a fault: {route} clear it, then "
+                "Start with resume continues the program"
+            )
         if bus.differs and not (job is not None and job.pending is not None and job.pending.rest):
             return (
                 "the occupancy sensors differ from the twin at "

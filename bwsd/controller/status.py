@@ -115,8 +115,14 @@ class StateChanged(Event):
     reason: str
 
     def wire(self) -> dict[str, Any]:
-        return {**super().wire(), "from": self.old.label, "to": self.new.label,
-                "cause": self.cause, "state": int(self.new), "reason": self.reason}  # fmt: skip
+        return {
+            **super().wire(),
+            "from": self.old.label,
+            "to": self.new.label,
+            "cause": self.cause,
+            "state": int(self.new),
+            "reason": self.reason,
+        }
 
 
 @dataclass(frozen=True)
@@ -127,8 +133,12 @@ class ProgramLoaded(Event):
     count: int
 
     def wire(self) -> dict[str, Any]:
-        return {**super().wire(), "program_id": self.program_id, "name": self.name,
-                "count": self.count}  # fmt: skip
+        return {
+            **super().wire(),
+            "program_id": self.program_id,
+            "name": self.name,
+            "count": self.count,
+        }
 
 
 @dataclass(frozen=True)
@@ -143,9 +153,16 @@ class InstructionDone(Event):
     next: dict[str, Any] | None  # the instruction that runs next, with its line
 
     def wire(self) -> dict[str, Any]:
-        return {**super().wire(), "program_id": self.program_id, "index": self.index,
-                "contacts": self.contacts, "inserted": self.inserted, **self.timing,
-                "skeleton": self.skeleton, "next": self.next}  # fmt: skip
+        return {
+            **super().wire(),
+            "program_id": self.program_id,
+            "index": self.index,
+            "contacts": self.contacts,
+            "inserted": self.inserted,
+            **self.timing,
+            "skeleton": self.skeleton,
+            "next": self.next,
+        }
 
 
 @dataclass(frozen=True)
@@ -175,9 +192,14 @@ class BusChanged(Event):
 
     def wire(self) -> dict[str, Any]:
         b = self.bus
-        return {**super().wire(), "connected": b.connected, "last_error": b.last_error,
-                "estop": b.estop, "faulted": list(b.faulted),
-                "differs": [list(c) for c in b.differs]}  # fmt: skip
+        return {
+            **super().wire(),
+            "connected": b.connected,
+            "last_error": b.last_error,
+            "estop": b.estop,
+            "faulted": list(b.faulted),
+            "differs": [list(c) for c in b.differs],
+        }
 
 
 Subscriber = Callable[[Event], None]

@@ -42,8 +42,10 @@ def summary(length: FloatArray, angle: FloatArray) -> dict[str, Any]:
 def skeleton_angles(arrays: Arrays) -> dict[str, dict[str, Any]]:
     """Per family, over every fixed segment of the skeleton."""
     length, angle = segment_angles(arrays.seg_p0, arrays.seg_p1)
-    return {arrays.names[f]: summary(length[arrays.seg_family == f], angle[arrays.seg_family == f])
-            for f in arrays.present()}  # fmt: skip
+    return {
+        arrays.names[f]: summary(length[arrays.seg_family == f], angle[arrays.seg_family == f])
+        for f in arrays.present()
+    }
 
 
 def formed_angles(arrays: Arrays, pieces: Pieces) -> dict[str, dict[str, Any]]:

@@ -42,16 +42,20 @@ class Arrays:
             seconds.append(fixed[1:])
             owners.append(np.full(max(len(fixed) - 1, 0), yarn.id, dtype=np.int64))
         contacts = np.array(
-            [(c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node)
-             for c in sk.contacts], dtype=np.int64,
-        ).reshape(-1, 5)  # fmt: skip
+            [
+                (c.instruction, c.moving_yarn, c.moving_node, c.hit_yarn, c.hit_node)
+                for c in sk.contacts
+            ],
+            dtype=np.int64,
+        ).reshape(-1, 5)
         made = np.zeros(size, dtype=np.int64)
         made[contacts[:, 2]] = contacts[:, 0]
         made[contacts[:, 4]] = contacts[:, 0]
         codes = family_codes(sk)
         family = np.array([codes[y.family] for y in sk.yarns], dtype=np.int64)
-        return cls(sk, pos, _cat(firsts), _cat(seconds), _cat(owners), contacts, made, family,
-                   tuple(codes))  # fmt: skip
+        return cls(
+            sk, pos, _cat(firsts), _cat(seconds), _cat(owners), contacts, made, family, tuple(codes)
+        )
 
     @cached_property
     def seg_p0(self) -> FloatArray:

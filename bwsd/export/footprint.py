@@ -67,8 +67,9 @@ class Grid:
         return self.hx * self.hy
 
 
-def disc_rows(centres: FloatArray, radius: float, grid: Grid) -> tuple[IntArray, IntArray,
-                                                                         IntArray]:  # fmt: skip
+def disc_rows(
+    centres: FloatArray, radius: float, grid: Grid
+) -> tuple[IntArray, IntArray, IntArray]:
     """The samples within ``radius`` of a centre (closed discs), as disjoint runs of each
     sample row: (row j, first i, last i), by row and first i. A disc covers, in each row
     it reaches, the samples whose x lies within its chord there."""
@@ -141,8 +142,9 @@ class Nominal:
         tile = row // ny
         ok = (tile >= 0) & (tile < rows)
         mask = self.mask[tile[ok]]  # (runs, cols): the tile row of each run
-        before = np.concatenate([np.zeros((len(mask), 1), np.int64), np.cumsum(mask, axis=1)],
-                                axis=1)  # fmt: skip
+        before = np.concatenate(
+            [np.zeros((len(mask), 1), np.int64), np.cumsum(mask, axis=1)], axis=1
+        )
 
         def masked_below(i: IntArray) -> IntArray:  # masked samples with index < i
             i = np.clip(i, 0, cols * nx)
@@ -191,8 +193,9 @@ def footprint(sk: SkeletonData, z: float, section: Section | None = None) -> dic
     return out
 
 
-def _against(nominal: Nominal, runs: tuple[IntArray, IntArray, IntArray], grid: Grid | None,
-             area: float) -> dict[str, Any]:  # fmt: skip
+def _against(
+    nominal: Nominal, runs: tuple[IntArray, IntArray, IntArray], grid: Grid | None, area: float
+) -> dict[str, Any]:
     """Nominal shape, measured over nominal area, covered fraction, area outside it."""
     covered, coverage = 0, None
     if nominal.area > 0:

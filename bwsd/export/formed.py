@@ -82,9 +82,15 @@ def find_zone(arrays: Arrays, length: int, guides: FloatArray | None) -> Zone:
     if guides is None:
         return Zone(None, None, complete, (), "the guides' heights are not known")
     if complete < MIN_CYCLES:
-        return Zone(None, None, complete, (), f"too short: {complete} complete cycles of "
-                    f"{length} instructions, a formed zone needs at least {MIN_CYCLES}",
-                    MIN_CYCLES)  # fmt: skip
+        return Zone(
+            None,
+            None,
+            complete,
+            (),
+            f"too short: {complete} complete cycles of "
+            f"{length} instructions, a formed zone needs at least {MIN_CYCLES}",
+            MIN_CYCLES,
+        )
     depths = _depths(arrays, length, complete, guides)
     last = depths[complete // 2 :]
     steady = float(np.median(last)) if np.isfinite(last).all() else math.nan
@@ -98,8 +104,14 @@ def find_zone(arrays: Arrays, length: int, guides: FloatArray | None) -> Zone:
     low = float(arrays.pos[made & (cycle == first), 2].min())
     high = float(arrays.pos[made & (cycle >= complete), 2].min())
     if high <= low:
-        return Zone(None, None, complete, shown, "the cycle still forming reaches below the "
-                    f"first formed cycle (cycle {first})", complete + 1)  # fmt: skip
+        return Zone(
+            None,
+            None,
+            complete,
+            shown,
+            f"the cycle still forming reaches below the first formed cycle (cycle {first})",
+            complete + 1,
+        )
     return Zone((low, high), (first, complete - 1), complete, shown)
 
 
@@ -126,9 +138,11 @@ def _depths(arrays: Arrays, length: int, complete: int, guides: FloatArray) -> F
 
 def _unsettled(last: FloatArray, complete: int) -> str:
     shown = ", ".join("none" if math.isnan(v) else f"{v:.1f}" for v in last.tolist())
-    return (f"the contacts have not settled at one depth below the guides within {complete} "
-            f"complete cycles (depths of the last half, mm: {shown}); run more cycles, at "
-            f"least {2 * complete}")  # fmt: skip
+    return (
+        f"the contacts have not settled at one depth below the guides within {complete} "
+        f"complete cycles (depths of the last half, mm: {shown}); run more cycles, at "
+        f"least {2 * complete}"
+    )
 
 
 @dataclass(frozen=True)
@@ -160,8 +174,9 @@ def pieces(arrays: Arrays, zone: Zone) -> Pieces:
     return Pieces(np.flatnonzero(keep).astype(float), s0[keep], s1[keep])
 
 
-def clip_to_slab(za: FloatArray, zb: FloatArray, low: float, high: float
-                 ) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+def clip_to_slab(
+    za: FloatArray, zb: FloatArray, low: float, high: float
+) -> tuple[FloatArray, FloatArray]:
     """For segments from height ``za`` to ``zb``, the part (s0, s1) within [low, high]
     (s0 >= s1 when none); a horizontal segment is in or out whole."""
     dz = zb - za

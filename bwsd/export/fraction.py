@@ -68,8 +68,13 @@ def at_height(arrays: Arrays, z: float) -> dict[str, Any]:
     ellipses = float((math.pi * d * d / 4 / np.cos(np.radians(angle))).sum())
     yarn = ellipses + weft_strips(arrays, z)
     section = hull_area(xy, d / 2)
-    return {"z": z, "crossings": len(xy), "yarn_area": yarn, "section_area": section,
-            "fraction": yarn / section if section > 0 else None}  # fmt: skip
+    return {
+        "z": z,
+        "crossings": len(xy),
+        "yarn_area": yarn,
+        "section_area": section,
+        "fraction": yarn / section if section > 0 else None,
+    }
 
 
 def volume_fraction(arrays: Arrays, zone: Zone) -> list[dict[str, Any]] | None:

@@ -119,8 +119,9 @@ def cycle_length_or_whole(cycle_length: int | None, instructions: int) -> int:
     return length
 
 
-def contacts_per_cycle(sk: SkeletonData, cycle_length: int | None,
-                       arrays: Arrays | None = None) -> dict[str, Any]:  # fmt: skip
+def contacts_per_cycle(
+    sk: SkeletonData, cycle_length: int | None, arrays: Arrays | None = None
+) -> dict[str, Any]:
     """Contacts per cycle of ``cycle_length`` instructions, counted from instruction 1.
 
     ``cycle_length`` None makes the whole run one cycle. The mean, min and max cover the
@@ -148,12 +149,20 @@ def _named(named: NamedSection | None) -> dict[str, Any] | None:
     if named is None:
         return None
     line = named.line if named.source == "header" else None
-    return {"spec": named.section.spec, "shape": named.section.shape, "source": named.source,
-            "line": line}  # fmt: skip
+    return {
+        "spec": named.section.spec,
+        "shape": named.section.shape,
+        "source": named.source,
+        "line": line,
+    }
 
 
-def formed(sk: SkeletonData, cycle_length: int | None, guides: FloatArray | None,
-           arrays: Arrays | None = None) -> dict[str, Any]:  # fmt: skip
+def formed(
+    sk: SkeletonData,
+    cycle_length: int | None,
+    guides: FloatArray | None,
+    arrays: Arrays | None = None,
+) -> dict[str, Any]:
     """The formed zone, and its yarn angles, interpenetration and yarn volume fraction."""
     arrays = arrays or Arrays.of(sk)
     zone: Zone = find_zone(arrays, cycle_length_or_whole(cycle_length, sk.instructions), guides)

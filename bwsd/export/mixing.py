@@ -63,22 +63,27 @@ def section_header(text: str, source: str = "<program>") -> NamedSection | None:
         return None
     number, column, spec = found[0]
     if len(found) > 1:
-        raise ProgramError(f"a second '# section:' line (the first is line {number})",
-                           line=found[1][0], column=1, source=source)  # fmt: skip
+        raise ProgramError(
+            f"a second '# section:' line (the first is line {number})",
+            line=found[1][0],
+            column=1,
+            source=source,
+        )
     try:
         return NamedSection(parse_section(spec), "header", number)
     except ValueError as exc:
-        raise ProgramError(f"# section: {exc}", line=number, column=column,
-                           source=source) from None  # fmt: skip
+        raise ProgramError(f"# section: {exc}", line=number, column=column, source=source) from None
 
 
 def check_fits(section: Section, machine: Machine) -> None:
     """Refuse a section with a cell outside the machine's matrix."""
     outside = sorted(cell for cell in section.cells if not machine.inside(*cell))
     if outside:
-        raise ExportError(f"section {section.spec} does not fit the {machine.rows} x "
-                          f"{machine.cols} matrix of the config: its cell {outside[0]} "
-                          "lies outside")  # fmt: skip
+        raise ExportError(
+            f"section {section.spec} does not fit the {machine.rows} x "
+            f"{machine.cols} matrix of the config: its cell {outside[0]} "
+            "lies outside"
+        )
 
 
 class ZoneVisits:

@@ -33,8 +33,9 @@ def dot(u: FloatArray, v: FloatArray) -> FloatArray:
     return out
 
 
-def candidates(p0: FloatArray, p1: FloatArray, yarn: IntArray, d: float
-               ) -> tuple[IntArray, IntArray]:  # fmt: skip
+def candidates(
+    p0: FloatArray, p1: FloatArray, yarn: IntArray, d: float
+) -> tuple[IntArray, IntArray]:
     """Pairs (i, j), i < j, of segments of different yarns that may come closer than d: cut
     into pieces of at most a median segment's length (and 4 d), their boxes grown by d / 2
     meet. Sweep and prune along the axis where the boxes overlap least."""
@@ -71,8 +72,9 @@ def _meeting(lo: FloatArray, hi: FloatArray) -> tuple[IntArray, IntArray]:
     return order[i], order[j]
 
 
-def _below(a: FloatArray, b: FloatArray, c: FloatArray, lo: FloatArray, hi: FloatArray
-           ) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+def _below(
+    a: FloatArray, b: FloatArray, c: FloatArray, lo: FloatArray, hi: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """{s in [lo, hi]: a s^2 + b s + c < 0}, a > 0, as (start, end); none when start >= end.
     A nearly vanishing a gives roots far out, which the range cuts."""
     disc = b * b - 4 * a * c
@@ -102,8 +104,13 @@ class Quads:
         wu, wv, ww = dot(w, u), dot(w, v), dot(w, w)
         e = w - v
         line_a = np.maximum(uu - uv * uv / vv, TINY * uu)
-        coef = np.array([(uu, 2 * wu, ww), (uu, 2 * dot(e, u), dot(e, e)),
-                         (line_a, 2 * (wu - wv * uv / vv), ww - wv * wv / vv)])  # fmt: skip
+        coef = np.array(
+            [
+                (uu, 2 * wu, ww),
+                (uu, 2 * dot(e, u), dot(e, e)),
+                (line_a, 2 * (wu - wv * uv / vv), ww - wv * wv / vv),
+            ]
+        )
         with np.errstate(divide="ignore", invalid="ignore"):
             sa, sb = -wv / uv, (vv - wv) / uv  # where the nearest point is B's first, last end
         inside = (wv >= 0) & (wv <= vv)
@@ -154,8 +161,9 @@ class Quads:
         return np.maximum(best, 0.0)
 
 
-def merge(group: IntArray, start: FloatArray, end: FloatArray
-          ) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:  # fmt: skip
+def merge(
+    group: IntArray, start: FloatArray, end: FloatArray
+) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:
     """The union of each group's intervals (within [0, 1]) as disjoint intervals, by group
     and start; and for each given interval the index of the one holding it (-1: empty)."""
     order = np.flatnonzero(start < end)
@@ -228,8 +236,11 @@ class Overlaps:
         k1 = np.minimum(np.floor((found.pair_end - found.start[t]) * scale - 0.5), steps[t] - 1)
         count = np.maximum(k1 - k0 + 1, 0).astype(np.int64)
         pair = np.repeat(found.pairs, count)
-        k = np.repeat(k0.astype(np.int64), count) + np.arange(len(pair)) - np.repeat(
-            np.cumsum(count) - count, count)  # fmt: skip
+        k = (
+            np.repeat(k0.astype(np.int64), count)
+            + np.arange(len(pair))
+            - np.repeat(np.cumsum(count) - count, count)
+        )
         stretch = np.repeat(t, count)
         at = found.start[stretch] + (k + 0.5) / steps[stretch] * width[stretch]
         least = np.full(int(steps.sum()), np.inf)
@@ -263,8 +274,9 @@ def weighted_percentile(values: FloatArray, weights: FloatArray, share: float) -
     return float(np.interp(share * total, middle, values))
 
 
-def _measure(lengths: FloatArray, over: FloatArray, worst: FloatArray, depth: FloatArray,
-             weight: FloatArray) -> dict[str, Any]:  # fmt: skip
+def _measure(
+    lengths: FloatArray, over: FloatArray, worst: FloatArray, depth: FloatArray, weight: FloatArray
+) -> dict[str, Any]:
     total, overlapping = float(lengths.sum()), float(over.sum())
     return {
         "length": total,
@@ -275,16 +287,24 @@ def _measure(lengths: FloatArray, over: FloatArray, worst: FloatArray, depth: Fl
     }
 
 
-def _families(arrays: Arrays, lengths: FloatArray, over: FloatArray, worst: FloatArray,
-               pair_family: IntArray, depth: FloatArray, weight: FloatArray,
-               sample_family: IntArray) -> dict[str, Any]:  # fmt: skip
+def _families(
+    arrays: Arrays,
+    lengths: FloatArray,
+    over: FloatArray,
+    worst: FloatArray,
+    pair_family: IntArray,
+    depth: FloatArray,
+    weight: FloatArray,
+    sample_family: IntArray,
+) -> dict[str, Any]:
     """The measures of all yarns and of each family."""
     family = arrays.seg_family
     out = {"all": _measure(lengths, over, worst, depth, weight)}
     for f in arrays.present():
         mine, pair, sample = family == f, pair_family == f, sample_family == f
-        out[arrays.names[f]] = _measure(lengths[mine], over[mine], worst[pair], depth[sample],
-                                        weight[sample])  # fmt: skip
+        out[arrays.names[f]] = _measure(
+            lengths[mine], over[mine], worst[pair], depth[sample], weight[sample]
+        )
     return out
 
 
@@ -322,6 +342,14 @@ def interpenetration(arrays: Arrays, pieces: Pieces) -> dict[str, Any]:
     whole = pairs.worst(d, np.zeros(count), np.ones(count))
     return {
         "skeleton": _families(arrays, length, over, whole, pf, depth, weight, sf),
-        "formed": _families(arrays, formed, over_formed, pairs.worst(d, lo, hi), pf,
-                            depth[in_formed], weight[in_formed], sf[in_formed]),
-    }  # fmt: skip
+        "formed": _families(
+            arrays,
+            formed,
+            over_formed,
+            pairs.worst(d, lo, hi),
+            pf,
+            depth[in_formed],
+            weight[in_formed],
+            sf[in_formed],
+        ),
+    }

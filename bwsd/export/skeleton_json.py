@@ -86,8 +86,9 @@ def committed_parts(twin: Twin, pred: Prediction) -> tuple[dict[int, int], list[
     return free, [twin.yarn(i) for i in pred.new_yarns], twin.yarn_count
 
 
-def delta_from(pred: Prediction, free_nodes: Mapping[int, int], new_yarns: Sequence[YarnData],
-               yarn_count: int) -> dict[str, Any]:  # fmt: skip
+def delta_from(
+    pred: Prediction, free_nodes: Mapping[int, int], new_yarns: Sequence[YarnData], yarn_count: int
+) -> dict[str, Any]:
     """The delta from the prediction and ``committed_parts`` (no twin needed: any thread).
 
     ``inserted`` nodes come in yarn order, so each one's ``after`` is in place before it.

@@ -36,8 +36,12 @@ def print_metrics(result: dict[str, Any], console: Console) -> None:
     if result["wefts"]["count"]:
         console.print(_weft_table(result["wefts"]))
     console.print(_section_table(result["section"]))
-    console.print(_angle_table(result["skeleton_angles"], "Yarn angle to the production axis, "
-                               "whole skeleton (length-weighted)"))  # fmt: skip
+    console.print(
+        _angle_table(
+            result["skeleton_angles"],
+            "Yarn angle to the production axis, whole skeleton (length-weighted)",
+        )
+    )
     console.print(_cycle_table(result["cycles"]))
     console.print(_groups_table(result["groups"], result["unconnected"]))
     if result["mixing"] is not None:
@@ -96,8 +100,9 @@ def _angle_table(angles: dict[str, dict[str, Any]], title: str) -> Table:
 
 
 def _formed_table(formed: dict[str, Any]) -> Table:
-    table = Table(title="Formed zone (complete cycles below the one still forming)",
-                  show_header=False)  # fmt: skip
+    table = Table(
+        title="Formed zone (complete cycles below the one still forming)", show_header=False
+    )
     if not formed["found"]:
         table.add_row("none", escape(formed["reason"]))
         return table
@@ -114,33 +119,40 @@ def _formed_angle_table(angles: dict[str, dict[str, Any]]) -> Table:
         table.add_column(escape(name), justify="left" if name in ("family", "part") else "right")
     for family, parts in angles.items():
         for part, a in parts.items():
-            table.add_row(family, part, _number(a["length"]), _number(a["mean"]),
-                          _number(a["std"]))  # fmt: skip
+            table.add_row(family, part, _number(a["length"]), _number(a["mean"]), _number(a["std"]))
     return table
 
 
 def _overlap_table(found: dict[str, dict[str, Any]], diameter: float) -> Table:
-    table = Table(title=f"Interpenetration: yarn closer than one diameter ({diameter:g} mm) "
-                  "to another yarn")  # fmt: skip
+    table = Table(
+        title=f"Interpenetration: yarn closer than one diameter ({diameter:g} mm) to another yarn"
+    )
     for name in ("where", "family", "length [mm]", "share", "worst [mm]", "p95 [mm]"):
         table.add_column(escape(name), justify="left" if name in ("where", "family") else "right")
     for where, families in found.items():
         for family, m in families.items():
             share = "n/a" if m["share"] is None else f"{100 * m['share']:.1f} %"
-            table.add_row(where, family, _number(m["length"]), share, _number(m["worst"]),
-                          _number(m["p95"]))  # fmt: skip
+            table.add_row(
+                where, family, _number(m["length"]), share, _number(m["worst"]), _number(m["p95"])
+            )
     return table
 
 
 def _fraction_table(heights: list[dict[str, Any]]) -> Table:
-    table = Table(title="Yarn volume fraction in the formed zone (section: convex hull of the "
-                  "yarn discs)")  # fmt: skip
+    table = Table(
+        title="Yarn volume fraction in the formed zone (section: convex hull of the yarn discs)"
+    )
     for name in ("z [mm]", "crossings", "yarn [mm^2]", "section [mm^2]", "fraction"):
         table.add_column(escape(name), justify="right")
     for h in heights:
         fraction = "n/a" if h["fraction"] is None else f"{100 * h['fraction']:.2f} %"
-        table.add_row(f"{h['z']:.3f}", str(h["crossings"]), _number(h["yarn_area"]),
-                      _number(h["section_area"]), fraction)  # fmt: skip
+        table.add_row(
+            f"{h['z']:.3f}",
+            str(h["crossings"]),
+            _number(h["yarn_area"]),
+            _number(h["section_area"]),
+            fraction,
+        )
     return table
 
 
@@ -148,8 +160,10 @@ def _weft_table(wefts: dict[str, Any]) -> Table:
     table = Table(title="Weft contacts", show_header=False)
     spread = wefts["contacts"]
     table.add_row("wefts", str(wefts["count"]))
-    table.add_row("contacts per weft", f"min {spread['min']}, median {spread['median']:g}, "
-                  f"max {spread['max']}")  # fmt: skip
+    table.add_row(
+        "contacts per weft",
+        f"min {spread['min']}, median {spread['median']:g}, max {spread['max']}",
+    )
     table.add_row("loose (no contact)", _listed(wefts["loose"]))
     table.add_row("held at one contact", _listed(wefts["held_once"]))
     return table
@@ -183,8 +197,9 @@ def _groups_table(groups: dict[str, Any], unconnected: dict[str, Any]) -> Table:
 
 def _mixing_table(mixing: dict[str, Any], spec: dict[str, Any]) -> Table:
     source = "--section" if spec["source"] == "option" else f"program line {spec['line']}"
-    table = Table(title=f"Carrier mixing, section {mixing['section']} (from {source})",
-                  show_header=False)  # fmt: skip
+    table = Table(
+        title=f"Carrier mixing, section {mixing['section']} (from {source})", show_header=False
+    )
     table.add_row("carriers", f"{mixing['carriers']} ({mixing['edge']} filled outside the section)")
     if mixing["empty_body_cells"]:
         table.add_row("body cells empty at the fill", str(mixing["empty_body_cells"]))
@@ -196,8 +211,9 @@ def _mixing_table(mixing: dict[str, Any], spec: dict[str, Any]) -> Table:
     table.add_row("did not", str(mixing["incomplete"]))
     for miss in mixing["missing"]:
         row, col = miss["cell"]
-        table.add_row(f"  yarn {miss['yarn']} (filled at {row}, {col})",
-                      "missed " + ", ".join(miss["zones"]))  # fmt: skip
+        table.add_row(
+            f"  yarn {miss['yarn']} (filled at {row}, {col})", "missed " + ", ".join(miss["zones"])
+        )
     if mixing["incomplete"] > len(mixing["missing"]):
         table.add_row("  ...", f"{mixing['incomplete'] - len(mixing['missing'])} more")
     table.add_row("K (cycles until all mixed)", _k(mixing))
@@ -209,8 +225,10 @@ def _k(mixing: dict[str, Any]) -> str:
         return "never within the program"
     if mixing["k"] == 0:
         return "0 (all mixed at the fill)"
-    return (f"{mixing['k']} (after instruction {mixing['instruction']}, "
-            f"cycles of {mixing['cycle_length']})")  # fmt: skip
+    return (
+        f"{mixing['k']} (after instruction {mixing['instruction']}, "
+        f"cycles of {mixing['cycle_length']})"
+    )
 
 
 def _range(values: list[float] | None) -> str:
@@ -218,8 +236,9 @@ def _range(values: list[float] | None) -> str:
 
 
 def _footprint_table(foot: dict[str, Any]) -> Table:
-    table = Table(title=f"Footprint at z = {foot['z']:g} mm (discs of the yarn diameter)",
-                  show_header=False)  # fmt: skip
+    table = Table(
+        title=f"Footprint at z = {foot['z']:g} mm (discs of the yarn diameter)", show_header=False
+    )
     free = f", {foot['free']} on free segments" if foot["free"] else ""
     table.add_row("crossings", f"{foot['crossings']}{free}")
     measured = foot["measured"]

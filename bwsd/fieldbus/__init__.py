@@ -42,8 +42,10 @@ _BASE = (
     "MachineState",
 )
 
-BACKENDS = {"modbus": ("bwsd.fieldbus.modbus", "ModbusBus"),
-            "canopen": ("bwsd.fieldbus.canopen", "CanopenBus")}  # fmt: skip
+BACKENDS = {
+    "modbus": ("bwsd.fieldbus.modbus", "ModbusBus"),
+    "canopen": ("bwsd.fieldbus.canopen", "CanopenBus"),
+}
 # The optional libraries a backend needs (the package's extras); Modbus is in the core.
 BACKEND_LIBRARIES = {"canopen": CANOPEN}
 
@@ -86,15 +88,20 @@ def open_bus(config: Config) -> Fieldbus:
     try:
         module_name, class_name = BACKENDS[name]
     except KeyError:
-        raise ConfigError(f"unknown backend {name!r}", path=config.path, table="fieldbus",
-                          key="backend") from None  # fmt: skip
+        raise ConfigError(
+            f"unknown backend {name!r}", path=config.path, table="fieldbus", key="backend"
+        ) from None
     library = BACKEND_LIBRARIES.get(name)
     missing = partial(ConfigError, path=config.path, table="fieldbus", key="backend")
     try:
         with needs(library, f"backend {name!r}", missing) if library else nullcontext():
             module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ConfigError(f"backend {name!r} cannot be loaded: {exc}", path=config.path,
-                          table="fieldbus", key="backend") from exc  # fmt: skip
+        raise ConfigError(
+            f"backend {name!r} cannot be loaded: {exc}",
+            path=config.path,
+            table="fieldbus",
+            key="backend",
+        ) from exc
     bus: Fieldbus = getattr(module, class_name).from_config(config)
     return bus

@@ -54,10 +54,15 @@ def machine_axes(machine: Machine) -> tuple[Axis, ...]:
         Axis(base + 2, "takeup", "takeup"),
     ]
     axes += [
-        Axis(base + 3 + i, segment_axis_name(seg.axis, seg.line, (seg.lo, seg.hi)), seg.axis,
-             seg.line, (seg.lo, seg.hi))
+        Axis(
+            base + 3 + i,
+            segment_axis_name(seg.axis, seg.line, (seg.lo, seg.hi)),
+            seg.axis,
+            seg.line,
+            (seg.lo, seg.hi),
+        )
         for i, seg in enumerate(machine.segments)
-    ]  # fmt: skip
+    ]
     kinds: dict[str, AxisKind] = {"x": "weft_x", "y": "weft_y", "z": "weft_z"}
     axes += [Axis(len(axes) + i, kinds[a], kinds[a]) for i, a in enumerate(machine.weft_axes)]
     return tuple(axes)
@@ -81,8 +86,10 @@ def axis_by_name(machine: Machine, name: str) -> Axis:
         if axis.name == name:
             return axis
     segments = ", ".join(segment_axis_name(s.axis, s.line, (s.lo, s.hi)) for s in machine.segments)
-    raise ValueError(f"no axis {name!r} (rows 0..{machine.rows - 1}, cols 0..{machine.cols - 1}, "
-                     f"segments: {segments or 'none declared in [machine] segments'})")  # fmt: skip
+    raise ValueError(
+        f"no axis {name!r} (rows 0..{machine.rows - 1}, cols 0..{machine.cols - 1}, "
+        f"segments: {segments or 'none declared in [machine] segments'})"
+    )
 
 
 def shift_stroke_um(machine: Machine, axis: Axis, cells: int) -> int:

@@ -253,9 +253,11 @@ class Fieldbus(ABC):
             return
         held = await self._claim(self.owner_id, os.getpid())
         if held is not None:
-            raise BusHeld(f"the loom is held by another client: pid {held[1]} (claim id "
-                          f"{held[0]:08x}; a claim lapses {OWNER_LEASE:g} s after its holder's "
-                          "last); nothing was moved")  # fmt: skip
+            raise BusHeld(
+                f"the loom is held by another client: pid {held[1]} (claim id "
+                f"{held[0]:08x}; a claim lapses {OWNER_LEASE:g} s after its holder's "
+                "last); nothing was moved"
+            )
         self._claimed_at = time.monotonic()
 
     async def move(self, moves: Sequence[AxisMove]) -> None:
@@ -286,14 +288,14 @@ class Fieldbus(ABC):
         while True:
             state = await self._read_state(axes)
             self._check(state, axes)
-            if all(state.axes[i].done_seq == self._seq[i] and not state.axes[i].busy
-                   for i in axes):  # fmt: skip
+            if all(state.axes[i].done_seq == self._seq[i] and not state.axes[i].busy for i in axes):
                 self._check_positions(state, axes)
                 return state
             if time.monotonic() > limit:
                 late = [self.axes[i].name for i in axes if state.axes[i].done_seq != self._seq[i]]
-                raise FieldbusTimeout(f"axes {', '.join(late)} did not complete in time",
-                                      lost=False)  # fmt: skip
+                raise FieldbusTimeout(
+                    f"axes {', '.join(late)} did not complete in time", lost=False
+                )
             await asyncio.sleep(0.002)
 
     async def execute(

@@ -341,11 +341,13 @@ class CanopenBus(Fieldbus):
                 if layout(pdo_map) != wanted_layout(pdo):
                     configure(pdo_map, pdo)
         except SdoCommunicationError as exc:
-            raise FieldbusTimeout(f"{self._name(node_id)}: no answer while mapping its "
-                                  f"PDOs ({exc})") from exc  # fmt: skip
+            raise FieldbusTimeout(
+                f"{self._name(node_id)}: no answer while mapping its PDOs ({exc})"
+            ) from exc
         except SdoAbortedError as exc:
-            raise FieldbusError(f"{self._name(node_id)}: its PDO mapping was refused: "
-                                f"{exc}") from exc  # fmt: skip
+            raise FieldbusError(
+                f"{self._name(node_id)}: its PDO mapping was refused: {exc}"
+            ) from exc
         if not pdo.receive and self._sampler is not None:
             self._sampler.listen(node_id, pdo.number, pdo_map)
             if pdo.trans_type == SYNC_ON_CHANGE:  # no PDO until it changes: read it now

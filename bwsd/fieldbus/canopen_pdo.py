@@ -40,9 +40,19 @@ COB_INVALID = 0x80000000  # bit 31 of a COB-ID: the PDO is off
 SYNC_EVERY = 1  # transmission type: on every SYNC
 SYNC_ON_CHANGE = 0  # transmission type: at a SYNC, when a mapped object changed
 ON_ARRIVAL = 255  # transmission type of a receive PDO: acted on when it arrives
-BITS = {CONTROLWORD: 16, STATUSWORD: 16, TARGET: 32, POSITION: 32, DONE_SEQ: 16,
-        SETPOINT_SEQ: 16, FAULT_CODE: 8, LAST_STROKE: 32, STROKES: 16, ESTOP: 8,
-        OCCUPANCY_WORDS: 32}  # fmt: skip
+BITS = {
+    CONTROLWORD: 16,
+    STATUSWORD: 16,
+    TARGET: 32,
+    POSITION: 32,
+    DONE_SEQ: 16,
+    SETPOINT_SEQ: 16,
+    FAULT_CODE: 8,
+    LAST_STROKE: 32,
+    STROKES: 16,
+    ESTOP: 8,
+    OCCUPANCY_WORDS: 32,
+}
 
 Entry = tuple[int, int]  # object index, sub-index
 
@@ -73,13 +83,18 @@ def drive_pdos(node_id: int) -> tuple[Pdo, ...]:
     (statusword, position, done sequence: every SYNC) out. TPDO1's lower COB-ID wins the
     bus first, so a change always arrives before the sample it belongs to ends."""
     return (
-        Pdo(True, 1, 0x200 + node_id, ON_ARRIVAL,
-            ((CONTROLWORD, 0), (TARGET, 0), (SETPOINT_SEQ, 0))),
-        Pdo(False, 1, 0x180 + node_id, SYNC_ON_CHANGE,
-            ((FAULT_CODE, 0), (LAST_STROKE, 0), (STROKES, 0))),
-        Pdo(False, 2, 0x280 + node_id, SYNC_EVERY,
-            ((STATUSWORD, 0), (POSITION, 0), (DONE_SEQ, 0))),
-    )  # fmt: skip
+        Pdo(
+            True, 1, 0x200 + node_id, ON_ARRIVAL, ((CONTROLWORD, 0), (TARGET, 0), (SETPOINT_SEQ, 0))
+        ),
+        Pdo(
+            False,
+            1,
+            0x180 + node_id,
+            SYNC_ON_CHANGE,
+            ((FAULT_CODE, 0), (LAST_STROKE, 0), (STROKES, 0)),
+        ),
+        Pdo(False, 2, 0x280 + node_id, SYNC_EVERY, ((STATUSWORD, 0), (POSITION, 0), (DONE_SEQ, 0))),
+    )
 
 
 def io_pdos(cells: int) -> tuple[Pdo, ...]:
@@ -87,18 +102,22 @@ def io_pdos(cells: int) -> tuple[Pdo, ...]:
     COB-IDs are 0x380 + k for TPDO k (the drives use TPDO1, TPDO2 and RPDO1 only)."""
     words = [(OCCUPANCY_WORDS, sub) for sub in range(1, occupancy_words(cells) + 1)]
     groups = [((ESTOP, 0), words[0])] + [tuple(words[i : i + 2]) for i in range(1, len(words), 2)]
-    return tuple(Pdo(False, k, 0x380 + k, SYNC_EVERY, tuple(group))
-                 for k, group in enumerate(groups, start=1))  # fmt: skip
+    return tuple(
+        Pdo(False, k, 0x380 + k, SYNC_EVERY, tuple(group))
+        for k, group in enumerate(groups, start=1)
+    )
 
 
 def add_occupancy_words(od: ObjectDictionary, cells: int) -> None:
     """0x2100 of the I/O node: the occupancy as 32-bit words a PDO can carry."""
     array = ODArray("occupancy words", OCCUPANCY_WORDS)
-    array.add_member(_variable("number of words", OCCUPANCY_WORDS, 0, UNSIGNED8, "ro",
-                               occupancy_words(cells)))  # fmt: skip
+    array.add_member(
+        _variable("number of words", OCCUPANCY_WORDS, 0, UNSIGNED8, "ro", occupancy_words(cells))
+    )
     for sub in range(1, occupancy_words(cells) + 1):
-        array.add_member(_variable(f"occupancy word {sub}", OCCUPANCY_WORDS, sub, UNSIGNED32,
-                                   "ro", 0))  # fmt: skip
+        array.add_member(
+            _variable(f"occupancy word {sub}", OCCUPANCY_WORDS, sub, UNSIGNED32, "ro", 0)
+        )
     od.add_object(array)
 
 
@@ -110,8 +129,7 @@ def add_pdo_records(od: ObjectDictionary, pdos: Iterable[Pdo]) -> None:
         mapping = (RPDO_MAP if pdo.receive else TPDO_MAP) + pdo.number - 1
         record = ODRecord(f"PDO {pdo.number} communication", com)
         record.add_member(_variable("highest sub-index", com, 0, UNSIGNED8, "ro", 2))
-        record.add_member(_variable("COB-ID", com, 1, UNSIGNED32, "rw",
-                                    pdo.cob_id | COB_INVALID))  # fmt: skip
+        record.add_member(_variable("COB-ID", com, 1, UNSIGNED32, "rw", pdo.cob_id | COB_INVALID))
         record.add_member(_variable("transmission type", com, 2, UNSIGNED8, "rw", pdo.trans_type))
         od.add_object(record)
         entries = ODRecord(f"PDO {pdo.number} mapping", mapping)
@@ -121,8 +139,9 @@ def add_pdo_records(od: ObjectDictionary, pdos: Iterable[Pdo]) -> None:
         od.add_object(entries)
 
 
-def _variable(name: str, index: int, sub: int, data_type: int, access: str,
-              default: int) -> ODVariable:  # fmt: skip
+def _variable(
+    name: str, index: int, sub: int, data_type: int, access: str, default: int
+) -> ODVariable:
     var = ODVariable(name, index, sub)
     var.data_type, var.access_type, var.default = data_type, access, default
     return var
@@ -192,8 +211,9 @@ class SyncSampler:
         for waiter in waiters:
             waiter.loop.call_soon_threadsafe(_reject, waiter.future, error)
 
-    async def sample(self, every: Sequence[Key], kept: Sequence[Key],
-                     timeout: float) -> dict[Key, dict[Entry, int]]:  # fmt: skip
+    async def sample(
+        self, every: Sequence[Key], kept: Sequence[Key], timeout: float
+    ) -> dict[Key, dict[Entry, int]]:
         """Send one SYNC; wait for the TPDOs ``every`` it makes the nodes send; with them
         the last values of the on-change TPDOs ``kept``."""
         loop = asyncio.get_running_loop()
@@ -211,8 +231,10 @@ class SyncSampler:
             with self._lock:
                 late = [k for k in every if self._seen.get(k, (0, {}))[0] < waiter.count]
             missing = sorted({node for node, _ in late})
-            raise FieldbusTimeout(f"no answer to SYNC within {timeout:g} s: no PDO from nodes "
-                                  f"{', '.join(map(str, missing))}") from None  # fmt: skip
+            raise FieldbusTimeout(
+                f"no answer to SYNC within {timeout:g} s: no PDO from nodes "
+                f"{', '.join(map(str, missing))}"
+            ) from None
         finally:
             with self._lock:
                 if waiter in self._waiters:

@@ -28,8 +28,9 @@ if TYPE_CHECKING:
     from bwsd.twin.machine import Machine
 
 Action = Callable[["Fieldbus", argparse.Namespace], Awaitable["MachineState"]]
-_LINE = re.compile(r"\s*([0-9]{1,6})\s*(?:\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\])?\s*",
-                   re.ASCII)  # fmt: skip
+_LINE = re.compile(
+    r"\s*([0-9]{1,6})\s*(?:\[\s*([0-9]{1,6})\s*\.\.\s*([0-9]{1,6})\s*\])?\s*", re.ASCII
+)
 
 
 def shift_line(text: str) -> tuple[int, tuple[int, int] | None]:
@@ -156,8 +157,7 @@ def _print(machine: Machine, state: MachineState, console: Console) -> None:
     for axis, report in zip(machine_axes(machine), state.axes, strict=True):
         fault = FAULT_NAMES.get(report.fault, str(report.fault)) if report.fault else ""
         busy = "yes" if report.busy else ""
-        table.add_row(escape(axis.name), str(report.position), busy, fault,
-                      str(report.last_stroke))  # fmt: skip
+        table.add_row(escape(axis.name), str(report.position), busy, fault, str(report.last_stroke))
     console.print(table)
     grid = "\n".join("".join("X" if v else "." for v in row) for row in state.occupancy)
     console.print(f"occupancy (row 0 first):\n{grid}")

@@ -86,13 +86,17 @@ def map_problem(machine: Machine) -> str:
     (input registers) always fits where the axis blocks do."""
     cells, axes = machine.rows * machine.cols, len(machine_axes(machine))
     if cells > MAX_CELLS:
-        return (f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
-                f"{machine.rows} x {machine.cols}")  # fmt: skip
+        return (
+            f"the Modbus map addresses at most {MAX_CELLS} cells, the machine has "
+            f"{machine.rows} x {machine.cols}"
+        )
     if axes > MAX_AXES:
-        return (f"the Modbus map addresses at most {MAX_AXES} axes, the machine has {axes} "
-                f"({machine.rows} rows, {machine.cols} cols, "
-                f"{3 + len(machine.weft_axes)} weft and take-up axes, "
-                f"{len(machine.segments)} segments)")  # fmt: skip
+        return (
+            f"the Modbus map addresses at most {MAX_AXES} axes, the machine has {axes} "
+            f"({machine.rows} rows, {machine.cols} cols, "
+            f"{3 + len(machine.weft_axes)} weft and take-up axes, "
+            f"{len(machine.segments)} segments)"
+        )
     return ""
 
 
@@ -145,8 +149,9 @@ def decode_axis(words: Sequence[int]) -> AxisState:
     )
 
 
-def decode_image(words: Sequence[int], rows: int, cols: int
-                 ) -> tuple[int, npt.NDArray[np.bool_], list[AxisState]]:  # fmt: skip
+def decode_image(
+    words: Sequence[int], rows: int, cols: int
+) -> tuple[int, npt.NDArray[np.bool_], list[AxisState]]:
     """The status image (or its first part: the axes it covers) as machine status, the
     occupancy grid and the axes' states."""
     n = occupancy_words(rows * cols)
@@ -155,11 +160,16 @@ def decode_image(words: Sequence[int], rows: int, cols: int
     axes = []
     for at in range(1 + n, len(words) - IMAGE_AXIS_WORDS + 1, IMAGE_AXIS_WORDS):
         record = words[at : at + IMAGE_AXIS_WORDS]
-        axes.append(AxisState(
-            position=words_int32(record[1], record[2]), busy=bool(record[0] & AXIS_BUSY),
-            done_seq=record[3], fault=record[4], last_stroke=words_int32(record[5], record[6]),
-            strokes=record[7],
-        ))  # fmt: skip
+        axes.append(
+            AxisState(
+                position=words_int32(record[1], record[2]),
+                busy=bool(record[0] & AXIS_BUSY),
+                done_seq=record[3],
+                fault=record[4],
+                last_stroke=words_int32(record[5], record[6]),
+                strokes=record[7],
+            )
+        )
     return words[0], bits.reshape(rows, cols), axes
 
 
@@ -186,8 +196,15 @@ Send = Callable[[AsyncModbusTcpClient], Awaitable[ModbusPDU]]
 class ModbusBus(Fieldbus):
     """The machine's actuators behind one Modbus TCP server (unit ``device_id``)."""
 
-    def __init__(self, machine: Machine, settings: BusSettings, host: str, port: int,
-                 device_id: int, map_version: int = MAP_VERSION) -> None:  # fmt: skip
+    def __init__(
+        self,
+        machine: Machine,
+        settings: BusSettings,
+        host: str,
+        port: int,
+        device_id: int,
+        map_version: int = MAP_VERSION,
+    ) -> None:
         if map_version not in MAP_VERSIONS:
             raise FieldbusError(f"Modbus map {map_version}: bwsd reads maps 2 and 3")
         problem = map_problem(machine) or version_problem(machine, map_version)
@@ -214,8 +231,14 @@ class ModbusBus(Fieldbus):
         if problem:  # its cells are checked at load: more axes than the map has blocks
             raise ConfigError(problem, path=config.path, table="machine", key="segments")
         settings = BusSettings(**{f.name: bus[f.name] for f in fields(BusSettings)})
-        return cls(config.machine, settings, modbus["host"], modbus["port"], modbus["device_id"],
-                   modbus["map"])  # fmt: skip
+        return cls(
+            config.machine,
+            settings,
+            modbus["host"],
+            modbus["port"],
+            modbus["device_id"],
+            modbus["map"],
+        )
 
     @property
     def where(self) -> str:
@@ -259,8 +282,10 @@ class ModbusBus(Fieldbus):
         wanted = range(len(self.axes)) if axes is None else sorted(set(axes))
         groups = _runs(wanted)
         cells = self.machine.rows * self.machine.cols
-        blocks = [await self._read_registers(axis_address(lo), AXIS_STRIDE * (hi - lo))
-                  for lo, hi in groups]  # fmt: skip
+        blocks = [
+            await self._read_registers(axis_address(lo), AXIS_STRIDE * (hi - lo))
+            for lo, hi in groups
+        ]
         bits = await self._read_inputs(0, estop_input(self.machine) + 1)
         read = {
             i: decode_axis(words[(i - lo) * AXIS_STRIDE : (i - lo + 1) * AXIS_STRIDE])
@@ -313,8 +338,9 @@ class ModbusBus(Fieldbus):
         limit = loop.time() + self.settings.timeout
         while (await self._read_registers(REG_COMMAND, 1))[0] != CMD_NONE:
             if loop.time() > limit:
-                raise FieldbusTimeout(f"{self.where}: machine command {code} was not taken",
-                                      lost=False)  # fmt: skip
+                raise FieldbusTimeout(
+                    f"{self.where}: machine command {code} was not taken", lost=False
+                )
             await asyncio.sleep(0.002)
 
     async def _read_registers(self, start: int, count: int) -> list[int]:
@@ -335,8 +361,9 @@ class ModbusBus(Fieldbus):
     def _holding(self, address: int, count: int) -> Send:
         return lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id)
 
-    def _write(self, address: int, words: list[int], client: AsyncModbusTcpClient
-               ) -> Awaitable[ModbusPDU]:  # fmt: skip
+    def _write(
+        self, address: int, words: list[int], client: AsyncModbusTcpClient
+    ) -> Awaitable[ModbusPDU]:
         return client.write_registers(address, words, device_id=self.device_id)
 
     def _image(self, address: int, count: int) -> Send:
@@ -345,8 +372,7 @@ class ModbusBus(Fieldbus):
     def _inputs(self, address: int, count: int) -> Send:
         return lambda c: c.read_discrete_inputs(address, count=count, device_id=self.device_id)
 
-    async def _request(self, address: int, send: Send,
-                       refusals: tuple[int, ...] = ()) -> ModbusPDU:  # fmt: skip
+    async def _request(self, address: int, send: Send, refusals: tuple[int, ...] = ()) -> ModbusPDU:
         """One request, its failures mapped to our errors by phase; an exception response
         with a code of ``refusals`` is returned to the caller."""
         client = await self._ready()

@@ -30,8 +30,16 @@ class StateFolderError(BwsdError):
     """The state folder cannot be used (its disk is full, it is read-only): names the file."""
 
 
-__all__ = ["LOCK_NAME", "BusHeld", "BusLock", "Holder", "StateFolderError", "daemon_owner_id",
-           "holder", "refuse_if_held"]  # fmt: skip
+__all__ = [
+    "LOCK_NAME",
+    "BusHeld",
+    "BusLock",
+    "Holder",
+    "StateFolderError",
+    "daemon_owner_id",
+    "holder",
+    "refuse_if_held",
+]
 
 
 @dataclass(frozen=True)
@@ -77,8 +85,10 @@ class BusLock:
             os.pwrite(fd, json.dumps(record).encode(), 0)
         except OSError as exc:  # a full disk, a read-only folder
             os.close(fd)
-            raise StateFolderError(f"{path}: cannot write who holds the bus: {exc.strerror} "
-                                   "(free the state folder's disk)") from None  # fmt: skip
+            raise StateFolderError(
+                f"{path}: cannot write who holds the bus: {exc.strerror} "
+                "(free the state folder's disk)"
+            ) from None
         return cls(path, fd)
 
     def release(self) -> None:
@@ -125,5 +135,7 @@ def refuse_if_held(state_dir: Path) -> None:
     """BusHeld naming the daemon that holds the bus of ``state_dir``; nothing when free."""
     found = holder(state_dir)
     if found is not None:
-        raise BusHeld(f"the bus is held by {found.describe()} (lock {state_dir / LOCK_NAME}): "
-                      "stop it, or command the machine through it")  # fmt: skip
+        raise BusHeld(
+            f"the bus is held by {found.describe()} (lock {state_dir / LOCK_NAME}): "
+            "stop it, or command the machine through it"
+        )

@@ -82,9 +82,15 @@ def _orphans(conn: sqlite3.Connection) -> list[str]:
 
 
 def _program_problems(
-    program: int, outcome: str, total: int, done: int, rows: int, last: int, finished: int,
+    program: int,
+    outcome: str,
+    total: int,
+    done: int,
+    rows: int,
+    last: int,
+    finished: int,
     last_done: int,
-) -> list[str]:  # fmt: skip
+) -> list[str]:
     """What is wrong with one program's instructions: indexes 1..n, done ones first."""
     out: list[str] = []
     where = f"program {program}"
@@ -108,27 +114,33 @@ def records(conn: sqlite3.Connection, program: int | None = None) -> list[str]:
     text that fails its sha256, a payload that is not a JSON object, a snapshot that fails
     its sha256. ``program``: that program's rows only. One pass over the rows."""
     where, args = ("WHERE id = ?", (program,)) if program is not None else ("", ())
-    found = [f"program {pid}: its text does not match its sha256 (the journal was changed "
-             "outside bwsd)"
-             for pid, text, digest in conn.execute(
-                 f"SELECT id, text, sha256 FROM programs {where} ORDER BY id", args)
-             if _sha256(text.encode() if isinstance(text, str) else text) != digest]  # fmt: skip
+    found = [
+        f"program {pid}: its text does not match its sha256 (the journal was changed outside bwsd)"
+        for pid, text, digest in conn.execute(
+            f"SELECT id, text, sha256 FROM programs {where} ORDER BY id", args
+        )
+        if _sha256(text.encode() if isinstance(text, str) else text) != digest
+    ]
     inner = "WHERE program_id = ?" if program is not None else ""
     for pid, idx, started, done in conn.execute(
         f"SELECT program_id, idx, started_payload, done_payload FROM instructions {inner} "
-        "ORDER BY program_id, idx", args,
-    ):  # fmt: skip
+        "ORDER BY program_id, idx",
+        args,
+    ):
         for which, text in (("started", started), ("done", done)):
             if text is not None and not _json_object(text):
-                found.append(f"program {pid}, instruction {idx}: its {which} payload is not a "
-                             "JSON object")  # fmt: skip
+                found.append(
+                    f"program {pid}, instruction {idx}: its {which} payload is not a JSON object"
+                )
     for pid, idx, data, digest in conn.execute(
         f"SELECT program_id, idx, data, sha256 FROM snapshots {inner} ORDER BY program_id, idx",
         args,
-    ):  # fmt: skip
+    ):
         if not isinstance(data, bytes) or _sha256(data) != digest:
-            found.append(f"program {pid}: the snapshot at instruction {idx} does not match its "
-                         "sha256 (a restart skips it)")  # fmt: skip
+            found.append(
+                f"program {pid}: the snapshot at instruction {idx} does not match its "
+                "sha256 (a restart skips it)"
+            )
     return found
 
 

@@ -48,44 +48,59 @@ from bwsd.journal.records import ACTIVE, JournalError
 from bwsd.journal.schema import APPLICATION_ID, SCHEMA_VERSION, identify, lock, sync_folder, upgrade
 from bwsd.paths import journal_file, state_folder
 
-_EMPTY = ("is empty (0 bytes), where a journal was expected: restore the journal, or move this "
-          "file away to start a new one")  # fmt: skip
+_EMPTY = (
+    "is empty (0 bytes), where a journal was expected: restore the journal, or move this "
+    "file away to start a new one"
+)
 
 
 def configure(sub: Any) -> None:
     """Register `bwsd journal` and its commands."""
     journal = sub.add_parser("journal", help="check, export or reset the daemon's journal")
     cmds = journal.add_subparsers(dest="journal_command", required=True)
-    check = cmds.add_parser("check", help="is the journal sound? a short report (exit 1 if "
-                            "not); changes nothing")  # fmt: skip
+    check = cmds.add_parser(
+        "check", help="is the journal sound? a short report (exit 1 if not); changes nothing"
+    )
     check.set_defaults(handler=_check_cmd)
     export = cmds.add_parser("export", help="the journal as JSON lines; changes nothing")
-    export.add_argument("-o", "--output", metavar="FILE",
-                        help="write to FILE (default: standard output)")  # fmt: skip
+    export.add_argument(
+        "-o", "--output", metavar="FILE", help="write to FILE (default: standard output)"
+    )
     export.set_defaults(handler=_export_cmd)
-    reset = cmds.add_parser("reset", help="move the journal aside (renamed, kept) so that the "
-                            "daemon's next start creates a new one")  # fmt: skip
-    reset.add_argument("--i-understand", action="store_true",
-                       help="do it: the new journal knows none of the old one's "
-                       "programs")  # fmt: skip
+    reset = cmds.add_parser(
+        "reset",
+        help="move the journal aside (renamed, kept) so that the "
+        "daemon's next start creates a new one",
+    )
+    reset.add_argument(
+        "--i-understand",
+        action="store_true",
+        help="do it: the new journal knows none of the old one's programs",
+    )
     reset.set_defaults(handler=_reset_cmd)
     for parser in (check, export, reset):
-        parser.add_argument("--config", help="the daemon's config (TOML), for its [journal] "
-                            "path (default: journal.db)")  # fmt: skip
+        parser.add_argument(
+            "--config",
+            help="the daemon's config (TOML), for its [journal] path (default: journal.db)",
+        )
         parser.add_argument(
             "--state-dir",
             help="the daemon's state folder (default: the config's [daemon] state_dir)",
         )
-        parser.add_argument("--journal", metavar="FILE", help="the journal file itself, "
-                            "instead of --config and --state-dir")  # fmt: skip
+        parser.add_argument(
+            "--journal",
+            metavar="FILE",
+            help="the journal file itself, instead of --config and --state-dir",
+        )
 
 
 def locate(args: argparse.Namespace) -> Path:
     """The journal file the command is about, found as `bwsd serve` finds it."""
     if args.journal:
         if args.config or args.state_dir:
-            raise BwsdError("--journal names the file itself: give it without --config and "
-                            "--state-dir")  # fmt: skip
+            raise BwsdError(
+                "--journal names the file itself: give it without --config and --state-dir"
+            )
         return Path(args.journal)
     if args.config:
         config = load_config(args.config)
@@ -130,24 +145,33 @@ def check_journal(path: Path) -> Report:
         raise JournalError("is a folder, not a journal file", path=str(path))
     if not path.exists():
         if not wal_holds_a_commit(wal):
-            raise JournalError("no journal here (the daemon creates one at its first start)",
-                               path=str(path))  # fmt: skip
-        report.problems.append(f"is missing, but its write-ahead log {wal.name} is here: put "
-                               f"the journal back beside it, or move {wal.name} (and "
-                               f"{path.name}{SHM}) away to start a new one")  # fmt: skip
+            raise JournalError(
+                "no journal here (the daemon creates one at its first start)", path=str(path)
+            )
+        report.problems.append(
+            f"is missing, but its write-ahead log {wal.name} is here: put "
+            f"the journal back beside it, or move {wal.name} (and "
+            f"{path.name}{SHM}) away to start a new one"
+        )
         return report
     log = _size(wal.stat().st_size) if wal.exists() else "none"
-    report.facts.append(("journal", f"{path} ({_size(path.stat().st_size)}; write-ahead log: "
-                         f"{log})"))  # fmt: skip
+    report.facts.append(
+        ("journal", f"{path} ({_size(path.stat().st_size)}; write-ahead log: {log})")
+    )
     if path.stat().st_size == 0:
         report.problems.append(_EMPTY)
         return report
     running = writer_running(path)
-    report.facts.append(("daemon", {
-        True: "running (it holds the journal's lock): this report is of a copy taken now",
-        False: "not running",
-        None: f"unknown (cannot read {path.name}{LOCK})",
-    }[running]))  # fmt: skip
+    report.facts.append(
+        (
+            "daemon",
+            {
+                True: "running (it holds the journal's lock): this report is of a copy taken now",
+                False: "not running",
+                None: f"unknown (cannot read {path.name}{LOCK})",
+            }[running],
+        )
+    )
     with tempfile.TemporaryDirectory(prefix="bwsd-journal-") as tmp:
         copy = private_copy(path, Path(tmp))
         lost = _check_log(report, copy, running)
@@ -187,8 +211,12 @@ def _check_file(report: Report, conn: sqlite3.Connection, where: str, lost: bool
         report.problems.append(f"not a usable journal: {exc}")
         return
     if version == 0:
-        report.facts.append(("schema", "none: an empty SQLite file, which the daemon makes a "
-                             "journal at its next start"))  # fmt: skip
+        report.facts.append(
+            (
+                "schema",
+                "none: an empty SQLite file, which the daemon makes a journal at its next start",
+            )
+        )
         return
     later = "" if version == SCHEMA_VERSION else f" (the daemon upgrades it to {SCHEMA_VERSION})"
     report.facts.append(("schema", f"version {version}{later}"))
@@ -206,8 +234,9 @@ def _check_file(report: Report, conn: sqlite3.Connection, where: str, lost: bool
         if found := records(conn):
             report.problems.extend(f"damaged row: {line}" for line in found)
         else:
-            report.facts.append(("rows", "ok (program texts and snapshots match their "
-                                 "sha256, payloads are JSON)"))  # fmt: skip
+            report.facts.append(
+                ("rows", "ok (program texts and snapshots match their sha256, payloads are JSON)")
+            )
         alone = " (as the file alone says, without its lost log)" if lost else ""
         report.facts.append(("sessions", _sessions(conn) + alone))
         report.facts.append(("programs", _programs(conn) + alone))
@@ -227,8 +256,10 @@ def _sessions(conn: sqlite3.Connection) -> str:
         "SELECT id, opened, closed, pid, version FROM sessions ORDER BY id DESC LIMIT 1"
     ).fetchone()
     end = "not closed" if closed is None else f"closed {stamp(closed)}"
-    return (f"{count} ({unclosed} not closed: a crash, a kill or a power cut, or running); "
-            f"the last opened {stamp(opened)} by pid {pid} (bwsd {version}), {end}")  # fmt: skip
+    return (
+        f"{count} ({unclosed} not closed: a crash, a kill or a power cut, or running); "
+        f"the last opened {stamp(opened)} by pid {pid} (bwsd {version}), {end}"
+    )
 
 
 def _programs(conn: sqlite3.Connection) -> str:
@@ -270,12 +301,18 @@ def _check_cmd(args: argparse.Namespace) -> int:
 
 # -- export ---------------------------------------------------------------------------------
 
-_PROGRAMS = ("SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
-             "reason, text FROM programs ORDER BY id")  # fmt: skip
-_INSTRUCTIONS = ("SELECT program_id, idx, started, started_payload, done, done_payload "
-                 "FROM instructions WHERE program_id = ? ORDER BY idx")  # fmt: skip
-_SNAPSHOTS = ("SELECT program_id, idx, length(data), sha256, created FROM snapshots "
-              "WHERE program_id = ? ORDER BY idx")  # fmt: skip
+_PROGRAMS = (
+    "SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
+    "reason, text FROM programs ORDER BY id"
+)
+_INSTRUCTIONS = (
+    "SELECT program_id, idx, started, started_payload, done, done_payload "
+    "FROM instructions WHERE program_id = ? ORDER BY idx"
+)
+_SNAPSHOTS = (
+    "SELECT program_id, idx, length(data), sha256, created FROM snapshots "
+    "WHERE program_id = ? ORDER BY idx"
+)
 
 
 def export_journal(path: Path, write: Callable[[str], object]) -> int:
@@ -299,8 +336,7 @@ def export_journal(path: Path, write: Callable[[str], object]) -> int:
 def _export(conn: sqlite3.Connection, where: str, write: Callable[[str], object]) -> int:
     version = identify(conn, where)
     if version == 0:
-        raise JournalError("an empty SQLite file, not a journal yet: nothing to export",
-                           path=where)  # fmt: skip
+        raise JournalError("an empty SQLite file, not a journal yet: nothing to export", path=where)
     if version < SCHEMA_VERSION:
         upgrade(conn, version, where)  # the private copy only
     lines = 0
@@ -332,15 +368,32 @@ def _export(conn: sqlite3.Connection, where: str, write: Callable[[str], object]
         reason,
         text,
     ) in conn.execute(_PROGRAMS):
-        line("program", id=pid, name=name, sha256=sha, instructions=total, done=done,
-             created=created, started=started, finished=finished, outcome=outcome,
-             reason=reason, text=text)  # fmt: skip
+        line(
+            "program",
+            id=pid,
+            name=name,
+            sha256=sha,
+            instructions=total,
+            done=done,
+            created=created,
+            started=started,
+            finished=finished,
+            outcome=outcome,
+            reason=reason,
+            text=text,
+        )
         for _, idx, t0, p0, t1, p1 in conn.execute(_INSTRUCTIONS, (pid,)):
-            line("instruction", program_id=pid, index=idx, started=t0,
-                 started_payload=_payload(p0), done=t1, done_payload=_payload(p1))  # fmt: skip
+            line(
+                "instruction",
+                program_id=pid,
+                index=idx,
+                started=t0,
+                started_payload=_payload(p0),
+                done=t1,
+                done_payload=_payload(p1),
+            )
         for _, idx, size, sha, created in conn.execute(_SNAPSHOTS, (pid,)):
-            line("snapshot", program_id=pid, index=idx, bytes=size, sha256=sha,
-                 created=created)  # fmt: skip
+            line("snapshot", program_id=pid, index=idx, bytes=size, sha256=sha, created=created)
     for eid, at, kind, data in conn.execute("SELECT id, time, kind, data FROM events ORDER BY id"):
         line("event", id=eid, time=at, event=kind, data=_payload(data))
     for sid, at, state, name, reason in conn.execute(
@@ -413,8 +466,9 @@ def reset_journal(path: Path, confirmed: bool) -> list[tuple[Path, Path]]:
     except JournalError as exc:
         if "another writer" not in exc.reason:
             raise
-        raise JournalError("in use: a daemon (or another writer) has it open; stop it first",
-                           path=where) from exc  # fmt: skip
+        raise JournalError(
+            "in use: a daemon (or another writer) has it open; stop it first", path=where
+        ) from exc
     try:
         for source, target in moves:
             source.rename(target)

@@ -68,8 +68,9 @@ def wal_holds_a_commit(wal: Path) -> bool:
     except (FileNotFoundError, IsADirectoryError):
         return False
     except OSError as exc:
-        raise JournalError(f"cannot read its write-ahead log: {exc.strerror}",
-                           path=str(wal)) from exc  # fmt: skip
+        raise JournalError(
+            f"cannot read its write-ahead log: {exc.strerror}", path=str(wal)
+        ) from exc
 
 
 def _page_size(size: int) -> bool:
@@ -122,12 +123,14 @@ def lost_wal(path: Path, application_id: int) -> str | None:
     if session is None or session.closed is not None:
         return None
     state = "is missing" if not wal.exists() else "holds no transaction"
-    return (f"the daemon that opened this journal at {stamp(session.opened)} (pid "
-            f"{session.pid}) never closed it, and its write-ahead log {wal.name} {state}: "
-            "the file alone may be older than what the loom did. Put the "
-            f"{wal.name} of this journal back beside it and start again, or move this journal "
-            "aside and start a new one with `bwsd journal reset --i-understand` "
-            "(docs/journal.md)")  # fmt: skip
+    return (
+        f"the daemon that opened this journal at {stamp(session.opened)} (pid "
+        f"{session.pid}) never closed it, and its write-ahead log {wal.name} {state}: "
+        "the file alone may be older than what the loom did. Put the "
+        f"{wal.name} of this journal back beside it and start again, or move this journal "
+        "aside and start a new one with `bwsd journal reset --i-understand` "
+        "(docs/journal.md)"
+    )
 
 
 def stamp(seconds: float) -> str:
@@ -203,8 +206,10 @@ def private_copy(path: Path, folder: Path) -> Path:
                 continue
         if _wal_header(copied_wal) == before == _wal_header(wal):
             return target
-    raise JournalError("kept changing while it was copied (the daemon folding its log in): try "
-                       "again", path=str(path))  # fmt: skip
+    raise JournalError(
+        "kept changing while it was copied (the daemon folding its log in): try again",
+        path=str(path),
+    )
 
 
 def _wal_header(wal: Path) -> bytes | None:

@@ -279,14 +279,22 @@ def identify(conn: sqlite3.Connection, where: str) -> int:
     if app_id == 0 and version == 0 and not tables:
         return 0
     if app_id != APPLICATION_ID:
-        raise JournalError(f"not a bwsd journal (application id {app_id:#x}, tables: "
-                           f"{', '.join(sorted(tables)) or 'none'})", path=where)  # fmt: skip
+        raise JournalError(
+            f"not a bwsd journal (application id {app_id:#x}, tables: "
+            f"{', '.join(sorted(tables)) or 'none'})",
+            path=where,
+        )
     if version > SCHEMA_VERSION:
-        raise JournalError(f"written by a newer bwsd (schema version {version}; this bwsd "
-                           f"reads version {SCHEMA_VERSION})", path=where)  # fmt: skip
+        raise JournalError(
+            f"written by a newer bwsd (schema version {version}; this bwsd "
+            f"reads version {SCHEMA_VERSION})",
+            path=where,
+        )
     if version != SCHEMA_VERSION and version not in UPGRADES:
-        raise JournalError(f"unknown schema version {version} (this bwsd reads version "
-                           f"{SCHEMA_VERSION})", path=where)  # fmt: skip
+        raise JournalError(
+            f"unknown schema version {version} (this bwsd reads version {SCHEMA_VERSION})",
+            path=where,
+        )
     later = {name for v, names in ADDED.items() if v > version for name in names}
     if missing := set(TABLES) - later - tables:
         raise JournalError(f"damaged: missing tables {', '.join(sorted(missing))}", path=where)
@@ -323,8 +331,9 @@ def upgrade(conn: sqlite3.Connection, version: int, where: str) -> None:
     try:
         found = conn.execute("PRAGMA user_version").fetchone()[0]
         if found != version:  # only this process writes; a mismatch means the file changed
-            raise JournalError(f"schema version changed from {version} to {found} while "
-                               "opening", path=where)  # fmt: skip
+            raise JournalError(
+                f"schema version changed from {version} to {found} while opening", path=where
+            )
         for step in range(version, SCHEMA_VERSION):
             for statement in _statements(UPGRADES[step]):
                 conn.execute(statement)
@@ -335,8 +344,9 @@ def upgrade(conn: sqlite3.Connection, version: int, where: str) -> None:
             with contextlib.suppress(sqlite3.Error):
                 conn.execute("ROLLBACK")
         if isinstance(exc, sqlite3.Error):
-            raise JournalError(f"cannot upgrade from schema version {version}: {exc}",
-                               path=where) from exc  # fmt: skip
+            raise JournalError(
+                f"cannot upgrade from schema version {version}: {exc}", path=where
+            ) from exc
         raise
 
 

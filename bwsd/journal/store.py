@@ -28,8 +28,10 @@ from bwsd.journal.records import (
     ProgramRecord,
 )
 
-_PROGRAM = ("SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
-            "reason FROM programs")  # fmt: skip
+_PROGRAM = (
+    "SELECT id, name, sha256, instructions, done, created, started, finished, outcome, "
+    "reason FROM programs"
+)
 _ACTIVE_SQL = ", ".join("?" for _ in ACTIVE)
 _log = logging.getLogger(__name__)
 SNAPSHOTS_KEPT = 2  # twin snapshots kept per program: the newest, and one if it is damaged
@@ -119,33 +121,43 @@ class Journal(EventLog):
 
     def _check_outcome(self, conn: sqlite3.Connection, rec: ProgramRecord, outcome: str) -> None:
         if rec.outcome == COMPLETE:
-            raise self._error("already complete: a complete program never changes",
-                              program=rec.id)  # fmt: skip
+            raise self._error("already complete: a complete program never changes", program=rec.id)
         if rec.outcome in ENDED:
             if outcome != RUNNING:
-                raise self._error(f"already {rec.outcome}: an ended program only resumes",
-                                  program=rec.id)  # fmt: skip
+                raise self._error(
+                    f"already {rec.outcome}: an ended program only resumes", program=rec.id
+                )
             newer = conn.execute("SELECT min(id) FROM programs WHERE id > ?", (rec.id,))
             if (later := newer.fetchone()[0]) is not None:
-                raise self._error(f"program {later} was loaded after it: an ended program "
-                                  "resumes only while it is the newest",
-                                  program=rec.id)  # fmt: skip
+                raise self._error(
+                    f"program {later} was loaded after it: an ended program "
+                    "resumes only while it is the newest",
+                    program=rec.id,
+                )
         if outcome in ACTIVE:
             row = conn.execute(
                 f"SELECT id, outcome FROM programs WHERE outcome IN ({_ACTIVE_SQL}) AND id <> ?",
                 (*ACTIVE, rec.id),
             ).fetchone()
             if row is not None:
-                raise self._error(f"program {row[0]} is {row[1]}: one program is active at a "
-                                  "time", program=rec.id)  # fmt: skip
+                raise self._error(
+                    f"program {row[0]} is {row[1]}: one program is active at a time", program=rec.id
+                )
         if outcome == COMPLETE and rec.done != rec.instructions:
-            raise self._error(f"{rec.done} of {rec.instructions} instructions done: it cannot "
-                              "complete", program=rec.id)  # fmt: skip
+            raise self._error(
+                f"{rec.done} of {rec.instructions} instructions done: it cannot complete",
+                program=rec.id,
+            )
 
     # -- instructions -----------------------------------------------------------------------
 
-    def started(self, program_id: int, index: int, payload: dict[str, Any],
-                done: tuple[int, dict[str, Any]] | None = None) -> None:  # fmt: skip
+    def started(
+        self,
+        program_id: int,
+        index: int,
+        payload: dict[str, Any],
+        done: tuple[int, dict[str, Any]] | None = None,
+    ) -> None:
         """Journal that instruction ``index`` (1-based) starts: before the actuators move.
 
         ``done``: (index, payload) of the instruction before, journaled as done in the same
@@ -176,8 +188,11 @@ class Journal(EventLog):
             raise refuse("already started and done")
         if self._pending_row(conn, rec) is not None:
             pending = rec.done + 1
-            raise refuse("already started" if index == pending else f"instruction {pending} is "
-                         "started and not done")  # fmt: skip
+            raise refuse(
+                "already started"
+                if index == pending
+                else f"instruction {pending} is started and not done"
+            )
         if index != rec.done + 1:
             raise refuse(f"instruction {index - 1} is not done")
 
@@ -190,8 +205,11 @@ class Journal(EventLog):
     def _done(self, conn: sqlite3.Connection, program_id: int, index: int, data: str) -> None:
         rec = self._program(conn, program_id, index)
         if rec.outcome not in ACTIVE and rec.outcome not in ENDED:
-            raise self._error(f"the program is {rec.outcome}: no instruction of it can finish",
-                              program=program_id, index=index)  # fmt: skip
+            raise self._error(
+                f"the program is {rec.outcome}: no instruction of it can finish",
+                program=program_id,
+                index=index,
+            )
         row = conn.execute(
             "SELECT done FROM instructions WHERE program_id = ? AND idx = ?",
             (program_id, index),
@@ -242,21 +260,31 @@ class Journal(EventLog):
         transaction, and saving at an index already kept replaces it.
         """
         if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-            raise self._error(f"snapshot index must be an integer >= 0, got {index!r}",
-                              program=program_id)  # fmt: skip
+            raise self._error(
+                f"snapshot index must be an integer >= 0, got {index!r}", program=program_id
+            )
         if not isinstance(data, bytes | bytearray | memoryview) or not len(data):
-            raise self._error(f"snapshot must be non-empty bytes, got {type(data).__name__}",
-                              program=program_id, index=index)  # fmt: skip
+            raise self._error(
+                f"snapshot must be non-empty bytes, got {type(data).__name__}",
+                program=program_id,
+                index=index,
+            )
         blob = bytes(data)
         digest = hashlib.sha256(blob).hexdigest()
         with self._write() as conn:
             rec = self._program(conn, program_id, index)
             if rec.outcome not in ACTIVE:
-                raise self._error(f"the program is {rec.outcome}: snapshots are kept only while "
-                                  "it is active", program=program_id, index=index)  # fmt: skip
+                raise self._error(
+                    f"the program is {rec.outcome}: snapshots are kept only while it is active",
+                    program=program_id,
+                    index=index,
+                )
             if index > rec.done:
-                raise self._error(f"snapshot beyond the instructions done ({rec.done})",
-                                  program=program_id, index=index)  # fmt: skip
+                raise self._error(
+                    f"snapshot beyond the instructions done ({rec.done})",
+                    program=program_id,
+                    index=index,
+                )
             conn.execute(
                 "INSERT INTO snapshots (program_id, idx, data, sha256, created) "
                 "VALUES (?, ?, ?, ?, ?) ON CONFLICT (program_id, idx) DO UPDATE SET "
@@ -284,8 +312,12 @@ class Journal(EventLog):
         for index, data, digest in rows:
             if isinstance(data, bytes) and hashlib.sha256(data).hexdigest() == digest:
                 return int(index), data
-            _log.warning("%s: program %d: snapshot at instruction %d does not match its sha256; "
-                         "skipped", self._path, program_id, index)  # fmt: skip
+            _log.warning(
+                "%s: program %d: snapshot at instruction %d does not match its sha256; skipped",
+                self._path,
+                program_id,
+                index,
+            )
         return None
 
     @staticmethod

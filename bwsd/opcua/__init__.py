@@ -14,8 +14,9 @@ if TYPE_CHECKING:
     from bwsd.opcua.server import OpcUaServer
 
 
-def opcua_server(controller: Controller, config: Config, state_dir: Path,
-                 gate: Gate | None = None) -> OpcUaServer | None:  # fmt: skip
+def opcua_server(
+    controller: Controller, config: Config, state_dir: Path, gate: Gate | None = None
+) -> OpcUaServer | None:
     """The server of the config's ``[opcua]`` table, or None when it is not enabled; its
     users are the tokens of ``gate`` (else of the state folder's token file)."""
     table = config.table("opcua")

@@ -23,8 +23,11 @@ def configure(sub: Any) -> None:
     """Register `bwsd opcua` and its commands."""
     opcua = sub.add_parser("opcua", help="the OPC UA server's certificate")
     cmds = opcua.add_subparsers(dest="opcua_command", required=True)
-    cert = cmds.add_parser("cert", help="show the server certificate's thumbprint (made when "
-                           "missing); --renew makes a new one")  # fmt: skip
+    cert = cmds.add_parser(
+        "cert",
+        help="show the server certificate's thumbprint (made when "
+        "missing); --renew makes a new one",
+    )
     cert.add_argument("--config", required=True, help="machine config (TOML)")
     cert.add_argument(
         "--state-dir", help="the daemon's state folder (default: the config's [daemon] state_dir)"

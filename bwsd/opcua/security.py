@@ -79,10 +79,12 @@ class Certificate:
 
     def describe(self) -> str:
         cert = self.load()
-        return (f"certificate {self.cert}\n  thumbprint (SHA-1) {self.thumbprint()}\n"
-                f"  subject {cert.subject.rfc4514_string()}\n"
-                f"  valid {cert.not_valid_before_utc:%Y-%m-%d} to "
-                f"{cert.not_valid_after_utc:%Y-%m-%d}")  # fmt: skip
+        return (
+            f"certificate {self.cert}\n  thumbprint (SHA-1) {self.thumbprint()}\n"
+            f"  subject {cert.subject.rfc4514_string()}\n"
+            f"  valid {cert.not_valid_before_utc:%Y-%m-%d} to "
+            f"{cert.not_valid_after_utc:%Y-%m-%d}"
+        )
 
 
 def certificate(folder: Path, *, renew: bool = False, listening: str = "127.0.0.1") -> Certificate:
@@ -92,17 +94,23 @@ def certificate(folder: Path, *, renew: bool = False, listening: str = "127.0.0.
     if found.cert.exists() and found.key.exists() and not renew:
         if _names_host(found, listening):
             return found
-        log.warning("OPC UA: the server certificate does not name %s, where the server listens: "
-                    "made anew (clients that trusted the old one must trust the new one)",
-                    listening)  # fmt: skip
+        log.warning(
+            "OPC UA: the server certificate does not name %s, where the server listens: "
+            "made anew (clients that trusted the old one must trust the new one)",
+            listening,
+        )
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         key = cert_gen.generate_private_key()
         host = socket.gethostname()
         cert = cert_gen.generate_self_signed_app_certificate(
-            key, f"bwsd@{host}", {"organizationName": "bwsd"}, _names(host, listening),
-            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_DAYS,
-        )  # fmt: skip
+            key,
+            f"bwsd@{host}",
+            {"organizationName": "bwsd"},
+            _names(host, listening),
+            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+            days=CERT_DAYS,
+        )
         write_private(found.key, cert_gen.dump_private_key_as_pem(key))
         found.cert.write_bytes(cert.public_bytes(Encoding.DER))
     except OSError as exc:
@@ -115,8 +123,11 @@ def _names(host: str, listening: str) -> list[x509.GeneralName]:
     """The certificate's names: the application URI, the machine's name, localhost, the
     loopback addresses, and the address the server listens on (on every address: the
     machine's own addresses)."""
-    names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri(host)),
-                                      x509.DNSName(host), x509.DNSName("localhost")]  # fmt: skip
+    names: list[x509.GeneralName] = [
+        x509.UniformResourceIdentifier(application_uri(host)),
+        x509.DNSName(host),
+        x509.DNSName("localhost"),
+    ]
     addresses = {"127.0.0.1", "::1"}
     if listening in ("", "0.0.0.0", "::"):
         with contextlib.suppress(OSError):
@@ -176,8 +187,13 @@ class TokenUsers:
         self.tokens = tokens
         self.anonymous = anonymous
 
-    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
-                 certificate: Any = None) -> User | None:  # fmt: skip
+    def get_user(
+        self,
+        iserver: Any,
+        username: str | None = None,
+        password: str | None = None,
+        certificate: Any = None,
+    ) -> User | None:
         if username is None:  # anonymous (X509 user tokens are not offered)
             if self.anonymous:
                 return LoomUser(UserRole.User, "anonymous", "viewer")
@@ -271,21 +287,24 @@ class TrustFolder:
             await self._refuse(cert, app, ServiceError(ua.StatusCodes.BadCertificateUntrusted))
         store = TrustStore([self.trusted], [])
         await store.load()
-        options = (CertificateValidatorOptions.TRUSTED_VALIDATION
-                   | CertificateValidatorOptions.PEER_CLIENT)  # fmt: skip
+        options = (
+            CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
+        )
         try:
             await CertificateValidator(options, store).validate(cert, app)
         except ServiceError as exc:
             await self._refuse(cert, app, exc)
 
-    async def _refuse(self, cert: x509.Certificate, app: ua.ApplicationDescription,
-                      exc: ServiceError) -> None:  # fmt: skip
+    async def _refuse(
+        self, cert: x509.Certificate, app: ua.ApplicationDescription, exc: ServiceError
+    ) -> None:
         """Log the refusal, keep an untrusted certificate in ``rejected/``, raise ``exc``."""
         name = status(exc.code).name
         der = cert.public_bytes(Encoding.DER)
         thumb = hashlib.sha1(der, usedforsecurity=False).hexdigest()
-        REFUSED_CERT.note("OPC UA: refused client %s (certificate %s): %s",
-                          app.ApplicationUri, thumb, name)  # fmt: skip
+        REFUSED_CERT.note(
+            "OPC UA: refused client %s (certificate %s): %s", app.ApplicationUri, thumb, name
+        )
         if exc.code == ua.StatusCodes.BadCertificateUntrusted:
             await asyncio.to_thread(self._keep, thumb, der)
         raise exc

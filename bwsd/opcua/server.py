@@ -63,13 +63,17 @@ HISTORY = 10  # programs in Admin.ProgramHistory
 _POLICIES = {
     ("Basic256Sha256", "SignAndEncrypt"): ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
     ("Basic256Sha256", "Sign"): ua.SecurityPolicyType.Basic256Sha256_Sign,
-    ("Aes128Sha256RsaOaep", "SignAndEncrypt"):
-        ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
+    (
+        "Aes128Sha256RsaOaep",
+        "SignAndEncrypt",
+    ): ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
     ("Aes128Sha256RsaOaep", "Sign"): ua.SecurityPolicyType.Aes128Sha256RsaOaep_Sign,
-    ("Aes256Sha256RsaPss", "SignAndEncrypt"):
-        ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt,
+    (
+        "Aes256Sha256RsaPss",
+        "SignAndEncrypt",
+    ): ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt,
     ("Aes256Sha256RsaPss", "Sign"): ua.SecurityPolicyType.Aes256Sha256RsaPss_Sign,
-}  # fmt: skip
+}
 
 
 class Refused(Exception):
@@ -83,15 +87,22 @@ class Refused(Exception):
 class OpcUaServer:
     """Serve a controller's PackML object on ``opc.tcp://host:port/bwsd``; port 0: any."""
 
-    def __init__(self, controller: Controller, tokens: TokenStore, folder: Path,
-                 settings: Mapping[str, Any], gate: Gate | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        controller: Controller,
+        tokens: TokenStore,
+        folder: Path,
+        settings: Mapping[str, Any],
+        gate: Gate | None = None,
+    ) -> None:
         self.controller = controller
         self.tokens = tokens
         self.folder = folder  # the certificate, trusted/ and rejected/
         self.host = settings.get("host", "127.0.0.1")
         self.port = int(settings.get("port", 4840))
-        self.policy = _POLICIES[(settings.get("policy", "Basic256Sha256"),
-                                 settings.get("mode", "SignAndEncrypt"))]  # fmt: skip
+        self.policy = _POLICIES[
+            (settings.get("policy", "Basic256Sha256"), settings.get("mode", "SignAndEncrypt"))
+        ]
         self.allow_none = bool(settings.get("allow_none", False))
         self.anonymous = bool(settings.get("anonymous", False))
         self.server: Server | None = None
@@ -126,8 +137,9 @@ class OpcUaServer:
         await server.load_certificate(str(cert.cert))
         await server.load_private_key(str(cert.key))
         server.set_certificate_validator(trust)
-        methods = space.Methods(self._method, self._set_mode_method, self._resume_method,
-                                self._load_method)  # fmt: skip
+        methods = space.Methods(
+            self._method, self._set_mode_method, self._resume_method, self._load_method
+        )
         self._space = await space.build(server, methods)
         self._paths = {node.nodeid: path for path, node in self._space.variables.items()}
         policies = [self.policy] + ([ua.SecurityPolicyType.NoSecurity] if self.allow_none else [])
@@ -151,8 +163,13 @@ class OpcUaServer:
         supervisor = self.controller.supervisor
         self._updater = supervisor.start("opcua", self._update_forever)
         supervisor.start("opcua sessions", self._drop_revoked, restart=True)
-        log.info("OPC UA on %s (%s%s), certificate %s", self.url, self.policy.name,
-                 ", None too" if self.allow_none else "", cert.thumbprint())  # fmt: skip
+        log.info(
+            "OPC UA on %s (%s%s), certificate %s",
+            self.url,
+            self.policy.name,
+            ", None too" if self.allow_none else "",
+            cert.thumbprint(),
+        )
 
     def _read_live(self, server: Server) -> None:
         """A read of a status variable answers from the controller as it is at that moment
@@ -169,16 +186,16 @@ class OpcUaServer:
         value = self._status_values()[self._live[nodeid]]
         path = self._live[nodeid]
         stamp = ua.DateTime.now(UTC)
-        return ua.DataValue(ua.Variant(value, _KINDS[path]), SourceTimestamp=stamp,
-                            ServerTimestamp=stamp)  # fmt: skip
+        return ua.DataValue(
+            ua.Variant(value, _KINDS[path]), SourceTimestamp=stamp, ServerTimestamp=stamp
+        )
 
     def _status_values(self) -> dict[str, Any]:
         """The status variables' values from one status snapshot per read request: a PLC's
         Read of every tag is answered in one go, so the snapshot is kept until the event
         loop's next turn."""
         if self._snapshot is None:
-            self._snapshot = status_values(self.controller.status(), self._tally,
-                                           time.monotonic())  # fmt: skip
+            self._snapshot = status_values(self.controller.status(), self._tally, time.monotonic())
             asyncio.get_running_loop().call_soon(self._forget_snapshot)
         return self._snapshot
 
@@ -207,8 +224,9 @@ class OpcUaServer:
             if method in self._paths:
                 continue  # a variable, done above
 
-            def executable(nodeid: ua.NodeId, attr: ua.AttributeIds, n: Role = needs
-                           ) -> ua.DataValue:  # fmt: skip
+            def executable(
+                nodeid: ua.NodeId, attr: ua.AttributeIds, n: Role = needs
+            ) -> ua.DataValue:
                 return ua.DataValue(
                     ua.Variant(rules.may(current_user(), n), ua.VariantType.Boolean)
                 )
@@ -227,8 +245,11 @@ class OpcUaServer:
                 session = client.processor.session if client.processor is not None else None
                 user = session.user if session is not None else None
                 if isinstance(user, LoomUser) and not self.tokens_agree(user):
-                    log.info("OPC UA: closed the session of %s: its token was removed or its "
-                             "role changed", user.name)  # fmt: skip
+                    log.info(
+                        "OPC UA: closed the session of %s: its token was removed or its "
+                        "role changed",
+                        user.name,
+                    )
                     if client.transport is not None:
                         client.transport.close()
 
@@ -308,9 +329,13 @@ class OpcUaServer:
     async def _twin_values(self) -> dict[str, Any]:
         """The twin's occupancy, take-up and contacts, and the matrix's size."""
         view = await self.controller.twin_view()
-        return {"Machine/Rows": view.rows, "Machine/Cols": view.cols,
-                "Machine/TwinOccupancy": view.occupancy, "Machine/TakeUp": view.takeup,
-                "Machine/Contacts": view.contacts}  # fmt: skip
+        return {
+            "Machine/Rows": view.rows,
+            "Machine/Cols": view.cols,
+            "Machine/TwinOccupancy": view.occupancy,
+            "Machine/TakeUp": view.takeup,
+            "Machine/Contacts": view.contacts,
+        }
 
     async def _write(self, path: str, value: Any, at: float | None = None) -> None:
         """Write (and notify) ``value`` at ``path`` unless it is there already; ``at``: when
@@ -346,8 +371,9 @@ class OpcUaServer:
             )
         )
 
-    async def _load_method(self, parent: ua.NodeId, name: Any, text: Any
-                           ) -> ua.StatusCode | list[Any]:  # fmt: skip
+    async def _load_method(
+        self, parent: ua.NodeId, name: Any, text: Any
+    ) -> ua.StatusCode | list[Any]:
         caller = self._caller(current_user())
         loaded: list[int] = []
 
@@ -410,8 +436,10 @@ class OpcUaServer:
             if path in _TYPES:
                 w.Value = _typed(w.Value, path)  # Int16 taken as Int32, else refused
             written[w.NodeId] = w.Value.Value.Value
-        pairs = (("Command/CmdChangeRequest", "Command/CntrlCmd", self._command),
-                 ("Command/UnitModeChangeRequest", "Command/UnitMode", self._mode))  # fmt: skip
+        pairs = (
+            ("Command/CmdChangeRequest", "Command/CntrlCmd", self._command),
+            ("Command/UnitModeChangeRequest", "Command/UnitMode", self._mode),
+        )
         caller = self._caller(event.user)
         for request, number, apply in pairs:
             if written.get(self._id(request)) is True:
@@ -426,8 +454,12 @@ class OpcUaServer:
         if self._space is None or not event.is_external:
             return
         for w in event.request_params.NodesToWrite:
-            for path in ("Command/CmdChangeRequest", "Command/UnitModeChangeRequest",
-                         "Command/CntrlCmd", "Command/UnitMode"):  # fmt: skip
+            for path in (
+                "Command/CmdChangeRequest",
+                "Command/UnitModeChangeRequest",
+                "Command/CntrlCmd",
+                "Command/UnitMode",
+            ):
                 if w.NodeId == self._id(path) and w.Value.Value is not None:
                     self._values[path] = w.Value.Value.Value
         await self._write("Command/CmdChangeRequest", False)
@@ -446,12 +478,18 @@ def _notify_only(node: Any, attr: ua.AttributeIds, value: ua.DataValue) -> None:
 # (Int16) as the same number; the requests are Boolean. Any other type is refused before
 # anything acts (Bad_TypeMismatch), as asyncua would refuse it after.
 _NUMBERS = (ua.VariantType.Int32, ua.VariantType.Int16)
-_TYPES = {"Command/CntrlCmd": _NUMBERS, "Command/UnitMode": _NUMBERS,
-          "Command/CmdChangeRequest": (ua.VariantType.Boolean,),
-          "Command/UnitModeChangeRequest": (ua.VariantType.Boolean,)}  # fmt: skip
-_GATE_CODES = {"type": ua.StatusCodes.BadTypeMismatch, "range": ua.StatusCodes.BadOutOfRange,
-               "who": ua.StatusCodes.BadUserAccessDenied,
-               "role": ua.StatusCodes.BadUserAccessDenied}  # fmt: skip
+_TYPES = {
+    "Command/CntrlCmd": _NUMBERS,
+    "Command/UnitMode": _NUMBERS,
+    "Command/CmdChangeRequest": (ua.VariantType.Boolean,),
+    "Command/UnitModeChangeRequest": (ua.VariantType.Boolean,),
+}
+_GATE_CODES = {
+    "type": ua.StatusCodes.BadTypeMismatch,
+    "range": ua.StatusCodes.BadOutOfRange,
+    "who": ua.StatusCodes.BadUserAccessDenied,
+    "role": ua.StatusCodes.BadUserAccessDenied,
+}
 
 
 def _typed(value: ua.DataValue, path: str) -> ua.DataValue:

@@ -40,39 +40,81 @@ class Tag:
 SECONDS = ("SEC", "s")
 TAGS: tuple[Tag, ...] = (
     Tag("Status/StateCurrent", V.Int32, int(State.STOPPED), "PackML state number (1..17)"),
-    Tag("Status/UnitModeCurrent", V.Int32, int(UnitMode.PRODUCTION),
-        "unit mode: 1 Production, 2 Maintenance, 3 Manual"),
-    Tag("Status/CurMachSpeed", V.Double, 0.0, "instructions done in the last minute",
-        ("C94", "1/min")),
+    Tag(
+        "Status/UnitModeCurrent",
+        V.Int32,
+        int(UnitMode.PRODUCTION),
+        "unit mode: 1 Production, 2 Maintenance, 3 Manual",
+    ),
+    Tag(
+        "Status/CurMachSpeed",
+        V.Double,
+        0.0,
+        "instructions done in the last minute",
+        ("C94", "1/min"),
+    ),
     Tag("Status/InstructionsDone", V.UInt32, 0, "instructions of the loaded program done"),
     Tag("Status/InstructionCount", V.UInt32, 0, "instructions of the loaded program"),
     Tag("Status/CurrentInstruction", V.UInt32, 0, "the instruction that runs next (0: none)"),
     Tag("Status/CurrentLine", V.UInt32, 0, "its line in the program text (0: none)"),
     Tag("Status/Program", V.String, "", "name of the loaded program"),
     Tag("Status/ProgramId", V.UInt32, 0, "its id in the journal (0: none)"),
-    Tag("Status/StateRequested", V.Int32, int(State.STOPPED),
-        "the state the machine is going to: the one an acting state ends in, else the state"),
-    Tag("Status/StateChangeInProcess", V.Boolean, False,
-        "an acting state (Resetting, Starting, Holding...) is doing its work"),
-    Tag("Status/UnitModeRequested", V.Int32, int(UnitMode.PRODUCTION),
-        "the unit mode last requested (by any door)"),
+    Tag(
+        "Status/StateRequested",
+        V.Int32,
+        int(State.STOPPED),
+        "the state the machine is going to: the one an acting state ends in, else the state",
+    ),
+    Tag(
+        "Status/StateChangeInProcess",
+        V.Boolean,
+        False,
+        "an acting state (Resetting, Starting, Holding...) is doing its work",
+    ),
+    Tag(
+        "Status/UnitModeRequested",
+        V.Int32,
+        int(UnitMode.PRODUCTION),
+        "the unit mode last requested (by any door)",
+    ),
     Tag("Status/CmdInvalid", V.Boolean, False, "the last command or mode request was refused"),
     Tag("Status/CmdInvalidReason", V.String, "", "why it was refused"),
-    Tag("Command/CntrlCmd", V.Int32, 0, "PackML command number (1 Reset .. 9 Clear)",
-        writer="operator"),
-    Tag("Command/CmdChangeRequest", V.Boolean, False,
-        "write true to apply CntrlCmd; reads false once taken", writer="operator"),
-    Tag("Command/UnitMode", V.Int32, int(UnitMode.PRODUCTION), "requested unit mode",
-        writer="admin"),
-    Tag("Command/UnitModeChangeRequest", V.Boolean, False,
-        "write true to apply UnitMode; reads false once taken", writer="admin"),
+    Tag(
+        "Command/CntrlCmd",
+        V.Int32,
+        0,
+        "PackML command number (1 Reset .. 9 Clear)",
+        writer="operator",
+    ),
+    Tag(
+        "Command/CmdChangeRequest",
+        V.Boolean,
+        False,
+        "write true to apply CntrlCmd; reads false once taken",
+        writer="operator",
+    ),
+    Tag(
+        "Command/UnitMode", V.Int32, int(UnitMode.PRODUCTION), "requested unit mode", writer="admin"
+    ),
+    Tag(
+        "Command/UnitModeChangeRequest",
+        V.Boolean,
+        False,
+        "write true to apply UnitMode; reads false once taken",
+        writer="admin",
+    ),
     Tag("Admin/StopReason/ID", V.Int32, 0, "stop reason code (docs/plc.md)"),
     Tag("Admin/StopReason/Value", V.String, "none", "stop reason code's name"),
     Tag("Admin/StopReason/Message", V.String, "", "the reason as the controller gave it"),
     Tag("Admin/Warning", V.String, [], "what an operator should know now"),
     Tag("Admin/StateCurrentTime", V.Double, 0.0, "time in the current state", SECONDS),
-    Tag("Admin/StateCumulativeTime", V.Double, [0.0] * (len(State) + 1),
-        "time in each state since the start, by state number", SECONDS),
+    Tag(
+        "Admin/StateCumulativeTime",
+        V.Double,
+        [0.0] * (len(State) + 1),
+        "time in each state since the start, by state number",
+        SECONDS,
+    ),
     Tag("Admin/AccTimeSinceReset", V.Double, 0.0, "time since the door started", SECONDS),
     Tag("Admin/ProdProcessedCount", V.UInt32, 0, "programs that ended after they ran"),
     Tag("Admin/ProdGoodCount", V.UInt32, 0, "programs that reached Complete"),
@@ -84,14 +126,18 @@ TAGS: tuple[Tag, ...] = (
     Tag("Machine/FaultedAxes", V.String, [], "axes reporting a fault"),
     Tag("Machine/SensorsDiffer", V.String, [], "cells 'row,col' where sensors and twin differ"),
     Tag("Machine/Recovering", V.String, "", "why commands wait after a restart"),
-    Tag("Status/Resumable", V.Boolean, False,
-        "the Resume method continues the loaded program where an Abort or a Stop left it"),
+    Tag(
+        "Status/Resumable",
+        V.Boolean,
+        False,
+        "the Resume method continues the loaded program where an Abort or a Stop left it",
+    ),
     Tag("Machine/Rows", V.UInt32, 0, "rows of the matrix"),
     Tag("Machine/Cols", V.UInt32, 0, "columns of the matrix"),
     Tag("Machine/TwinOccupancy", V.Int32, [], "yarn id per cell, row by row, -1 where empty"),
     Tag("Machine/TakeUp", V.Double, 0.0, "take-up of the loaded program so far", ("MMT", "mm")),
     Tag("Machine/Contacts", V.UInt32, 0, "yarn contacts of the loaded program so far"),
-)  # fmt: skip
+)
 
 # The methods: the PackML commands, Resume and LoadProgram (operator), SetUnitMode (admin).
 COMMAND_METHODS: tuple[Command, ...] = tuple(Command)
@@ -103,8 +149,7 @@ MethodCall = Callable[..., Awaitable[Any]]
 
 def node_id(idx: int, path: str) -> ua.NodeId:
     """``Loom.Status.StateCurrent`` in the bwsd namespace; ``Loom`` for the object itself."""
-    return ua.NodeId(ua.String(".".join((ROOT, *path.split("/"))) if path else ROOT),
-                     ua.Int16(idx))  # fmt: skip
+    return ua.NodeId(ua.String(".".join((ROOT, *path.split("/"))) if path else ROOT), ua.Int16(idx))
 
 
 def standard_id(number: int) -> ua.NodeId:
@@ -163,26 +208,46 @@ async def build(server: Server, methods: Methods) -> Space:
         parent = await _parent(objects, idx, tag.path.rpartition("/")[0])
         variables[tag.path] = await _variable(parent, idx, tag)
     for command in COMMAND_METHODS:
-        await root.add_method(node_id(idx, command.label), ua.QualifiedName(command.label, idx),
-                              methods.command(command), [], [])  # fmt: skip
-    await root.add_method(node_id(idx, RESUME), ua.QualifiedName(RESUME, idx), methods.resume,
-                          [], [])  # fmt: skip
+        await root.add_method(
+            node_id(idx, command.label),
+            ua.QualifiedName(command.label, idx),
+            methods.command(command),
+            [],
+            [],
+        )
+    await root.add_method(
+        node_id(idx, RESUME), ua.QualifiedName(RESUME, idx), methods.resume, [], []
+    )
     about = ua.LocalizedText("1 Production, 2 Maintenance, 3 Manual")
-    mode = ua.Argument(Name="UnitMode", DataType=standard_id(ua.ObjectIds.Int32), ValueRank=-1,
-                       Description=about)  # fmt: skip
-    await root.add_method(node_id(idx, SET_UNIT_MODE), ua.QualifiedName(SET_UNIT_MODE, idx),
-                          methods.set_mode, [mode], [])  # fmt: skip
-    load_in = [_argument("Name", ua.ObjectIds.String, "the program's name"),
-               _argument("Text", ua.ObjectIds.String, "the program's .bws text")]  # fmt: skip
+    mode = ua.Argument(
+        Name="UnitMode", DataType=standard_id(ua.ObjectIds.Int32), ValueRank=-1, Description=about
+    )
+    await root.add_method(
+        node_id(idx, SET_UNIT_MODE),
+        ua.QualifiedName(SET_UNIT_MODE, idx),
+        methods.set_mode,
+        [mode],
+        [],
+    )
+    load_in = [
+        _argument("Name", ua.ObjectIds.String, "the program's name"),
+        _argument("Text", ua.ObjectIds.String, "the program's .bws text"),
+    ]
     load_out = [_argument("ProgramId", ua.ObjectIds.UInt32, "its id in the journal")]
-    await root.add_method(node_id(idx, LOAD_PROGRAM), ua.QualifiedName(LOAD_PROGRAM, idx),
-                          methods.load, load_in, load_out)  # fmt: skip
+    await root.add_method(
+        node_id(idx, LOAD_PROGRAM),
+        ua.QualifiedName(LOAD_PROGRAM, idx),
+        methods.load,
+        load_in,
+        load_out,
+    )
     return Space(idx, variables)
 
 
 def _argument(name: str, kind: int, about: str) -> ua.Argument:
-    return ua.Argument(Name=name, DataType=standard_id(kind), ValueRank=-1,
-                       Description=ua.LocalizedText(about))  # fmt: skip
+    return ua.Argument(
+        Name=name, DataType=standard_id(kind), ValueRank=-1, Description=ua.LocalizedText(about)
+    )
 
 
 async def _parent(objects: dict[str, Node], idx: int, path: str) -> Node:
@@ -196,21 +261,29 @@ async def _parent(objects: dict[str, Node], idx: int, path: str) -> Node:
 
 async def _variable(parent: Node, idx: int, tag: Tag) -> Node:
     name = tag.path.rpartition("/")[2]
-    node = await parent.add_variable(node_id(idx, tag.path), ua.QualifiedName(name, idx),
-                                     ua.Variant(tag.start, tag.kind))  # fmt: skip
+    node = await parent.add_variable(
+        node_id(idx, tag.path), ua.QualifiedName(name, idx), ua.Variant(tag.start, tag.kind)
+    )
     if isinstance(tag.start, list):  # an array: one dimension, its length where fixed (else 0)
         rank, length = ua.Variant(1, V.Int32), ua.Variant([len(tag.start)], V.UInt32)
         await node.write_attribute(ua.AttributeIds.ValueRank, ua.DataValue(rank))
         await node.write_attribute(ua.AttributeIds.ArrayDimensions, ua.DataValue(length))
-    await node.write_attribute(ua.AttributeIds.Description,
-                               ua.DataValue(ua.Variant(ua.LocalizedText(tag.about))))  # fmt: skip
+    await node.write_attribute(
+        ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(tag.about)))
+    )
     if tag.writer:
         await node.set_writable()
     if tag.unit[0]:
         code, symbol = tag.unit
-        units = ua.EUInformation(NamespaceUri=UNITS_NAMESPACE, UnitId=unit_id(code),
-                                 DisplayName=ua.LocalizedText(symbol),
-                                 Description=ua.LocalizedText(symbol))  # fmt: skip
-        await node.add_property(node_id(idx, f"{tag.path}/EngineeringUnits"),
-                                ua.QualifiedName("EngineeringUnits", 0), units)  # fmt: skip
+        units = ua.EUInformation(
+            NamespaceUri=UNITS_NAMESPACE,
+            UnitId=unit_id(code),
+            DisplayName=ua.LocalizedText(symbol),
+            Description=ua.LocalizedText(symbol),
+        )
+        await node.add_property(
+            node_id(idx, f"{tag.path}/EngineeringUnits"),
+            ua.QualifiedName("EngineeringUnits", 0),
+            units,
+        )
     return node

@@ -32,8 +32,11 @@ REG_LOAD_REQUEST = 21  # Command.LoadRequest (bwsd): 1 loads Command.ProgramId
 REG_PROGRAM_ID = 22  # 22, 23: Status.ProgramId (bwsd): the loaded program's id
 REG_COUNT = 24
 
-WRITABLE = (*range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1), REG_RESUME,
-            *range(REG_PROGRAM, REG_LOAD_REQUEST + 1))  # fmt: skip
+WRITABLE = (
+    *range(REG_CNTRL_CMD, REG_UNIT_MODE_CHANGE_REQUEST + 1),
+    REG_RESUME,
+    *range(REG_PROGRAM, REG_LOAD_REQUEST + 1),
+)
 """The command registers the PLC writes; every other register is read-only."""
 
 REQUEST_REGISTERS = (REG_CMD_CHANGE_REQUEST, REG_UNIT_MODE_CHANGE_REQUEST, REG_LOAD_REQUEST)

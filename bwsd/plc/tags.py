@@ -69,11 +69,13 @@ class PlcError(BwsdError):
 
 def build_device(device_id: int, action: SimAction) -> SimDevice:
     """The map as a SimDevice: the command registers writable, the rest read-only."""
-    holding = [SimData(REG_MAP_VERSION, values=MAP_VERSION, datatype=DataType.REGISTERS,
-                       readonly=True)]  # fmt: skip
+    holding = [
+        SimData(REG_MAP_VERSION, values=MAP_VERSION, datatype=DataType.REGISTERS, readonly=True)
+    ]
     for address in range(REG_MAP_VERSION + 1, REG_COUNT):
-        holding.append(SimData(address, datatype=DataType.REGISTERS,
-                               readonly=address not in WRITABLE))  # fmt: skip
+        holding.append(
+            SimData(address, datatype=DataType.REGISTERS, readonly=address not in WRITABLE)
+        )
     return SimDevice(id=device_id, simdata=holding, action=action)
 
 
@@ -84,8 +86,9 @@ def networks(allow: Iterable[str]) -> tuple[Network, ...]:
         try:
             found.append(ipaddress.ip_network(entry, strict=False))
         except ValueError:
-            raise ConfigError(f"{entry[:60]!r} is not an IP address or network",
-                              table="plc", key="allow") from None  # fmt: skip
+            raise ConfigError(
+                f"{entry[:60]!r} is not an IP address or network", table="plc", key="allow"
+            ) from None
     return tuple(found)
 
 
@@ -149,8 +152,9 @@ class PlcTags:
         if self._server is not None:
             raise RuntimeError(f"the PLC tags on port {self.port} are already served")
         device = build_device(self.device_id, self._action)
-        server = ModbusTcpServer(device, address=(self.host, self.port),
-                                 trace_connect=self._connected)  # fmt: skip
+        server = ModbusTcpServer(
+            device, address=(self.host, self.port), trace_connect=self._connected
+        )
         self._server = server  # the hook below reads its connections
         try:
             await server.serve_forever(background=True)
@@ -198,8 +202,10 @@ class PlcTags:
             if admits(self.allow, peer[0] if peer else None):
                 self._admitted.add(protocol)
             else:
-                REFUSED.note("PLC: refused a connection from %s: not in [plc] allow",
-                             peer[0] if peer else "an unknown address")  # fmt: skip
+                REFUSED.note(
+                    "PLC: refused a connection from %s: not in [plc] allow",
+                    peer[0] if peer else "an unknown address",
+                )
                 transport.close()
 
     # ----- what the PLC reads -----
@@ -251,18 +257,22 @@ class PlcTags:
     def _write(self, address: int, values: list[int]) -> ExcCodes | None:
         """Take the command registers, queue a change request; refuse a request but 0 or 1."""
         written = dict(zip(range(address, address + len(values)), values, strict=True))
-        if any(written.get(register, 0) not in (0, 1)
-               for register in (*REQUEST_REGISTERS, REG_RESUME)):  # fmt: skip
+        if any(
+            written.get(register, 0) not in (0, 1) for register in (*REQUEST_REGISTERS, REG_RESUME)
+        ):
             return ExcCodes.ILLEGAL_VALUE
         self._resume = written.get(REG_RESUME, self._resume)
         self._cntrl_cmd = written.get(REG_CNTRL_CMD, self._cntrl_cmd)
         self._unit_mode = written.get(REG_UNIT_MODE, self._unit_mode)
-        high, low = (written.get(REG_PROGRAM + i, word) for i, word in
-                     enumerate(u32_words(self._program)))  # fmt: skip
+        high, low = (
+            written.get(REG_PROGRAM + i, word) for i, word in enumerate(u32_words(self._program))
+        )
         self._program = words_u32(high, low)
-        asked = {REG_CMD_CHANGE_REQUEST: self._cntrl_cmd,
-                 REG_UNIT_MODE_CHANGE_REQUEST: self._unit_mode,
-                 REG_LOAD_REQUEST: self._program}  # fmt: skip
+        asked = {
+            REG_CMD_CHANGE_REQUEST: self._cntrl_cmd,
+            REG_UNIT_MODE_CHANGE_REQUEST: self._unit_mode,
+            REG_LOAD_REQUEST: self._program,
+        }
         for register, number in asked.items():
             # a 1 while the same request is still pending is the same request
             if written.get(register) == 1 and register not in self._pending:
@@ -311,6 +321,12 @@ def plc_tags(controller: Controller, config: Config, gate: Gate | None = None) -
     table = config.table("plc")
     if not table["enabled"]:
         return None
-    return PlcTags(controller, table["host"], table["port"], table["device_id"],
-                   allow=table["allow"].split(), read_only=table["read_only"],
-                   gate=gate)  # fmt: skip
+    return PlcTags(
+        controller,
+        table["host"],
+        table["port"],
+        table["device_id"],
+        allow=table["allow"].split(),
+        read_only=table["read_only"],
+        gate=gate,
+    )

@@ -31,8 +31,9 @@ def twist(
     options = [render.option("turns", turns)]
     options += [render.option("takeup", takeup)] if takeup else []
     command = " ".join(["bwsd program twist", *options, *render.machine_options(machine)])
-    title = f"Two-yarn twist, {turns} turns" + (f", {render.num(takeup)} mm take-up a turn"
-                                                 if takeup else "")  # fmt: skip
+    title = f"Two-yarn twist, {turns} turns" + (
+        f", {render.num(takeup)} mm take-up a turn" if takeup else ""
+    )
     turn = ["ROW 0:+1 1:-1", "COL 1:+1 0:-1", "ROW 1:-1 0:+1", "COL 0:-1 1:+1"]
     turn += [f"TAKEUP {render.num(takeup)}"] if takeup else []
     lines = [
@@ -43,8 +44,9 @@ def twist(
     return Generated("twist", title, command, machine, "\n".join(lines) + "\n")
 
 
-def section(shape: str = "rect", rows: int = 2, cols: int = 2, flange: Block = (2, 6),
-            web: Block = (4, 2)) -> Section:  # fmt: skip
+def section(
+    shape: str = "rect", rows: int = 2, cols: int = 2, flange: Block = (2, 6), web: Block = (4, 2)
+) -> Section:
     """The section a braid4 call names: a rows x cols rectangle, or an L, T or I."""
     if shape == "rect":
         return rect(rows, cols)
@@ -65,8 +67,9 @@ def braid_rule(sec: Section, segments: bool) -> tuple[Rule, RuleCheck]:
     )
     if not segments and sec.shape == "I":
         hint += "; an I section needs a machine with corner segments (--segments)"
-    raise ValueError(f"no braid rule with {kind} mixes every carrier through every zone of "
-                     f"{sec.spec}{hint}")  # fmt: skip
+    raise ValueError(
+        f"no braid rule with {kind} mixes every carrier through every zone of {sec.spec}{hint}"
+    )
 
 
 def braid4(
@@ -104,8 +107,11 @@ def braid4(
         what = [render.option("rows", rows), render.option("cols", cols)]
         title = f"4-step braid, {rows} x {cols} body"
     else:
-        what = [render.option("shape", shape), render.option("flange", _size(flange)),
-                render.option("web", _size(web))]  # fmt: skip
+        what = [
+            render.option("shape", shape),
+            render.option("flange", _size(flange)),
+            render.option("web", _size(web)),
+        ]
         what += [] if segments else ["--no-segments"]
         title = f"4-step braid, {shape} section, flange {_size(flange)}, web {_size(web)}"
     title += f", {len(rule.carriers)} carriers, {cycles} cycles of {len(rule.steps)} steps"

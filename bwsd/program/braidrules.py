@@ -77,8 +77,15 @@ class _Builder:
         self.track: set[Cell] = set(section.cells)
         self.segments: list[Segment] = []
 
-    def line(self, axis: int, line: int, spans: list[tuple[int, int]], first: int,
-             pattern: Pattern, partial: bool = False) -> None:  # fmt: skip
+    def line(
+        self,
+        axis: int,
+        line: int,
+        spans: list[tuple[int, int]],
+        first: int,
+        pattern: Pattern,
+        partial: bool = False,
+    ) -> None:
         """A line (or its one run, ``partial``) that shifts at the steps of ``pattern``,
         first by ``first``, alternating; one edge carrier per run."""
         if not any(pattern):
@@ -99,8 +106,11 @@ class _Builder:
     def rule(self, name: str) -> Rule | None:
         if len(set(self.edges)) != len(self.edges):
             return None  # two runs want one edge cell
-        steps = tuple(Shift("row" if i % 2 == 0 else "col", tuple(sorted(moves)))
-                      for i, moves in enumerate(self.steps) if moves)  # fmt: skip
+        steps = tuple(
+            Shift("row" if i % 2 == 0 else "col", tuple(sorted(moves)))
+            for i, moves in enumerate(self.steps)
+            if moves
+        )
         carriers = tuple(sorted(self.section.cells)) + tuple(self.edges)
         return Rule(name, steps, carriers, frozenset(self.track), tuple(sorted(self.segments)))
 
@@ -127,15 +137,27 @@ class Corners:
 
 def corners(section: Section) -> Corners:
     found = corner_cells(section)
-    rows = sorted(r for r, rs in runs(section, 0).items()
-                  if any((r, a - 1) in found or (r, b + 1) in found for a, b in rs))  # fmt: skip
-    cols = sorted((c, a) for c, cs in runs(section, 1).items() for a, b in cs
-                  if (a - 1, c) in found or (b + 1, c) in found)  # fmt: skip
+    rows = sorted(
+        r
+        for r, rs in runs(section, 0).items()
+        if any((r, a - 1) in found or (r, b + 1) in found for a, b in rs)
+    )
+    cols = sorted(
+        (c, a)
+        for c, cs in runs(section, 1).items()
+        for a, b in cs
+        if (a - 1, c) in found or (b + 1, c) in found
+    )
     return Corners(rows, cols)
 
 
-def multiplexed(section: Section, n: int, rows: list[tuple[Pattern, int]],
-                cols: list[tuple[Pattern, int]], axis: tuple[int, int]) -> Rule | None:  # fmt: skip
+def multiplexed(
+    section: Section,
+    n: int,
+    rows: list[tuple[Pattern, int]],
+    cols: list[tuple[Pattern, int]],
+    axis: tuple[int, int],
+) -> Rule | None:
     """The corner-multiplexed 4n-step rule: ``rows`` and ``cols`` give each corner row and
     corner column run (in ``corners`` order) its pattern over the 2n row (column) steps and
     its first move; the others do the plain 4-step, first move ``parity * axis``."""
@@ -175,8 +197,9 @@ def roles(section: Section) -> tuple[dict[int, tuple[str, int]], dict[int, tuple
     out: list[dict[int, tuple[str, int]]] = [{}, {}]
     for axis, ranked in ((0, corner.rows), (1, corner_cols)):
         for line, spans in runs(section, axis).items():
-            cells = {(line, x) if axis == 0 else (x, line) for a, b in spans
-                     for x in range(a, b + 1)}  # fmt: skip
+            cells = {
+                (line, x) if axis == 0 else (x, line) for a, b in spans for x in range(a, b + 1)
+            }
             if cells & junction:
                 out[axis][line] = ("long", 0)
             elif line in ranked:
@@ -215,40 +238,79 @@ PARTIAL: dict[str, list[tuple[int, list[tuple[P, int]], list[tuple[P, int]], tup
         (2, [((1, 1, 0, 0), 1)], [((0, 0, 1, 1), 1)], (-1, -1)),
     ],
     "T": [
-        (3, [((1, 0, 0, 1, 0, 0), 1)],
-         [((0, 1, 1, 0, 0, 0), 1), ((0, 0, 0, 0, 1, 1), 1)], (1, -1)),
-        (3, [((1, 0, 0, 1, 0, 0), 1)],
-         [((1, 1, 0, 0, 0, 0), 1), ((0, 0, 0, 0, 1, 1), 1)], (-1, -1)),
+        (3, [((1, 0, 0, 1, 0, 0), 1)], [((0, 1, 1, 0, 0, 0), 1), ((0, 0, 0, 0, 1, 1), 1)], (1, -1)),
+        (
+            3,
+            [((1, 0, 0, 1, 0, 0), 1)],
+            [((1, 1, 0, 0, 0, 0), 1), ((0, 0, 0, 0, 1, 1), 1)],
+            (-1, -1),
+        ),
     ],
     "I": [
-        (3, [((0, 0, 1, 0, 0, 1), -1), ((0, 1, 0, 0, 1, 0), -1)],
-         [((1, 0, 0, 0, 0, 1), -1), ((0, 0, 0, 0, 1, 1), -1), ((0, 0, 0, 1, 1, 0), 1),
-          ((0, 0, 1, 1, 0, 0), -1)], (-1, -1)),
-        (3, [((0, 0, 1, 0, 0, 1), -1), ((0, 0, 1, 0, 0, 1), -1)],
-         [((1, 0, 0, 0, 0, 1), -1), ((1, 1, 0, 0, 0, 0), -1), ((0, 0, 0, 1, 1, 0), 1),
-          ((0, 0, 1, 1, 0, 0), -1)], (1, -1)),
+        (
+            3,
+            [((0, 0, 1, 0, 0, 1), -1), ((0, 1, 0, 0, 1, 0), -1)],
+            [
+                ((1, 0, 0, 0, 0, 1), -1),
+                ((0, 0, 0, 0, 1, 1), -1),
+                ((0, 0, 0, 1, 1, 0), 1),
+                ((0, 0, 1, 1, 0, 0), -1),
+            ],
+            (-1, -1),
+        ),
+        (
+            3,
+            [((0, 0, 1, 0, 0, 1), -1), ((0, 0, 1, 0, 0, 1), -1)],
+            [
+                ((1, 0, 0, 0, 0, 1), -1),
+                ((1, 1, 0, 0, 0, 0), -1),
+                ((0, 0, 0, 1, 1, 0), 1),
+                ((0, 0, 1, 1, 0, 0), -1),
+            ],
+            (1, -1),
+        ),
     ],
-}  # fmt: skip
+}
 WHOLE: dict[str, list[dict[tuple[str, str, int], tuple[P, int]]]] = {
     "L": [
-        {("COL", "arm", 0): ((0, 0, 1, 1), 1), ("COL", "arm", 1): ((0, 0, 1, 1), 1),
-         ("COL", "corner", 0): ((1, 1, 0, 0), 1), ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
-         ("ROW", "arm", 1): ((1, 0, 0, 1), 1), ("ROW", "corner", 0): ((0, 1, 1, 0), -1)},
-        {("COL", "arm", 0): ((1, 0, 0, 1), 1), ("COL", "arm", 1): ((0, 0, 1, 1), 1),
-         ("COL", "corner", 0): ((1, 1, 0, 0), 1), ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
-         ("ROW", "arm", 1): ((1, 0, 0, 1), 1), ("ROW", "corner", 0): ((0, 1, 1, 0), -1)},
+        {
+            ("COL", "arm", 0): ((0, 0, 1, 1), 1),
+            ("COL", "arm", 1): ((0, 0, 1, 1), 1),
+            ("COL", "corner", 0): ((1, 1, 0, 0), 1),
+            ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
+            ("ROW", "arm", 1): ((1, 0, 0, 1), 1),
+            ("ROW", "corner", 0): ((0, 1, 1, 0), -1),
+        },
+        {
+            ("COL", "arm", 0): ((1, 0, 0, 1), 1),
+            ("COL", "arm", 1): ((0, 0, 1, 1), 1),
+            ("COL", "corner", 0): ((1, 1, 0, 0), 1),
+            ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
+            ("ROW", "arm", 1): ((1, 0, 0, 1), 1),
+            ("ROW", "corner", 0): ((0, 1, 1, 0), -1),
+        },
     ],
     "T": [
-        {("COL", "arm", 0): ((1, 0, 0, 1), 1), ("COL", "arm", 1): ((1, 1, 0, 0), 1),
-         ("COL", "corner", 0): ((0, 1, 1, 0), -1), ("COL", "corner", 1): ((1, 1, 0, 0), -1),
-         ("ROW", "arm", 0): ((1, 0, 0, 1), 1), ("ROW", "arm", 1): ((1, 0, 0, 1), 1),
-         ("ROW", "corner", 0): ((0, 0, 1, 1), -1)},
-        {("COL", "arm", 0): ((0, 1, 1, 0), 1), ("COL", "arm", 1): ((0, 1, 1, 0), 1),
-         ("COL", "corner", 0): ((0, 1, 1, 0), 1), ("COL", "corner", 1): ((0, 1, 1, 0), -1),
-         ("ROW", "arm", 0): ((1, 0, 0, 1), 1), ("ROW", "arm", 1): ((1, 1, 0, 0), 1),
-         ("ROW", "corner", 0): ((1, 1, 0, 0), 1)},
+        {
+            ("COL", "arm", 0): ((1, 0, 0, 1), 1),
+            ("COL", "arm", 1): ((1, 1, 0, 0), 1),
+            ("COL", "corner", 0): ((0, 1, 1, 0), -1),
+            ("COL", "corner", 1): ((1, 1, 0, 0), -1),
+            ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
+            ("ROW", "arm", 1): ((1, 0, 0, 1), 1),
+            ("ROW", "corner", 0): ((0, 0, 1, 1), -1),
+        },
+        {
+            ("COL", "arm", 0): ((0, 1, 1, 0), 1),
+            ("COL", "arm", 1): ((0, 1, 1, 0), 1),
+            ("COL", "corner", 0): ((0, 1, 1, 0), 1),
+            ("COL", "corner", 1): ((0, 1, 1, 0), -1),
+            ("ROW", "arm", 0): ((1, 0, 0, 1), 1),
+            ("ROW", "arm", 1): ((1, 1, 0, 0), 1),
+            ("ROW", "corner", 0): ((1, 1, 0, 0), 1),
+        },
     ],
-}  # fmt: skip
+}
 
 
 def _axes() -> Iterator[tuple[int, int]]:
@@ -267,16 +329,24 @@ def _wider_partial(section: Section) -> Iterator[Rule | None]:
     runs into their corner cell and back at two neighbouring steps."""
     corner = corners(section)
     for n in (2, 3):
-        row_patterns = [tuple(int(j in pair) for j in range(2 * n))
-                        for pair in itertools.combinations(range(2 * n), 2)]  # fmt: skip
-        col_patterns = [tuple(int(j in (i, (i + 1) % (2 * n))) for j in range(2 * n))
-                        for i in range(2 * n)]  # fmt: skip
+        row_patterns = [
+            tuple(int(j in pair) for j in range(2 * n))
+            for pair in itertools.combinations(range(2 * n), 2)
+        ]
+        col_patterns = [
+            tuple(int(j in (i, (i + 1) % (2 * n))) for j in range(2 * n)) for i in range(2 * n)
+        ]
         choices = [[(p, s) for p in row_patterns for s in (1, -1)]] * len(corner.rows)
         choices += [[(p, s) for p in col_patterns for s in (1, -1)]] * len(corner.cols)
         for combo in itertools.islice(itertools.product(*choices), SEARCH_LIMIT):
             for axis in _axes():
-                yield multiplexed(section, n, list(combo[: len(corner.rows)]),
-                                  list(combo[len(corner.rows) :]), axis)  # fmt: skip
+                yield multiplexed(
+                    section,
+                    n,
+                    list(combo[: len(corner.rows)]),
+                    list(combo[len(corner.rows) :]),
+                    axis,
+                )
 
 
 SEARCH_LIMIT = 400  # schedules of the wider family tried per cycle length

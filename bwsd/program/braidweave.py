@@ -48,8 +48,7 @@ def family(angle: float) -> tuple[Callable[[Cell], int], Callable[[Cell], float]
     a = math.radians(angle)
     cos, sin = math.cos(a), math.sin(a)
     step = max(abs(cos), abs(sin))  # one row (column) across a line, as for 0, 90 and 45
-    return (lambda c: round((c[0] * cos - c[1] * sin) / step),
-            lambda c: c[1] * cos + c[0] * sin)  # fmt: skip
+    return (lambda c: round((c[0] * cos - c[1] * sin) / step), lambda c: c[1] * cos + c[0] * sin)
 
 
 def opening(angle: float) -> str:
@@ -85,12 +84,20 @@ def _shed(angle: float, m: int, run: list[Cell], key: Callable[[Cell], int]) -> 
     other = tuple(c for c in run if key(c) == m + 1)
     if len(one) < 2 or len(other) < 2:
         return []  # a corner of the section: one yarn a side holds no weft
-    return [Shed(angle, one, other, f"{render.num(angle)} degree weft between lines {m} and "
-                 f"{m + 1} (cells {run[0]} to {run[-1]})")]  # fmt: skip
+    return [
+        Shed(
+            angle,
+            one,
+            other,
+            f"{render.num(angle)} degree weft between lines {m} and "
+            f"{m + 1} (cells {run[0]} to {run[-1]})",
+        )
+    ]
 
 
-def _cycle(steps: Sequence[Shift], takeup: float, wefts: list[Shed], weft_every: int,
-           opening: str) -> list[Item]:  # fmt: skip
+def _cycle(
+    steps: Sequence[Shift], takeup: float, wefts: list[Shed], weft_every: int, opening: str
+) -> list[Item]:
     """``weft_every`` cycles of the rule, the wefts after its first ``opening`` step."""
     first = next(i for i, s in enumerate(steps) if s.axis == opening)
     body: list[Item] = []
@@ -140,13 +147,15 @@ def braid_weave(
     for angle in plan:
         wefts = sheds(sec, angle)
         if not wefts:
-            raise ValueError(f"{sec.spec} has no two neighbouring lines for "
-                             f"{render.num(angle)} degree wefts")  # fmt: skip
+            raise ValueError(
+                f"{sec.spec} has no two neighbouring lines for {render.num(angle)} degree wefts"
+            )
         order = ("row", "col") if opening(angle) == "row" else ("col", "row")
         bodies.append([_cycle(rule.steps, takeup, wefts, weft_every, step) for step in order])
     comment = f"{weft_every} cycles of {rule.name}, a layer of wefts"
-    title, command = _names(sec, rule.carriers, cycles, weft_every, angles, takeup, segments,
-                            machine)  # fmt: skip
+    title, command = _names(
+        sec, rule.carriers, cycles, weft_every, angles, takeup, segments, machine
+    )
     lines = [
         *render.header(title, command, machine),
         *describe(sec, rule, check),
@@ -158,23 +167,38 @@ def braid_weave(
     return Generated("braid-weave", title, command, machine, "\n".join(lines) + "\n")
 
 
-def _names(sec: Section, carriers: Sequence[Cell], cycles: int, weft_every: int,
-           angles: Sequence[float], takeup: float, segments: bool,
-           machine: Machine) -> tuple[str, str]:  # fmt: skip
+def _names(
+    sec: Section,
+    carriers: Sequence[Cell],
+    cycles: int,
+    weft_every: int,
+    angles: Sequence[float],
+    takeup: float,
+    segments: bool,
+    machine: Machine,
+) -> tuple[str, str]:
     if sec.shape == "rect":
         rows, cols = sec.size[0] - 2, sec.size[1] - 2
         what = [render.option("rows", rows), render.option("cols", cols)]
         title = f"Braid-weave, {rows} x {cols} body"
     else:
         _, flange, web = sec.spec.split(":")
-        what = [render.option("shape", sec.shape), render.option("flange", flange),
-                render.option("web", web)]  # fmt: skip
+        what = [
+            render.option("shape", sec.shape),
+            render.option("flange", flange),
+            render.option("web", web),
+        ]
         what += [] if segments else ["--no-segments"]
         title = f"Braid-weave, {sec.shape} section, flange {flange}, web {web}"
     title += f", {len(carriers)} carriers, {cycles} cycles, wefts every {weft_every}"
-    options = [*what, render.option("cycles", cycles), render.option("weft-every", weft_every),
-               "--angles=" + ",".join(map(render.num, angles)), render.option("takeup", takeup),
-               *render.machine_options(machine)]  # fmt: skip
+    options = [
+        *what,
+        render.option("cycles", cycles),
+        render.option("weft-every", weft_every),
+        "--angles=" + ",".join(map(render.num, angles)),
+        render.option("takeup", takeup),
+        *render.machine_options(machine),
+    ]
     return title, " ".join(["bwsd program braid-weave", *options])
 
 

@@ -84,8 +84,10 @@ def step(cells: list[Cell], shift: Shift, rows: int, cols: int) -> list[Cell]:
                 continue
             dst = (line, pos + k) if row else (pos + k, line)
             if not lo <= pos + k <= hi:
-                raise Illegal(f"{shift.text()}: the case in {src} would leave "
-                              f"{'its segment' if span else 'the matrix'}")  # fmt: skip
+                raise Illegal(
+                    f"{shift.text()}: the case in {src} would leave "
+                    f"{'its segment' if span else 'the matrix'}"
+                )
             if dst in at:
                 raise Illegal(f"{shift.text()}: the case in {src} would land on {dst}")
             at[dst] = i
@@ -100,8 +102,9 @@ def _visit(visits: list[set[str]], cells: Sequence[Cell], section: Section) -> N
             visits[i].add(zone)
 
 
-def _cycle(cells: list[Cell], rule: Rule, section: Section, size: tuple[int, int],
-           visits: list[set[str]]) -> list[Cell]:  # fmt: skip
+def _cycle(
+    cells: list[Cell], rule: Rule, section: Section, size: tuple[int, int], visits: list[set[str]]
+) -> list[Cell]:
     body = section.cells
     for shift in rule.steps:
         cells = step(cells, shift, *size)
@@ -155,8 +158,14 @@ def _orbits(perm: list[int]) -> list[list[int]]:
     return found
 
 
-def _k(cells: list[Cell], rule: Rule, section: Section, size: tuple[int, int],
-       visits: list[set[str]], need: set[str]) -> int | None:  # fmt: skip
+def _k(
+    cells: list[Cell],
+    rule: Rule,
+    section: Section,
+    size: tuple[int, int],
+    visits: list[set[str]],
+    need: set[str],
+) -> int | None:
     cycles = 1
     while not all(need <= v for v in visits):
         if cycles >= MAX_K_CYCLES:

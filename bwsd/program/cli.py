@@ -41,16 +41,22 @@ def _angles(text: str) -> tuple[float, ...]:
 def _section(p: argparse.ArgumentParser, side: int, takeup: float) -> None:
     """The braided section's options (a rect of ``side`` x ``side`` by default)."""
     p.add_argument("--rows", type=int, default=side, help=f"body rows of a rect section ({side})")
-    p.add_argument("--cols", type=int, default=side,
-                   help=f"body columns of a rect section ({side})")  # fmt: skip
+    p.add_argument(
+        "--cols", type=int, default=side, help=f"body columns of a rect section ({side})"
+    )
     p.add_argument("--shape", choices=BRAID_SHAPES, default="rect")
     p.add_argument("--flange", type=_block, default=(2, 6), help="L/T/I flange, ROWSxCOLS")
     p.add_argument("--web", type=_block, default=(4, 2), help="L/T/I web, ROWSxCOLS")
-    p.add_argument("--segments", action=argparse.BooleanOptionalAction, default=True,
-                   help="L/T/I: the machine has the corner line segments (the default; "
-                   "--no-segments: whole-line shifts only, L and T)")  # fmt: skip
-    p.add_argument("--takeup", type=float, default=takeup,
-                   help=f"take-up per four steps, mm ({takeup:g})")  # fmt: skip
+    p.add_argument(
+        "--segments",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="L/T/I: the machine has the corner line segments (the default; "
+        "--no-segments: whole-line shifts only, L and T)",
+    )
+    p.add_argument(
+        "--takeup", type=float, default=takeup, help=f"take-up per four steps, mm ({takeup:g})"
+    )
 
 
 def _braided(args: argparse.Namespace) -> dict[str, Any]:
@@ -74,8 +80,12 @@ def _common(parser: argparse.ArgumentParser, cycles: bool = True) -> None:
 def _kinds(sub: Any) -> None:
     p = sub.add_parser("twist", help="two yarns twisted in a 2 x 2 matrix")
     p.add_argument("--turns", type=int, default=4, help="full turns (4)")
-    p.add_argument("--takeup", type=float, default=0.0,
-                   help="take-up after each turn, mm (0: none, the worked example)")  # fmt: skip
+    p.add_argument(
+        "--takeup",
+        type=float,
+        default=0.0,
+        help="take-up after each turn, mm (0: none, the worked example)",
+    )
     _common(p, cycles=False)
     p = sub.add_parser("braid4", help="4-step braid of a rectangular, L, T or I section")
     _section(p, 2, 6.0)
@@ -83,9 +93,12 @@ def _kinds(sub: Any) -> None:
     p = sub.add_parser("braid-weave", help="4-step braid with a layer of wefts every N cycles")
     _section(p, 3, 3.0)
     p.add_argument("--weft-every", type=int, default=2, help="cycles between weft layers (2)")
-    p.add_argument("--angles", type=_angles, default=ANGLES,
-                   help="weft angles in degrees, any, taken in turn, layer by layer "
-                   "(0,90,45,-45)")  # fmt: skip
+    p.add_argument(
+        "--angles",
+        type=_angles,
+        default=ANGLES,
+        help="weft angles in degrees, any, taken in turn, layer by layer (0,90,45,-45)",
+    )
     _common(p)
     p.set_defaults(cycles=8)
     p = sub.add_parser("weave-plain", help="plain weave of one warp layer")
@@ -131,8 +144,15 @@ def generate(args: argparse.Namespace) -> Generated:
     if args.kind == "braid-weave":
         from bwsd.program.braidweave import braid_weave
 
-        return braid_weave(args.rows, args.cols, args.cycles, weft_every=args.weft_every,
-                           angles=args.angles, **_braided(args), **machine)  # fmt: skip
+        return braid_weave(
+            args.rows,
+            args.cols,
+            args.cycles,
+            weft_every=args.weft_every,
+            angles=args.angles,
+            **_braided(args),
+            **machine,
+        )
     from bwsd.program.weave import weave_3d, weave_plain
 
     if args.kind == "weave-plain":

@@ -94,10 +94,14 @@ def _refusal(sheds: list[Shed], best: tuple[int, Try, Shed] | None, closed: list
             "the layer jams at the others (leave out this angle, or raise the pitch)"
         )
     if best is None:
-        return (f"{sheds[0].name}: no height below the guides lets the {angle} degree layer "
-                "in without a jam (raise the take-up or the pitch)")  # fmt: skip
+        return (
+            f"{sheds[0].name}: no height below the guides lets the {angle} degree layer "
+            "in without a jam (raise the take-up or the pitch)"
+        )
     held, tried, shed = best
-    return (f"{shed.name}: no height below the guides holds every weft of the {angle} degree "
-            f"layer by at least {HELD} contacts: at best (z = {render.num(tried.z)} mm above "
-            f"the fell) this one has {held} (raise the take-up or the pitch, or leave out "
-            "this angle)")  # fmt: skip
+    return (
+        f"{shed.name}: no height below the guides holds every weft of the {angle} degree "
+        f"layer by at least {HELD} contacts: at best (z = {render.num(tried.z)} mm above "
+        f"the fell) this one has {held} (raise the take-up or the pitch, or leave out "
+        "this angle)"
+    )

@@ -68,8 +68,9 @@ def integer(text: str, column: int, where: Where, what: str) -> int:
     """A signed decimal integer of ASCII digits, at most MAX_DIGITS of them."""
     digits = text.lstrip("+-")
     if len(digits) > MAX_DIGITS and digits.isascii() and digits.isdigit():
-        raise where.error(f"{what}: {text[:20]}... has {len(digits)} digits, more than "
-                          f"{MAX_DIGITS}", column)  # fmt: skip
+        raise where.error(
+            f"{what}: {text[:20]}... has {len(digits)} digits, more than {MAX_DIGITS}", column
+        )
     if not _SHIFT.fullmatch(text):
         raise where.error(f"{what}: expected an integer, got {_shown(text)}", column)
     return int(text)
@@ -111,27 +112,37 @@ def shift_entry(tok: Token, where: Where, axis: str) -> tuple[Move, int]:
     """Parse an ``i:k`` or ``i[a..b]:k`` entry: returns the move and the column of the index."""
     head, sep, shift_text = tok.text.partition(":")
     if not sep:
-        raise where.error(f"malformed entry {_shown(tok.text)}: expected {axis}:shift or "
-                          f"{axis}[first..last]:shift", tok.column)  # fmt: skip
+        raise where.error(
+            f"malformed entry {_shown(tok.text)}: expected {axis}:shift or "
+            f"{axis}[first..last]:shift",
+            tok.column,
+        )
     index_text, bracket, span_text = head.partition("[")
     if not _INDEX.fullmatch(index_text):
-        raise where.error(f"bad {axis} index {_shown(index_text)}: expected an integer >= 0",
-                          tok.column)  # fmt: skip
+        raise where.error(
+            f"bad {axis} index {_shown(index_text)}: expected an integer >= 0", tok.column
+        )
     span = None
     if bracket:
         span_column = tok.column + len(index_text) + 1
         match = _SPAN.fullmatch(span_text.removesuffix("]")) if span_text.endswith("]") else None
         if match is None:
-            raise where.error(f"bad segment [{_shown(span_text)}: expected "
-                              "[first..last], cells along the line", span_column)  # fmt: skip
+            raise where.error(
+                f"bad segment [{_shown(span_text)}: expected [first..last], cells along the line",
+                span_column,
+            )
         span = (int(match[1]), int(match[2]))
         if span[0] >= span[1]:
-            raise where.error(f"bad segment [{span_text}: the first cell must come before the "
-                              "last", span_column)  # fmt: skip
+            raise where.error(
+                f"bad segment [{span_text}: the first cell must come before the last", span_column
+            )
     shift_column = tok.column + len(head) + 1
     if not _SHIFT.fullmatch(shift_text):
-        raise where.error(f"bad shift {_shown(shift_text)}: expected a signed integer of at most "
-                          f"{MAX_DIGITS} digits", shift_column)  # fmt: skip
+        raise where.error(
+            f"bad shift {_shown(shift_text)}: expected a signed integer of at most "
+            f"{MAX_DIGITS} digits",
+            shift_column,
+        )
     shift = int(shift_text)
     if shift == 0:
         raise where.error("shift must not be zero", shift_column)

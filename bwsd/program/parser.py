@@ -167,8 +167,10 @@ class _Parser:
             move, column = shift_entry(tok, where, axis)
             for other in moves:
                 if other.line == move.line and _overlap(other, move):
-                    raise where.error(f"{axis} {move.line} listed twice (as {other.text()} "
-                                      f"and {move.text()})", column)  # fmt: skip
+                    raise where.error(
+                        f"{axis} {move.line} listed twice (as {other.text()} and {move.text()})",
+                        column,
+                    )
             moves.append(move)
             columns.append(column)
         self._add(Shift(axis, tuple(moves)), where, keyword, tuple(columns))

@@ -61,8 +61,10 @@ def config_toml(machine: Machine, title: str) -> str:
     out += [f"{f'{k} = {v}':<{width}}# {why}" for k, v, why in rows]
     if m.segments:
         listed = ", ".join(f'"{seg.text()}"' for seg in m.segments)
-        out += ["# line segments with an actuator of their own (ROW r[a..b]:k, COL c[a..b]:k)",
-                f"segments = [{listed}]"]  # fmt: skip
+        out += [
+            "# line segments with an actuator of their own (ROW r[a..b]:k, COL c[a..b]:k)",
+            f"segments = [{listed}]",
+        ]
     yarn = f"diameter = {_toml_float(m.yarn_diameter)}"
     out += ["", "[yarn]", f"{yarn:<{width}}# mm, yarn diameter (a program's YARN overrides it)"]
     return "\n".join(out) + "\n"

@@ -88,14 +88,19 @@ def shaped(shape: str, flange: Block, web: Block, at: Cell = (MARGIN, MARGIN)) -
         if fc <= wc:
             raise ValueError("an L section needs a flange wider than its web")
         junction = _block(r0, c0, (fr, wc))
-        zones = {"flange": _block(r0, c0, flange) - junction, "junction": junction,
-                 "web": _block(r0 + fr, c0, web)}  # fmt: skip
+        zones = {
+            "flange": _block(r0, c0, flange) - junction,
+            "junction": junction,
+            "web": _block(r0 + fr, c0, web),
+        }
         return Section("L", spec, zones, ("flange", "web"))
     if shape not in ("T", "I"):
         raise ValueError(f"unknown shape {shape!r} (known: {', '.join(SHAPES)})")
     if fc <= wc or (fc - wc) % 2:
-        raise ValueError(f"a {shape} section needs a flange wider than its web by an even "
-                         "number of cells (the web is centred)")  # fmt: skip
+        raise ValueError(
+            f"a {shape} section needs a flange wider than its web by an even "
+            "number of cells (the web is centred)"
+        )
     wing = (fc - wc) // 2
     zones = _flange_zones("", r0, c0, flange, wing, wc)
     zones["web"] = _block(r0 + fr, c0 + wing, web)
@@ -110,8 +115,9 @@ def shaped(shape: str, flange: Block, web: Block, at: Cell = (MARGIN, MARGIN)) -
     return Section("I", spec, zones, required)
 
 
-def _flange_zones(prefix: str, row: int, col: int, flange: Block, wing: int,
-                  web_cols: int) -> dict[str, frozenset[Cell]]:  # fmt: skip
+def _flange_zones(
+    prefix: str, row: int, col: int, flange: Block, wing: int, web_cols: int
+) -> dict[str, frozenset[Cell]]:
     rows = flange[0]
     return {
         f"{prefix}left": _block(row, col, (rows, wing)),
@@ -126,16 +132,21 @@ def _positive(*blocks: tuple[str, Block]) -> None:
             raise ValueError(f"{name} must be at least 1 x 1")
 
 
-_SPEC = re.compile(r"(rect|L|T|I):(\d{1,4})x(\d{1,4})(?::(\d{1,4})x(\d{1,4}))?"
-                   r"(?:@(\d{1,4}),(\d{1,4}))?", re.ASCII)  # fmt: skip
+_SPEC = re.compile(
+    r"(rect|L|T|I):(\d{1,4})x(\d{1,4})(?::(\d{1,4})x(\d{1,4}))?"
+    r"(?:@(\d{1,4}),(\d{1,4}))?",
+    re.ASCII,
+)
 
 
 def parse_section(text: str) -> Section:
     """A section from its written form: ``rect:3x4``, ``L:2x6:4x2``, ``T:2x8:4x2@1,1``."""
     match = _SPEC.fullmatch(text.strip())
     if match is None or (match[1] == "rect") != (match[4] is None):
-        raise ValueError(f"not a section: {text[:40]!r} (expected rect:RxC, or L, T or I "
-                         "followed by :FLANGE:WEB as RxC each, optionally @ROW,COL)")  # fmt: skip
+        raise ValueError(
+            f"not a section: {text[:40]!r} (expected rect:RxC, or L, T or I "
+            "followed by :FLANGE:WEB as RxC each, optionally @ROW,COL)"
+        )
     at = (int(match[6]), int(match[7])) if match[6] else (MARGIN, MARGIN)
     first = (int(match[2]), int(match[3]))
     if match[1] == "rect":

@@ -66,8 +66,10 @@ class Occupancy:
                 and self.inside(dst)
                 and not lo <= dst[1 if axis == "row" else 0] <= hi
             ):
-                return (f"the case in {src} would leave the segment {axis.upper()} "
-                        f"{index}[{lo}..{hi}] (to {dst})")  # fmt: skip
+                return (
+                    f"the case in {src} would leave the segment {axis.upper()} "
+                    f"{index}[{lo}..{hi}] (to {dst})"
+                )
             reason = self.move(src, dst)
             if reason is not None:
                 return reason
@@ -98,9 +100,11 @@ def _too_small(fill: tuple[Cell, ...], cell: Cell, grid: Occupancy) -> str:
     """Why a fill does not fit: the first cell outside, and the matrix the fill needs."""
     rows = max(r for r, _ in fill) + 1
     cols = max(c for _, c in fill) + 1
-    return (f"fill cell {cell} is outside the {grid.rows} x {grid.cols} matrix: the program "
-            f"fills cells up to row {rows - 1}, column {cols - 1}, so it needs a matrix of "
-            f"at least {rows} x {cols}; this loom has {grid.rows} x {grid.cols}")  # fmt: skip
+    return (
+        f"fill cell {cell} is outside the {grid.rows} x {grid.cols} matrix: the program "
+        f"fills cells up to row {rows - 1}, column {cols - 1}, so it needs a matrix of "
+        f"at least {rows} x {cols}; this loom has {grid.rows} x {grid.cols}"
+    )
 
 
 def _check_fill(
@@ -131,9 +135,11 @@ def _check_shift(shift: Shift, grid: Occupancy, machine: Machine) -> tuple[int, 
     for entry, (index, k, span) in enumerate(shift.moves):
         if not 0 <= index < size:
             lines = "rows" if shift.axis == "row" else "columns"
-            return entry, (f"{shift.axis} {index} is outside the matrix (0 to {size - 1}): the "
-                           f"program needs at least {index + 1} {lines}; this loom has "
-                           f"{size}")  # fmt: skip
+            return entry, (
+                f"{shift.axis} {index} is outside the matrix (0 to {size - 1}): the "
+                f"program needs at least {index + 1} {lines}; this loom has "
+                f"{size}"
+            )
         if span is not None and machine.segment(shift.axis, index, span) is None:
             return entry, unknown_segment(machine, shift.axis, index, span)
         reason = grid.shift(shift.axis, index, k, span)

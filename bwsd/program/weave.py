@@ -13,12 +13,10 @@ SHAPES = WEAVE_SHAPES
 CYCLE_3D = "column shed + wefts along x, row shed + wefts along y, twice"
 
 
-def _pick(axis: Axis, moves: list[tuple[int, int]], wefts: list[Shed],
-          takeup: float) -> list[Item]:  # fmt: skip
+def _pick(axis: Axis, moves: list[tuple[int, int]], wefts: list[Shed], takeup: float) -> list[Item]:
     """Open a shed, insert its wefts (each placed near the fell), close the shed, take up."""
     closing = [(i, -k) for i, k in moves]
-    return [Shift(axis, as_moves(moves)), *wefts, Shift(axis, as_moves(closing)),
-            TakeUp(takeup)]  # fmt: skip
+    return [Shift(axis, as_moves(moves)), *wefts, Shift(axis, as_moves(closing)), TakeUp(takeup)]
 
 
 def weave_plain(

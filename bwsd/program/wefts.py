@@ -88,9 +88,11 @@ class Placer:
             for weft in self.candidates(shed, z):
                 if self._inserted(weft, closing):
                     return weft
-        raise ValueError(f"{shed.name}: no height between the fell and the guides where the "
-                         "shed is open and its closing catches the weft (raise the take-up or "
-                         "the pitch)")  # fmt: skip
+        raise ValueError(
+            f"{shed.name}: no height between the fell and the guides where the "
+            "shed is open and its closing catches the weft (raise the take-up or "
+            "the pitch)"
+        )
 
     def lowest_fixed(self, shed: Shed) -> float:
         """The lowest last fixed node of the shed's warps, above the fell: a move that closes
@@ -163,8 +165,7 @@ class Placer:
         run without contacts, scaled about the convergence point from c_mat to 1."""
         m = self.machine
         top = m.d_mat + self.twin.takeup
-        pairs = [[(*m.fell_xy(r, c), self.twin.takeup), (*m.guide_xy(r, c), top)]
-                 for r, c in cells]  # fmt: skip
+        pairs = [[(*m.fell_xy(r, c), self.twin.takeup), (*m.guide_xy(r, c), top)] for r, c in cells]
         return np.asarray(pairs, dtype=np.float64).reshape(-1, 2, 3)
 
     def _free_segments(self, shed: Shed) -> tuple[FloatArray, FloatArray]:
@@ -217,9 +218,14 @@ Pick = list[tuple[int, Shed]]  # the wefts of one pick, with their places in the
 PlacePick = Callable[[Placer, Pick, Sequence[Instruction]], list[str]]
 
 
-def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
-          cycles: Sequence[Cycle | Sequence[Cycle]], comment: str,
-          place: PlacePick | None = None, unit: str = "cycle") -> list[str]:  # fmt: skip
+def woven(
+    machine: Machine,
+    fill: tuple[tuple[int, int], ...],
+    cycles: Sequence[Cycle | Sequence[Cycle]],
+    comment: str,
+    place: PlacePick | None = None,
+    unit: str = "cycle",
+) -> list[str]:
     """The program lines of ``cycles`` (their moves and wefts), each pick's wefts placed on
     the twin by ``place`` (default: each weft at its own lowest open height); identical
     consecutive cycles share one REPEAT. Errors name a cycle as ``unit`` and its number.
@@ -231,16 +237,23 @@ def woven(machine: Machine, fill: tuple[tuple[int, int], ...],
     bodies = []
     for n, given in enumerate(cycles, start=1):
         options = [given] if given and not isinstance(given[0], list) else given
-        bodies.append(_first_that_places(placer, f"{unit} {n}", options,  # type: ignore[arg-type]
-                                         place or _place_pick))  # fmt: skip
+        bodies.append(
+            _first_that_places(
+                placer,
+                f"{unit} {n}",
+                options,  # type: ignore[arg-type]
+                place or _place_pick,
+            )
+        )
     lines: list[str] = []
     for count, body in group_cycles(bodies):
         lines += render.repeat(count, body, comment)
     return lines
 
 
-def _first_that_places(placer: Placer, n: str, options: Sequence[Cycle],
-                       place: PlacePick) -> list[str]:  # fmt: skip
+def _first_that_places(
+    placer: Placer, n: str, options: Sequence[Cycle], place: PlacePick
+) -> list[str]:
     start = placer.twin.snapshot()
     failure: ValueError | None = None
     for cycle in options:
@@ -269,10 +282,12 @@ def _place_cycle(placer: Placer, n: str, cycle: Cycle, place: PlacePick) -> list
             body.append(item.text() if isinstance(item, Shift) else text(item))
             i += 1
             continue
-        end = next((j for j in range(i, len(cycle)) if not isinstance(cycle[j], Shed)),
-                   len(cycle))  # fmt: skip
-        pick = [(j, replace(s, name=f"{n}, {s.name}")) for j, s in enumerate(cycle[i:end], i)
-                if isinstance(s, Shed)]  # fmt: skip
+        end = next((j for j in range(i, len(cycle)) if not isinstance(cycle[j], Shed)), len(cycle))
+        pick = [
+            (j, replace(s, name=f"{n}, {s.name}"))
+            for j, s in enumerate(cycle[i:end], i)
+            if isinstance(s, Shed)
+        ]
         body += place(placer, pick, closing[end - 1])
         i = end
     return body

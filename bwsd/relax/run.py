@@ -82,11 +82,24 @@ class Solver:
             old = self.chains.pos
             energies = np.zeros(count)
             steps, rejected, energy, worst, status, self.alpha = _step.steps(
-                pos, self.lay.a, self.lay.b, self.lay.tension, self.lay.free, self.pairs.i,
-                self.pairs.j, self.room, energies, self.d, self.d + SKIN * self.limit,
-                self.limit, self.options.stall, RELIST * CAP * self.d * (1 + REACH), passes,
-                pull, self.alpha,
-            )  # fmt: skip
+                pos,
+                self.lay.a,
+                self.lay.b,
+                self.lay.tension,
+                self.lay.free,
+                self.pairs.i,
+                self.pairs.j,
+                self.room,
+                energies,
+                self.d,
+                self.d + SKIN * self.limit,
+                self.limit,
+                self.options.stall,
+                RELIST * CAP * self.d * (1 + REACH),
+                passes,
+                pull,
+                self.alpha,
+            )
             self.figures.rejected += rejected
             if pull:  # the separation may raise it; the tightening never does
                 self.figures.energies.extend(energies[:steps].tolist())

@@ -53,8 +53,9 @@ def _arc_keys(pos: FloatArray, yarn: IntArray) -> FloatArray:
     return out
 
 
-def _window(key: FloatArray, a: IntArray, node: IntArray, reach: float
-            ) -> tuple[IntArray, IntArray]:  # fmt: skip
+def _window(
+    key: FloatArray, a: IntArray, node: IntArray, reach: float
+) -> tuple[IntArray, IntArray]:
     """The segments (first index into ``a`` and count) within ``reach`` of arc of ``node``,
     on its own yarn (at least the node's own segments)."""
     lo = np.searchsorted(key[a + 1], key[node] - reach, side="left")
@@ -65,8 +66,9 @@ def _window(key: FloatArray, a: IntArray, node: IntArray, reach: float
 Window = tuple[IntArray, IntArray]
 
 
-def _crossings(pos: FloatArray, a: IntArray, moving: Window, hit: Window
-               ) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
+def _crossings(
+    pos: FloatArray, a: IntArray, moving: Window, hit: Window
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Side, sine and distance of the closest pair of segments of each contact's windows."""
     (fm, cm), (fh, ch) = moving, hit
     total = cm * ch

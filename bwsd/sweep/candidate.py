@@ -80,8 +80,9 @@ class Candidate:
 
 def candidate_id(source: Source, columns: Mapping[str, Any]) -> str:
     """A stable id: the same source and parameter values give the same id in every run."""
-    text = json.dumps({"source": source.fingerprint(), "params": dict(columns)},
-                      sort_keys=True, allow_nan=False)  # fmt: skip
+    text = json.dumps(
+        {"source": source.fingerprint(), "params": dict(columns)}, sort_keys=True, allow_nan=False
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -158,8 +159,15 @@ def measure(candidate: Candidate) -> Row:
         arrays = Arrays.of(sk)
         band = section(sk, arrays)
         z = None if band is None else (band["z"][0] + band["z"][1]) / 2
-        found = metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
-                        visits=visits, arrays=arrays)  # fmt: skip
+        found = metrics(
+            sk,
+            program.cycle_length,
+            takeups=takeups_of(program),
+            z=z,
+            named=named,
+            visits=visits,
+            arrays=arrays,
+        )
     return flatten(found, z)
 
 
@@ -200,8 +208,12 @@ def _formed(found: Mapping[str, Any]) -> Row:
     yarn volume fraction; empty where there is no formed zone."""
     zone = found["formed"]
     cycles, z = zone["cycles"] or (None, None), zone["z"] or (None, None)
-    row: Row = {"formed_z_low": z[0], "formed_z_high": z[1], "formed_first_cycle": cycles[0],
-                "formed_last_cycle": cycles[1]}  # fmt: skip
+    row: Row = {
+        "formed_z_low": z[0],
+        "formed_z_high": z[1],
+        "formed_first_cycle": cycles[0],
+        "formed_last_cycle": cycles[1],
+    }
     for family, parts in (found["angles"] or {}).items():
         row[f"angle_{family}"] = parts["all"]["mean"]
         row[f"angle_{family}_std"] = parts["all"]["std"]

@@ -36,16 +36,34 @@ def sweep_parser() -> argparse.ArgumentParser:
     p.add_argument("spec", help="the sweep spec (TOML), or example:NAME for a shipped one")
     p.add_argument("-o", "--output", required=True, help="results file (Parquet)")
     p.add_argument("--csv", action="store_true", help="also write the rows as CSV beside it")
-    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                   help="a running Dask scheduler (default: a local cluster)")  # fmt: skip
-    p.add_argument("--workers", type=_positive, metavar="N",
-                   help="local cluster: worker processes (default: one per core)")  # fmt: skip
-    p.add_argument("--batch", type=_positive, metavar="N",
-                   help="candidates per task (default: sized to about 0.25 s a task)")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="go on with an unfinished (killed) sweep of the same output")  # fmt: skip
-    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                   help="progress bar on stderr (default: when stderr is a terminal)")  # fmt: skip
+    p.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:PORT",
+        help="a running Dask scheduler (default: a local cluster)",
+    )
+    p.add_argument(
+        "--workers",
+        type=_positive,
+        metavar="N",
+        help="local cluster: worker processes (default: one per core)",
+    )
+    p.add_argument(
+        "--batch",
+        type=_positive,
+        metavar="N",
+        help="candidates per task (default: sized to about 0.25 s a task)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on with an unfinished (killed) sweep of the same output",
+    )
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="progress bar on stderr (default: when stderr is a terminal)",
+    )
     return p
 
 
@@ -91,8 +109,10 @@ def run_sweep(args: argparse.Namespace) -> int:
         raise SweepError("--workers sizes the local cluster: a scheduler has its own workers")
     output = Path(args.output)
     if args.csv and output.suffix.lower() == ".csv":
-        raise SweepError(f"-o {output}: the results are Parquet (e.g. -o results.parquet); "
-                         "--csv writes the CSV beside them")  # fmt: skip
+        raise SweepError(
+            f"-o {output}: the results are Parquet (e.g. -o results.parquet); "
+            "--csv writes the CSV beside them"
+        )
     spec = load_spec(spec_path(args.spec))
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     options = Options(args.scheduler, args.workers, args.batch, args.resume, args.csv, progress)

@@ -16,9 +16,24 @@ from bwsd.extras import needs
 from bwsd.sweep.errors import MATPLOTLIB, PYARROW, SweepError
 
 Row = Mapping[str, Any]
-MM = ("takeup", "pitch", "pitch_x", "pitch_y", "d_mat", "diameter", "width", "thickness",
-      "takeup_total", "footprint_z", "formed_z_low", "formed_z_high", "overlap_worst",
-      "overlap_p95", "skeleton_overlap_worst", "skeleton_overlap_p95")  # fmt: skip
+MM = (
+    "takeup",
+    "pitch",
+    "pitch_x",
+    "pitch_y",
+    "d_mat",
+    "diameter",
+    "width",
+    "thickness",
+    "takeup_total",
+    "footprint_z",
+    "formed_z_low",
+    "formed_z_high",
+    "overlap_worst",
+    "overlap_p95",
+    "skeleton_overlap_worst",
+    "skeleton_overlap_p95",
+)
 
 
 def axis_label(column: str) -> str:

@@ -50,11 +50,16 @@ class Summary:
 
     def text(self, output: Path) -> str:
         plural = "s" * (self.workers != 1)
-        where = (f"{self.workers} worker{plural}, {self.run_seconds:.1f} s" if self.ran
-                 else "nothing left to run")  # fmt: skip
-        return (f"{output}: {self.total} candidates, {self.total - self.refused} ok, "
-                f"{self.refused} refused; {self.resumed} already done, {self.ran} run now "
-                f"({where})")  # fmt: skip
+        where = (
+            f"{self.workers} worker{plural}, {self.run_seconds:.1f} s"
+            if self.ran
+            else "nothing left to run"
+        )
+        return (
+            f"{output}: {self.total} candidates, {self.total - self.refused} ok, "
+            f"{self.refused} refused; {self.resumed} already done, {self.ran} run now "
+            f"({where})"
+        )
 
 
 def _earlier(output: Path, log: Path, resume: bool) -> list[Row]:
@@ -63,8 +68,10 @@ def _earlier(output: Path, log: Path, resume: bool) -> list[Row]:
         raise SweepError(f"{output}: no such folder {output.parent}")
     if not resume:
         if log.exists():
-            raise SweepError(f"{log} holds the rows of an unfinished sweep: --resume goes "
-                             "on with it; delete it to start over")  # fmt: skip
+            raise SweepError(
+                f"{log} holds the rows of an unfinished sweep: --resume goes "
+                "on with it; delete it to start over"
+            )
         return []
     earlier = read_table_rows(output) if output.exists() else []
     return [*earlier, *read_log(log)]
@@ -86,8 +93,14 @@ def _bar(enabled: bool, total: int, done: int) -> Iterator[Callable[[int], None]
         TimeRemainingColumn,
     )
 
-    columns = (TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-               TextColumn("ETA"), TimeRemainingColumn())  # fmt: skip
+    columns = (
+        TextColumn("sweep"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+    )
     with Progress(*columns, console=Console(stderr=True)) as bar:
         task = bar.add_task("sweep", total=total, completed=done)
         yield lambda n: bar.advance(task, n)
@@ -151,5 +164,12 @@ def run_sweep(spec: Spec, output: Path, options: Options) -> Summary:
     log.unlink(missing_ok=True)
     refused = sum(1 for row in table if row["status"] != "ok")
     resumed = len(candidates) - len(todo)
-    return Summary(len(candidates), resumed, len(todo), refused, ran.workers,
-                   ran.start_seconds, ran.run_seconds)  # fmt: skip
+    return Summary(
+        len(candidates),
+        resumed,
+        len(todo),
+        refused,
+        ran.workers,
+        ran.start_seconds,
+        ran.run_seconds,
+    )

@@ -26,9 +26,16 @@ from bwsd.sweep.errors import SpecError
 SAMPLES = ("grid", "random")
 MAX_CANDIDATES = 1_000_000  # each is a row in memory at the end: about a kB
 # The keys of a fixed program's config a sweep may change ("pitch" sets pitch_x and pitch_y).
-CONFIG_PARAMS = {"rows": "int", "cols": "int", "pitch": "float", "pitch_x": "float",
-                 "pitch_y": "float", "d_mat": "float", "c_mat": "float",
-                 "diameter": "float"}  # fmt: skip
+CONFIG_PARAMS = {
+    "rows": "int",
+    "cols": "int",
+    "pitch": "float",
+    "pitch_x": "float",
+    "pitch_y": "float",
+    "d_mat": "float",
+    "c_mat": "float",
+    "diameter": "float",
+}
 SWEEP_KEYS = ("generator", "program", "config", "sample", "count", "seed")
 
 
@@ -145,8 +152,13 @@ class _Reader:
             return self._block(raw, table, key)
         if kind == "ints" and isinstance(raw, list) and raw and all(type(v) is int for v in raw):
             return tuple(raw)
-        wanted = {"float": "a number", "int": "an integer", "bool": "true or false",
-                  "str": "a string", "ints": "a list of integers like [0, 90]"}  # fmt: skip
+        wanted = {
+            "float": "a number",
+            "int": "an integer",
+            "bool": "true or false",
+            "str": "a string",
+            "ints": "a list of integers like [0, 90]",
+        }
         raise self.error(f"must be {wanted[kind]}, got {raw!r}", table, key)
 
     def _block(self, raw: Any, table: str, key: str) -> tuple[int, int]:
@@ -173,11 +185,13 @@ class _Reader:
 
     def _range(self, raw: dict[str, Any], kind: str, key: str, sample: str) -> Range:
         if sample != "random":
-            raise self.error("a grid needs a list of values ({low, high} is for random "
-                             "samples)", "vary", key)  # fmt: skip
+            raise self.error(
+                "a grid needs a list of values ({low, high} is for random samples)", "vary", key
+            )
         if kind not in ("int", "float") or set(raw) != {"low", "high"}:
-            raise self.error("a range is {low = ..., high = ...} of a number parameter",
-                             "vary", key)  # fmt: skip
+            raise self.error(
+                "a range is {low = ..., high = ...} of a number parameter", "vary", key
+            )
         low, high = (self.value(raw[k], kind, "vary", key) for k in ("low", "high"))
         if not low <= high:
             raise self.error(f"low ({low}) must not exceed high ({high})", "vary", key)
@@ -190,8 +204,11 @@ def _source(reader: _Reader, sweep: dict[str, Any], folder: Path) -> tuple[Sourc
         raise reader.error("name either a generator or a program (with its config)", "sweep")
     if generator is not None:
         if generator not in GENERATORS:
-            raise reader.error(f"unknown generator {generator!r} (known: "
-                               f"{', '.join(GENERATORS)})", "sweep", "generator")  # fmt: skip
+            raise reader.error(
+                f"unknown generator {generator!r} (known: {', '.join(GENERATORS)})",
+                "sweep",
+                "generator",
+            )
         if "config" in sweep:
             raise reader.error("a generator writes its own config", "sweep", "config")
         return GeneratorSource(generator), generator_kinds(generator)
@@ -223,8 +240,9 @@ def _program_source(reader: _Reader, program: Path, config: Path) -> ProgramSour
 def _sample(reader: _Reader, sweep: dict[str, Any]) -> tuple[str, int, int]:
     sample = sweep.get("sample", "grid")
     if sample not in SAMPLES:
-        raise reader.error(f"must be one of {', '.join(SAMPLES)}, got {sample!r}", "sweep",
-                           "sample")  # fmt: skip
+        raise reader.error(
+            f"must be one of {', '.join(SAMPLES)}, got {sample!r}", "sweep", "sample"
+        )
     if sample == "grid":
         for key in ("count", "seed"):
             if key in sweep:
@@ -261,8 +279,7 @@ def parse_spec(data: Mapping[str, Any], path: str = "<spec>", folder: Path = Pat
     for table, names in (("fixed", fixed), ("vary", vary)):
         for name in names:
             if name not in kinds:
-                raise reader.error(f"not a parameter here (known: {', '.join(kinds)})",
-                                   table, name)  # fmt: skip
+                raise reader.error(f"not a parameter here (known: {', '.join(kinds)})", table, name)
     for name in vary:
         if name in fixed:
             raise reader.error("is also in [fixed]", "vary", name)
@@ -280,9 +297,12 @@ def parse_spec(data: Mapping[str, Any], path: str = "<spec>", folder: Path = Pat
 def _check_program_diameter(reader: _Reader, source: Source, table: str) -> None:
     """A program's YARN statement overrides the config's diameter: changing it does nothing."""
     if isinstance(source, ProgramSource) and parse_program(source.text).diameter is not None:
-        raise reader.error(f"the program {source.name} sets its own YARN diameter, which "
-                               "overrides the config's: remove that line to sweep it", table,
-                               "diameter")  # fmt: skip
+        raise reader.error(
+            f"the program {source.name} sets its own YARN diameter, which "
+            "overrides the config's: remove that line to sweep it",
+            table,
+            "diameter",
+        )
 
 
 def load_spec(path: str | Path) -> Spec:

@@ -128,8 +128,7 @@ def write_table(rows: Sequence[Row], params: Sequence[str], output: Path, csv: b
 def _array(pa: Any, values: list[Any]) -> Any:
     """A column; integers among floats are floats (a metric that is 0 once stays a float)."""
     if any(isinstance(v, float) for v in values):
-        values = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
-                  for v in values]  # fmt: skip
+        values = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in values]
     return pa.array(values)
 
 

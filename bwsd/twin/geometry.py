@@ -72,8 +72,14 @@ def weft_ends(weft: Weft, takeup: Fraction) -> tuple[Point, Point]:
     if half < 0:
         raise TwinError("a weft's length must not be negative")
     return (
-        (to_grid(x - half * cos, "a weft end"), to_grid(y - half * sin, "a weft end"),
-         to_grid(z, "a weft end")),
-        (to_grid(x + half * cos, "a weft end"), to_grid(y + half * sin, "a weft end"),
-         to_grid(z, "a weft end")),
-    )  # fmt: skip
+        (
+            to_grid(x - half * cos, "a weft end"),
+            to_grid(y - half * sin, "a weft end"),
+            to_grid(z, "a weft end"),
+        ),
+        (
+            to_grid(x + half * cos, "a weft end"),
+            to_grid(y + half * sin, "a weft end"),
+            to_grid(z, "a weft end"),
+        ),
+    )

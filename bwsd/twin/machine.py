@@ -94,8 +94,10 @@ class Machine:
     def _check_segment(self, seg: Segment) -> None:
         lines, along = (self.rows, self.cols) if seg.axis == "row" else (self.cols, self.rows)
         if not 0 <= seg.line < lines:
-            raise ValueError(f"segment {seg.text()}: {seg.axis} {seg.line} is outside the "
-                             f"matrix (0 to {lines - 1})")  # fmt: skip
+            raise ValueError(
+                f"segment {seg.text()}: {seg.axis} {seg.line} is outside the "
+                f"matrix (0 to {lines - 1})"
+            )
         if not 0 <= seg.lo < seg.hi < along:
             raise ValueError(f"segment {seg.text()}: needs 0 <= first < last <= {along - 1}")
 
@@ -109,9 +111,11 @@ class Machine:
         d, gap = exact(diameter), exact(self.c_mat) * min(exact(self.pitch_x), exact(self.pitch_y))
         if d == 0 or d < gap:
             return None
-        return (f"a yarn diameter of {diameter:g} mm does not fit: it must be less than c_mat x "
-                f"the smaller pitch ({float(gap):g} mm), where neighbouring yarns start at the "
-                "fell")  # fmt: skip
+        return (
+            f"a yarn diameter of {diameter:g} mm does not fit: it must be less than c_mat x "
+            f"the smaller pitch ({float(gap):g} mm), where neighbouring yarns start at the "
+            "fell"
+        )
 
     def as_dict(self) -> dict[str, Any]:
         """The machine as plain data (snapshots, skeleton JSON); ``segments`` only when it
@@ -173,8 +177,9 @@ def first_overlap(segments: Sequence[Segment]) -> tuple[Segment, Segment] | None
     in that order, so comparing neighbours finds every line with an overlap: O(n log n).
     """
     order = sorted(range(len(segments)), key=segments.__getitem__)  # axis, line, first, last
-    found = [(max(i, j), min(i, j)) for i, j in pairwise(order)
-             if segments[i].overlaps(segments[j])]  # fmt: skip
+    found = [
+        (max(i, j), min(i, j)) for i, j in pairwise(order) if segments[i].overlaps(segments[j])
+    ]
     if not found:
         return None
     later, earlier = min(found)
@@ -184,8 +189,10 @@ def first_overlap(segments: Sequence[Segment]) -> tuple[Segment, Segment] | None
 def unknown_segment(machine: Machine, axis: str, line: int, span: tuple[int, int]) -> str:
     """Why ``axis line[span]`` cannot move on ``machine``: it declares no such segment."""
     declared = ", ".join(seg.text() for seg in machine.segments) or "none"
-    return (f"{axis.upper()} {line}[{span[0]}..{span[1]}] is not a segment of this machine "
-            f"(declared in [machine] segments: {declared})")  # fmt: skip
+    return (
+        f"{axis.upper()} {line}[{span[0]}..{span[1]}] is not a segment of this machine "
+        f"(declared in [machine] segments: {declared})"
+    )
 
 
 def weft_off_fixed(machine: Machine, x: float, y: float, z: float) -> str | None:

@@ -45,18 +45,24 @@ class Twin:
         self.diameter = float(machine.yarn_diameter if diameter is None else diameter)
         d = exact(self.diameter)
         if not (d == 0 or MIN_LENGTH <= d < MAX_DIAMETER):
-            raise TwinError(f"yarn diameter {self.diameter:g} mm: it must be 0 or lie in "
-                            f"[{float(MIN_LENGTH):g}, {MAX_DIAMETER}) mm")  # fmt: skip
+            raise TwinError(
+                f"yarn diameter {self.diameter:g} mm: it must be 0 or lie in "
+                f"[{float(MIN_LENGTH):g}, {MAX_DIAMETER}) mm"
+            )
         fault = machine.diameter_fault(self.diameter)
         if fault is not None:
             raise TwinError(fault)
         self._geo = Geometry(machine)
         grid_d = d * SCALE
         self._kernel = _kernel.Kernel(
-            array("q", self._geo.gx).tobytes(), array("q", self._geo.gy).tobytes(),
-            self._geo.guide_z(Fraction(0)), self._geo.cell_shift(), float(grid_d),
-            as_bytes(grid_d.numerator), as_bytes(grid_d.denominator),
-        )  # fmt: skip
+            array("q", self._geo.gx).tobytes(),
+            array("q", self._geo.gy).tobytes(),
+            self._geo.guide_z(Fraction(0)),
+            self._geo.cell_shift(),
+            float(grid_d),
+            as_bytes(grid_d.numerator),
+            as_bytes(grid_d.denominator),
+        )
         self._fill: list[tuple[int, int]] = []
         for row, col in fill:
             self._add_warp(row, col)
@@ -95,15 +101,18 @@ class Twin:
         with self._lock:
             index = self.done + 1
             result, takeup, angles = self._run(instruction, index, predict=True)
-            return Prediction.build(index, instruction, result, takeup, angles, self._state,
-                                    self.machine)  # fmt: skip
+            return Prediction.build(
+                index, instruction, result, takeup, angles, self._state, self.machine
+            )
 
     def commit(self, prediction: Prediction) -> None:
         """Make ``prediction`` the committed state; it must have been made on this one."""
         with self._lock:
             if prediction.state is not self._state:
-                raise TwinError("prediction is stale: it was not made on the twin's current "
-                                "state", instruction=prediction.index)  # fmt: skip
+                raise TwinError(
+                    "prediction is stale: it was not made on the twin's current state",
+                    instruction=prediction.index,
+                )
             self._kernel.replay(prediction.record)
             self._advance(prediction.takeup_exact, prediction.angles)
 
@@ -125,8 +134,9 @@ class Twin:
         self.done += 1
         self._changed()
 
-    def _run(self, instruction: Instruction, index: int,
-             predict: bool) -> tuple[Any, Fraction, tuple[float, ...]]:  # fmt: skip
+    def _run(
+        self, instruction: Instruction, index: int, predict: bool
+    ) -> tuple[Any, Fraction, tuple[float, ...]]:
         takeup = self._takeup
         angles: tuple[float, ...] = ()
         try:
@@ -179,15 +189,24 @@ class Twin:
         if found is not None:
             yarn, gap2 = found
             gap = math.sqrt(gap2) / SCALE
-            raise ShedClosedError(f"shed closed: the weft passes {gap:.6g} mm from yarn {yarn} "
-                                  f"(yarn diameter {self.diameter:g} mm)")  # fmt: skip
+            raise ShedClosedError(
+                f"shed closed: the weft passes {gap:.6g} mm from yarn {yarn} "
+                f"(yarn diameter {self.diameter:g} mm)"
+            )
 
     # ----- snapshots -----
     def snapshot(self) -> Snapshot:
         """The committed state as an immutable value (``Snapshot.to_bytes`` to store it)."""
         with self._lock:
-            return Snapshot.make(self.machine, self.diameter, self._fill, self._angles,
-                                 self._takeup, self.done, self._kernel.dump())  # fmt: skip
+            return Snapshot.make(
+                self.machine,
+                self.diameter,
+                self._fill,
+                self._angles,
+                self._takeup,
+                self.done,
+                self._kernel.dump(),
+            )
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to ``snapshot`` (taken of a twin of the same machine and diameter)."""
@@ -228,9 +247,10 @@ class Twin:
         if self._warps is None:
             table, occupancy = self._kernel.warps()
             m = self.machine
-            self._warps = (np.frombuffer(table, dtype=np.int32).reshape(-1, 4).astype(np.int64),
-                           np.frombuffer(occupancy, dtype=np.int32).reshape(m.rows, m.cols)
-                           .astype(np.int64))  # fmt: skip
+            self._warps = (
+                np.frombuffer(table, dtype=np.int32).reshape(-1, 4).astype(np.int64),
+                np.frombuffer(occupancy, dtype=np.int32).reshape(m.rows, m.cols).astype(np.int64),
+            )
         return self._warps
 
     @property
@@ -286,8 +306,9 @@ def _load(snapshot: Snapshot) -> Any:
         raise TwinError(str(exc)) from None
 
 
-def _refusal(args: tuple[int, ...], instruction: Instruction, index: int,
-             diameter: float) -> TwinError:  # fmt: skip
+def _refusal(
+    args: tuple[int, ...], instruction: Instruction, index: int, diameter: float
+) -> TwinError:
     """The error of a refused instruction, from the kernel's code and details."""
     code, a, b, c, d = args
     if code == _kernel.E_JAM:
@@ -296,43 +317,55 @@ def _refusal(args: tuple[int, ...], instruction: Instruction, index: int,
         axis = instruction.axis.upper() if isinstance(instruction, Shift) else "LINE"
         return MoveError(f"{axis} {b} is outside the matrix", instruction=index)
     if code == _kernel.E_MOVE_OUT:
-        return MoveError(f"case of yarn {a} would leave the matrix at cell ({b}, {c})",
-                         instruction=index)  # fmt: skip
+        return MoveError(
+            f"case of yarn {a} would leave the matrix at cell ({b}, {c})", instruction=index
+        )
     if code == _kernel.E_MOVE_SPAN and isinstance(instruction, Shift):
         move = instruction.moves[d]
-        return MoveError(f"case of yarn {a} would leave the segment {instruction.axis.upper()} "
-                         f"{move.text().partition(':')[0]} at cell ({b}, {c})",
-                         instruction=index)  # fmt: skip
+        return MoveError(
+            f"case of yarn {a} would leave the segment {instruction.axis.upper()} "
+            f"{move.text().partition(':')[0]} at cell ({b}, {c})",
+            instruction=index,
+        )
     if code == _kernel.E_MOVE_BUSY:
-        return MoveError(f"case of yarn {a} would land on cell ({b}, {c}), occupied by yarn {d}",
-                         instruction=index)  # fmt: skip
+        return MoveError(
+            f"case of yarn {a} would land on cell ({b}, {c}), occupied by yarn {d}",
+            instruction=index,
+        )
     if code == _kernel.E_LIMIT:
-        return TwinError("a contact node would lie beyond the twin's range of 2^20 mm",
-                         instruction=index)  # fmt: skip
+        return TwinError(
+            "a contact node would lie beyond the twin's range of 2^20 mm", instruction=index
+        )
     if code == _kernel.E_CONTACTS:
         return TwinError(f"yarn {a}: more than 100000 contacts in one sweep", instruction=index)
-    return TwinError(f"the twin's kernel failed (code {code}): please report it",
-                     instruction=index)  # fmt: skip
+    return TwinError(f"the twin's kernel failed (code {code}): please report it", instruction=index)
 
 
-def jam_error(moving: int, hit: int, z: int, guides: int, diameter: float,
-              index: int) -> JamError:  # fmt: skip
+def jam_error(moving: int, hit: int, z: int, guides: int, diameter: float, index: int) -> JamError:
     """A jam (docs/twin.md): the contact of ``moving`` on ``hit`` at grid height ``z``, too
     close to the guides at grid height ``guides``."""
     at, below = z / SCALE, (guides - z) / SCALE
     where = f"{below:.4g} mm below the guides" if below > 0 else "at or above the guides"
-    return JamError(f"jam: yarn {moving} would rest on yarn {hit} at z = {at:.4f} mm, {where} "
-                    f"(z = {guides / SCALE:.4f} mm), within one yarn diameter ({diameter:g} mm) "
-                    "of them: the yarns would lock at the guides (more take-up per cycle moves "
-                    "the contacts down)", instruction=index, yarns=(moving, hit),
-                    z=at)  # fmt: skip
+    return JamError(
+        f"jam: yarn {moving} would rest on yarn {hit} at z = {at:.4f} mm, {where} "
+        f"(z = {guides / SCALE:.4f} mm), within one yarn diameter ({diameter:g} mm) "
+        "of them: the yarns would lock at the guides (more take-up per cycle moves "
+        "the contacts down)",
+        instruction=index,
+        yarns=(moving, hit),
+        z=at,
+    )
 
 
 ProgressFn = Callable[[int, int], None]
 
 
-def simulate(machine: Machine, program: Program, progress: ProgressFn | None = None,
-             timings: list[float] | None = None) -> Twin:  # fmt: skip
+def simulate(
+    machine: Machine,
+    program: Program,
+    progress: ProgressFn | None = None,
+    timings: list[float] | None = None,
+) -> Twin:
     """Run every instruction of ``program``; TwinError carries the failing instruction.
 
     With ``timings``, each instruction is predicted and committed as the daemon does, and the

@@ -64,9 +64,16 @@ class Prediction:
     angles: tuple[float, ...] = field(repr=False)
 
     @classmethod
-    def build(cls, index: int, instruction: Instruction, result: Any, takeup: Fraction,
-              angles: tuple[float, ...], state: object,
-              machine: Machine) -> Prediction:  # fmt: skip
+    def build(
+        cls,
+        index: int,
+        instruction: Instruction,
+        result: Any,
+        takeup: Fraction,
+        angles: tuple[float, ...],
+        state: object,
+        machine: Machine,
+    ) -> Prediction:
         """From the kernel's description of a predicted instruction."""
         record, contacts, nodes, (moved, change), occupancy, first_new, yarns = result
         return cls(
@@ -74,10 +81,14 @@ class Prediction:
             instruction=instruction,
             takeup=float(takeup),
             new_yarns=tuple(range(first_new, yarns)),
-            occupancy=_frozen(np.frombuffer(occupancy, dtype=np.int32)
-                              .reshape(machine.rows, machine.cols).astype(np.int64)),
-            contact_table=_frozen(np.frombuffer(contacts, dtype=np.int32).reshape(-1, 5)
-                                  .astype(np.int64)),
+            occupancy=_frozen(
+                np.frombuffer(occupancy, dtype=np.int32)
+                .reshape(machine.rows, machine.cols)
+                .astype(np.int64)
+            ),
+            contact_table=_frozen(
+                np.frombuffer(contacts, dtype=np.int32).reshape(-1, 5).astype(np.int64)
+            ),
             node_table=np.frombuffer(nodes, dtype=np.int64).reshape(-1, 6),
             moved_table=np.frombuffer(moved, dtype=np.int64).reshape(-1, 6),
             length_table=_frozen(np.frombuffer(change, dtype=np.float64) / 2.0**32),
@@ -85,7 +96,7 @@ class Prediction:
             state=state,
             takeup_exact=takeup,
             angles=angles,
-        )  # fmt: skip
+        )
 
     @cached_property
     def contacts(self) -> tuple[ContactData, ...]:
@@ -132,12 +143,25 @@ class Snapshot:
     data: bytes = field(repr=False)
 
     @classmethod
-    def make(cls, machine: Machine, diameter: float, fill: Sequence[tuple[int, int]],
-             angles: Sequence[float | None], takeup: Fraction, done: int,
-             kernel: bytes) -> Snapshot:  # fmt: skip
-        header = {"format": FORMAT, "machine": machine.as_dict(), "diameter": diameter,
-                  "fill": [list(c) for c in fill], "angles": list(angles),
-                  "takeup": str(takeup), "done": done}  # fmt: skip
+    def make(
+        cls,
+        machine: Machine,
+        diameter: float,
+        fill: Sequence[tuple[int, int]],
+        angles: Sequence[float | None],
+        takeup: Fraction,
+        done: int,
+        kernel: bytes,
+    ) -> Snapshot:
+        header = {
+            "format": FORMAT,
+            "machine": machine.as_dict(),
+            "diameter": diameter,
+            "fill": [list(c) for c in fill],
+            "angles": list(angles),
+            "takeup": str(takeup),
+            "done": done,
+        }
         text = json.dumps(header, sort_keys=True).encode()
         body = struct.pack("<I", len(text)) + text + kernel
         return cls(MAGIC + struct.pack("<I", zlib.crc32(body)) + body)

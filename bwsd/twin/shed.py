@@ -44,15 +44,23 @@ def distance2(p0: Point, p1: Point, q0: Point, q1: Point) -> Fraction:
     if den > 0:
         s, t = b * e - c * d, a * e - b * d
         if 0 <= s <= den and 0 <= t <= den:
-            r = (w[0] * den + s * u[0] - t * v[0], w[1] * den + s * u[1] - t * v[1],
-                 w[2] * den + s * u[2] - t * v[2])  # fmt: skip
+            r = (
+                w[0] * den + s * u[0] - t * v[0],
+                w[1] * den + s * u[1] - t * v[1],
+                w[2] * den + s * u[2] - t * v[2],
+            )
             return Fraction(_dot(r, r), den * den)
-    return min(Fraction(*_to_point(p0, q0, q1)), Fraction(*_to_point(p1, q0, q1)),
-               Fraction(*_to_point(q0, p0, p1)), Fraction(*_to_point(q1, p0, p1)))  # fmt: skip
+    return min(
+        Fraction(*_to_point(p0, q0, q1)),
+        Fraction(*_to_point(p1, q0, q1)),
+        Fraction(*_to_point(q0, p0, p1)),
+        Fraction(*_to_point(q1, p0, p1)),
+    )
 
 
-def closest(p0: Point, p1: Point, segments: Sequence[tuple[int, Point, Point]],
-            limit: Fraction) -> tuple[int, Fraction] | None:  # fmt: skip
+def closest(
+    p0: Point, p1: Point, segments: Sequence[tuple[int, Point, Point]], limit: Fraction
+) -> tuple[int, Fraction] | None:
     """Among ``segments`` (yarn, c, d), the nearest one closer than ``limit`` (grid units) to
     p0-p1, as (yarn, squared distance); ties go to the smaller yarn id. None if none is."""
     bound = limit * limit

@@ -124,8 +124,9 @@ class _Thread(threading.Thread):
         self.join(WAIT)
 
 
-def start_live(mock: Mock, folder: Path, open_reads: bool = False,
-               doors: Doors = DEFAULT_DOORS) -> Iterator[Live]:  # fmt: skip
+def start_live(
+    mock: Mock, folder: Path, open_reads: bool = False, doors: Doors = DEFAULT_DOORS
+) -> Iterator[Live]:
     """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given)."""
     folder = folder / ("open" if open_reads else "closed")
     folder.mkdir()

@@ -27,5 +27,7 @@ def apply_delta(yarns: Yarns, delta: dict[str, Any]) -> None:
         yarn["nodes"][yarn["node_ids"].index(node["node"])] = list(node["xyz"])
     for new in delta["new_yarns"]:
         assert new["id"] not in yarns
-        yarns[new["id"]] = {"node_ids": list(new["node_ids"]),
-                            "nodes": [list(p) for p in new["nodes"]]}  # fmt: skip
+        yarns[new["id"]] = {
+            "node_ids": list(new["node_ids"]),
+            "nodes": [list(p) for p in new["nodes"]],
+        }

@@ -18,8 +18,16 @@ from bwsd.api import TokenError, TokenStore
 from bwsd.controller.packml import State
 from tests.api.conftest import BRAID, WAIT
 
-READS = ["/state", "/machine", "/programs", "/programs/1", "/history", "/skeleton",
-         "/skeleton?format=vtp", "/preview"]  # fmt: skip
+READS = [
+    "/state",
+    "/machine",
+    "/programs",
+    "/programs/1",
+    "/history",
+    "/skeleton",
+    "/skeleton?format=vtp",
+    "/preview",
+]
 PATH_VALUES = {"program_id": "1"}
 
 
@@ -55,12 +63,15 @@ def test_a_running_store_sees_tokens_added_and_removed_elsewhere(tmp_path):
     assert daemon.check(token) is None
 
 
-@pytest.mark.parametrize(("name", "role", "message"), [
-    ("ok", "root", "unknown role 'root'"),
-    ("", "viewer", "token name ''"),
-    ("a b", "viewer", "token name 'a b'"),
-    ("dup", "viewer", "exists already"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "role", "message"),
+    [
+        ("ok", "root", "unknown role 'root'"),
+        ("", "viewer", "token name ''"),
+        ("a b", "viewer", "token name 'a b'"),
+        ("dup", "viewer", "exists already"),
+    ],
+)
 def test_bad_requests_name_the_problem_and_change_nothing(tmp_path, name, role, message):
     store = TokenStore.load(tmp_path / "tokens.json")
     store.add("dup", "admin")
@@ -70,10 +81,16 @@ def test_bad_requests_name_the_problem_and_change_nothing(tmp_path, name, role, 
     assert (tmp_path / "tokens.json").read_bytes() == before
 
 
-@pytest.mark.parametrize("content", ["{", '{"version": 2, "tokens": []}',
-                                     '{"version": 1, "tokens": [{"name": "x"}]}',
-                                     '{"version": 1, "tokens": [{"name": "x", "role": "god", '
-                                     '"sha256": "' + "0" * 64 + '", "created": 1}]}'])  # fmt: skip
+@pytest.mark.parametrize(
+    "content",
+    [
+        "{",
+        '{"version": 2, "tokens": []}',
+        '{"version": 1, "tokens": [{"name": "x"}]}',
+        '{"version": 1, "tokens": [{"name": "x", "role": "god", '
+        '"sha256": "' + "0" * 64 + '", "created": 1}]}',
+    ],
+)
 def test_a_broken_file_is_refused_naming_it(tmp_path, content):
     (tmp_path / "tokens.json").write_text(content)
     with pytest.raises(TokenError, match=r"tokens\.json"):
@@ -102,8 +119,11 @@ def _filled(route: APIRoute) -> str:
 
 def test_every_write_route_refuses_no_token_and_a_viewer_token(live):
     writes = _writes(live.app)
-    assert {p for _, p in writes} >= {"/api/v1/programs", "/api/v1/commands/reset",
-                                      "/api/v1/preview"}  # fmt: skip
+    assert {p for _, p in writes} >= {
+        "/api/v1/programs",
+        "/api/v1/commands/reset",
+        "/api/v1/preview",
+    }
     with httpx.Client(base_url=live.base, timeout=WAIT) as client:
         for method, path in writes:
             for body in (None, b"{not json", b'{"name": "x", "text": "FILL"}'):

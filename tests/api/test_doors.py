@@ -38,8 +38,10 @@ def _open(live: Live, source: str = "127.0.0.1") -> socket.socket:
 
 def _head(path: str, token: str | None, extra: str = "") -> bytes:
     auth = f"Authorization: Bearer {token}\r\n" if token else ""
-    return (f"POST /api/v1{path} HTTP/1.1\r\nHost: 127.0.0.1\r\n{auth}"
-            f"Content-Type: application/json\r\n{extra}\r\n").encode()  # fmt: skip
+    return (
+        f"POST /api/v1{path} HTTP/1.1\r\nHost: 127.0.0.1\r\n{auth}"
+        f"Content-Type: application/json\r\n{extra}\r\n"
+    ).encode()
 
 
 def _answer(sock: socket.socket) -> bytes:
@@ -66,8 +68,9 @@ def _closed(sock: socket.socket, within: float = 5.0) -> bool:
 
 
 # ----- the token before the body -----
-@pytest.mark.parametrize(("role", "status"), [(None, b"401"), ("nobody", b"401"),
-                                              ("viewer", b"403")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("role", "status"), [(None, b"401"), ("nobody", b"401"), ("viewer", b"403")]
+)
 def test_a_refused_token_is_answered_before_any_body_is_read(live, role, status):
     """50 idle unauthenticated chunked uploads held 200 MB: the server waited for bodies it
     would refuse. Now the refusal comes with the head alone, and the connection closes."""
@@ -90,16 +93,20 @@ def test_a_known_token_still_reaches_the_body(live):
 
 
 def test_malformed_json_is_a_400_as_the_docs_say(live):
-    answer = live.client("operator").post("/programs", content=b'{"name": "x.bws", "te',
-                                          headers={"Content-Type": "application/json"})  # fmt: skip
+    answer = live.client("operator").post(
+        "/programs", content=b'{"name": "x.bws", "te', headers={"Content-Type": "application/json"}
+    )
     assert answer.status_code == 400, answer.text
     assert "JSON" in answer.json()["error"]
     assert len(answer.text) < 400
 
 
 def test_invalid_utf8_in_a_body_is_a_400_not_a_500(live):
-    answer = live.client("operator").post("/programs", content=b'{"name": "\xff\xfe.bws"}',
-                                          headers={"Content-Type": "application/json"})  # fmt: skip
+    answer = live.client("operator").post(
+        "/programs",
+        content=b'{"name": "\xff\xfe.bws"}',
+        headers={"Content-Type": "application/json"},
+    )
     assert answer.status_code == 400, answer.text
 
 

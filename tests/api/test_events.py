@@ -113,10 +113,20 @@ def _example(name: str) -> tuple[Machine, Program, str]:
 
 def _machine(header: str) -> Machine:
     """The machine of an example's "# machine:" line."""
-    found = re.fullmatch(r"(\d+) x (\d+) cells, pitch (\S+) x (\S+) mm, d_mat (\S+) mm, "
-                         r"c_mat (\S+)", header.strip())  # fmt: skip
+    found = re.fullmatch(
+        r"(\d+) x (\d+) cells, pitch (\S+) x (\S+) mm, d_mat (\S+) mm, "
+        r"c_mat (\S+)",
+        header.strip(),
+    )
     assert found is not None, header
     rows, cols = int(found[1]), int(found[2])
     pitch_x, pitch_y, d_mat, c_mat = (float(found[i]) for i in range(3, 7))
-    return Machine(rows=rows, cols=cols, pitch_x=pitch_x, pitch_y=pitch_y, d_mat=d_mat,
-                   c_mat=c_mat, yarn_diameter=1.0)  # fmt: skip
+    return Machine(
+        rows=rows,
+        cols=cols,
+        pitch_x=pitch_x,
+        pitch_y=pitch_y,
+        d_mat=d_mat,
+        c_mat=c_mat,
+        yarn_diameter=1.0,
+    )

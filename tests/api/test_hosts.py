@@ -25,9 +25,14 @@ def handshake(live: Live, host: str, origin: str | None = None) -> bytes:
     """A WebSocket handshake sent by hand, with the Host (and Origin) a rebinding page sends."""
     port = int(live.base.rsplit(":", 1)[1])
     token = live.tokens["viewer"]
-    lines = [f"GET /api/v1/events?token={token} HTTP/1.1", f"Host: {host}",
-             "Upgrade: websocket", "Connection: Upgrade", "Sec-WebSocket-Version: 13",
-             "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ=="]  # fmt: skip
+    lines = [
+        f"GET /api/v1/events?token={token} HTTP/1.1",
+        f"Host: {host}",
+        "Upgrade: websocket",
+        "Connection: Upgrade",
+        "Sec-WebSocket-Version: 13",
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
+    ]
     if origin is not None:
         lines.append(f"Origin: {origin}")
     with socket.create_connection(("127.0.0.1", port), timeout=WAIT) as raw:
@@ -81,8 +86,10 @@ def test_a_removed_token_closes_its_event_stream(live: Live):
 def test_the_names_served_and_what_an_origin_must_say():
     hosts = allowed_hosts("127.0.0.1", "")
     assert {"127.0.0.1", "localhost", "::1", socket.gethostname().lower()} <= hosts
-    assert allowed_hosts("10.0.0.5", "loom3.plant.local 10.0.0.5") == {"loom3.plant.local",
-                                                                          "10.0.0.5"}  # fmt: skip
+    assert allowed_hosts("10.0.0.5", "loom3.plant.local 10.0.0.5") == {
+        "loom3.plant.local",
+        "10.0.0.5",
+    }
     assert host_of("[::1]:8080") == "::1" and host_of("LocalHost:8080") == "localhost"
     assert host_of("127.0.0.1") == "127.0.0.1" and host_of("loom.") == "loom"
     assert origin_allowed("http://localhost:9", hosts, frozenset())

@@ -37,12 +37,14 @@ class _Recorded(uvicorn.Server):
 async def _kept_alive(mock: Mock, state: Path) -> tuple[list[int], int]:
     """Two GET /healthz on one connection to `bwsd serve`'s API: the statuses, and the
     TCP_NODELAY option of the daemon's side of that connection."""
-    config = parse_config({
-        "machine": MACHINE,
-        "fieldbus": {"backend": "modbus", **BUS, "modbus": {"port": mock.ports["modbus"]}},
-        "api": {"port": 0},
-        "plc": {"enabled": False},
-    })  # fmt: skip
+    config = parse_config(
+        {
+            "machine": MACHINE,
+            "fieldbus": {"backend": "modbus", **BUS, "modbus": {"port": mock.ports["modbus"]}},
+            "api": {"port": 0},
+            "plc": {"enabled": False},
+        }
+    )
     running = await daemon.start(config, state)
     try:
         (server,) = _Recorded.made

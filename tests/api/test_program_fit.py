@@ -60,8 +60,9 @@ def test_the_api_answers_the_line_column_and_size_of_a_fill_too_big(live: Live):
     operator = live.client("operator")
     text = (ROOT / "examples/braid-24x24.bws").read_text()
     for params in ({"dry_run": "true"}, {}):
-        answer = operator.post("/programs", params=params,
-                               json={"name": "braid-24x24.bws", "text": text})  # fmt: skip
+        answer = operator.post(
+            "/programs", params=params, json={"name": "braid-24x24.bws", "text": text}
+        )
         assert answer.status_code == 422, answer.text
         body = answer.json()
         assert (body["line"], body["column"]) == (7, 6), body  # row 0's X in column 5
@@ -77,8 +78,10 @@ def test_a_line_past_the_matrix_says_how_many_lines_the_program_needs(live: Live
     text = "FILL row=1 col=0\n.XX.\nEND\nROW 1:+1\nCOL 0:+1 6:-1\n"
     body = operator.post("/programs", json={"name": "c.bws", "text": text}).json()
     assert (body["line"], body["column"]) == (5, 10), body  # the entry "6:-1"
-    assert body["error"] == ("instruction 2: col 6 is outside the matrix (0 to 3): the program "
-                             "needs at least 7 columns; this loom has 4")  # fmt: skip
+    assert body["error"] == (
+        "instruction 2: col 6 is outside the matrix (0 to 3): the program "
+        "needs at least 7 columns; this loom has 4"
+    )
 
 
 def test_a_program_too_long_names_the_repeat_that_passes_the_limit():
@@ -88,5 +91,7 @@ def test_a_program_too_long_names_the_repeat_that_passes_the_limit():
     with pytest.raises(ProgramError) as info:
         check_program(LOOM, Limits(), 100, "long.bws", text, None)
     assert (info.value.line, info.value.column) == (8, 1)
-    assert info.value.reason == ("the program expands to more than 100 instructions "
-                                 "([controller] max_instructions): 120 in all")  # fmt: skip
+    assert info.value.reason == (
+        "the program expands to more than 100 instructions "
+        "([controller] max_instructions): 120 in all"
+    )

@@ -49,11 +49,18 @@ def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
         assert json.loads(ws.recv(timeout=WAIT))["event"] == "hello"
         loaded = operator.post("/programs", json={"name": "braid.bws", "text": BRAID})
         assert loaded.status_code == 201, loaded.text
-        expected = simulate(client_config("modbus", {"modbus": 1, "socketcand": 1}).machine,
-                            parse_program(BRAID))  # fmt: skip
-        assert loaded.json() == {"id": 1, "name": "braid.bws", "instructions": BRAID_STEPS,
-                                 "contacts": expected.contact_count, "yarns": 4,
-                                 "nodes": expected.node_count, "takeup": 6.0}  # fmt: skip
+        expected = simulate(
+            client_config("modbus", {"modbus": 1, "socketcand": 1}).machine, parse_program(BRAID)
+        )
+        assert loaded.json() == {
+            "id": 1,
+            "name": "braid.bws",
+            "instructions": BRAID_STEPS,
+            "contacts": expected.contact_count,
+            "yarns": 4,
+            "nodes": expected.node_count,
+            "takeup": 6.0,
+        }
         start = viewer.get("/skeleton").json()
         first = {"kind": "shift", "axis": "row", "moves": [[1, 1], [2, -1]]}
         assert viewer.get("/state").json()["next"] == {"index": 1, "line": 7, "instruction": first}
@@ -65,8 +72,8 @@ def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
     assert states == RUN_STATES
     assert [e["state"] for e in events if e["event"] == "state"] == [15, 4, 3, 6, 16, 17]
     assert [e for e in events if e["event"] == "program"] == [
-        {"event": "program", "program_id": 1, "name": "braid.bws", "count": BRAID_STEPS,
-         "at": ANY}]  # fmt: skip
+        {"event": "program", "program_id": 1, "name": "braid.bws", "count": BRAID_STEPS, "at": ANY}
+    ]
     steps = [e for e in events if e["event"] == "instruction"]
     assert [e["index"] for e in steps] == list(range(1, BRAID_STEPS + 1))
     lines = parse_program(BRAID).lines
@@ -87,7 +94,11 @@ def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
 def _check_records(viewer: httpx.Client, contacts: int) -> None:
     state = viewer.get("/state").json()
     assert (state["name"], state["state"], state["index"], state["count"]) == (
-        "Complete", 17, BRAID_STEPS, BRAID_STEPS)  # fmt: skip
+        "Complete",
+        17,
+        BRAID_STEPS,
+        BRAID_STEPS,
+    )
     assert (state["program_id"], state["program_name"]) == (1, "braid.bws")
     assert state["allowed"] == ["reset", "stop", "abort"]
     assert state["next"] is None
@@ -107,8 +118,10 @@ def _check_metrics(live: Live, contacts: int) -> None:
     assert _metric(text, "bwsd_contacts_total") == contacts
     assert _metric(text, "bwsd_packml_state") == State.COMPLETE
     assert _metric(text, "bwsd_instruction_index") == BRAID_STEPS
-    assert 'bwsd_http_request_duration_seconds_count{method="POST",route="/api/v1/commands/' \
-        '{name}",status="200"} 2.0' in text  # fmt: skip
+    assert (
+        'bwsd_http_request_duration_seconds_count{method="POST",route="/api/v1/commands/'
+        '{name}",status="200"} 2.0' in text
+    )
 
 
 def test_a_syntax_error_gives_its_line_and_column(live: Live):
@@ -137,8 +150,9 @@ def test_a_syntax_error_gives_its_line_and_column(live: Live):
 
 def test_a_dry_run_checks_a_program_in_any_state_and_loads_nothing(live: Live):
     operator = live.client("operator")
-    checked = operator.post("/programs", params={"dry_run": "true"},
-                            json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    checked = operator.post(
+        "/programs", params={"dry_run": "true"}, json={"name": "b.bws", "text": BRAID}
+    )
     assert checked.status_code == 200, checked.text
     assert checked.json()["id"] is None and checked.json()["instructions"] == BRAID_STEPS
     assert live.controller.program is None and operator.get("/programs").json() == []
@@ -150,14 +164,19 @@ def test_a_dry_run_checks_a_program_in_any_state_and_loads_nothing(live: Live):
     other = BRAID.replace("REPEAT 3", "REPEAT 2")
     refused = operator.post("/programs", json={"name": "o.bws", "text": other})
     assert refused.status_code == 409
-    again = operator.post("/programs", params={"dry_run": "true"},
-                          json={"name": "o.bws", "text": other})  # fmt: skip
+    again = operator.post(
+        "/programs", params={"dry_run": "true"}, json={"name": "o.bws", "text": other}
+    )
     assert again.status_code == 200 and again.json()["instructions"] == 10
-    bad = operator.post("/programs", params={"dry_run": "true"},
-                        json={"name": "x.bws", "text": other + "ROW 9:+1\n"})  # fmt: skip
+    bad = operator.post(
+        "/programs",
+        params={"dry_run": "true"},
+        json={"name": "x.bws", "text": other + "ROW 9:+1\n"},
+    )
     assert bad.status_code == 422 and bad.json()["line"] == 13, bad.text
-    viewer = live.client("viewer").post("/programs", params={"dry_run": "true"},
-                                        json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    viewer = live.client("viewer").post(
+        "/programs", params={"dry_run": "true"}, json={"name": "b.bws", "text": BRAID}
+    )
     assert viewer.status_code == 403
     assert live.controller.program_id == 1 and live.controller.packml.state is State.HELD
 
@@ -275,17 +294,20 @@ def test_checks_run_one_at_a_time_and_stop_when_their_client_goes(live: Live, ca
     host, port = live.base.removeprefix("http://").split(":")
     caplog.set_level(logging.INFO, logger="bwsd.controller")
     with socket.create_connection((host, int(port))) as raw:
-        raw.sendall(b"POST /api/v1/programs?dry_run=true HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-                    b"Authorization: Bearer " + token.encode() + b"\r\n"
-                    b"Content-Type: application/json\r\n"
-                    b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body)  # fmt: skip
+        raw.sendall(
+            b"POST /api/v1/programs?dry_run=true HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+            b"Authorization: Bearer " + token.encode() + b"\r\n"
+            b"Content-Type: application/json\r\n"
+            b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body
+        )
         operator = live.client("operator")
         deadline = time.monotonic() + WAIT
         while not live.controller._checking.locked():  # the long check has begun
             assert time.monotonic() < deadline
             time.sleep(0.01)
-        busy = operator.post("/programs", params={"dry_run": "true"},
-                             json={"name": "b.bws", "text": BRAID})  # fmt: skip
+        busy = operator.post(
+            "/programs", params={"dry_run": "true"}, json={"name": "b.bws", "text": BRAID}
+        )
         assert busy.status_code == 429 and "another program is being checked" in busy.text
         assert busy.headers["retry-after"] == "1"
         assert live.client("viewer").get("/state").status_code == 200  # the loop is free
@@ -295,8 +317,9 @@ def test_checks_run_one_at_a_time_and_stop_when_their_client_goes(live: Live, ca
         assert time.monotonic() < deadline, "the check went on after its client left"
         time.sleep(0.05)
     assert "check of 'long.bws' cancelled" in caplog.text
-    again = operator.post("/programs", params={"dry_run": "true"},
-                          json={"name": "b.bws", "text": BRAID})  # fmt: skip
+    again = operator.post(
+        "/programs", params={"dry_run": "true"}, json={"name": "b.bws", "text": BRAID}
+    )
     assert again.status_code == 200
 
 
@@ -370,9 +393,11 @@ def test_a_refusal_quotes_an_excerpt_of_the_input_never_the_whole_body(live: Liv
 
 def test_a_lone_surrogate_is_refused_not_a_server_error(live: Live):
     operator = live.client("operator")
-    for body in (b'{"name": "b.bws", "text": "TAKEUP 1\\ud800\\n"}',
-                 b'{"name": "b\\udfff.bws", "text": "TAKEUP 1\\n"}',
-                 b'{"reason": "\\ud800"}'):  # fmt: skip
+    for body in (
+        b'{"name": "b.bws", "text": "TAKEUP 1\\ud800\\n"}',
+        b'{"name": "b\\udfff.bws", "text": "TAKEUP 1\\n"}',
+        b'{"reason": "\\ud800"}',
+    ):
         path = "/commands/stop" if b"reason" in body else "/programs"
         answer = operator.post(path, content=body, headers={"Content-Type": "application/json"})
         assert answer.status_code in (409, 422), (body, answer.status_code, answer.text)

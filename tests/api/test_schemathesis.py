@@ -11,20 +11,24 @@ from schemathesis import GenerationMode
 from tests.api.conftest import BRAID, WAIT, Live
 
 EXAMPLES = 25  # per operation and mode: the whole run stays around a minute
-CONFIG = schemathesis.Config.from_dict({"checks": {
-    # a schema-valid program text is still refused when it is not a valid program (422)
-    "positive_data_acceptance": {"enabled": False},
-    # an oversized body is refused before it is read, with 413
-    "negative_data_rejection": {"expected-statuses": [400, 401, 403, 404, 405, 406, 409, 413,
-                                                      415, 422, 428, 429]},
-}})  # fmt: skip
+CONFIG = schemathesis.Config.from_dict(
+    {
+        "checks": {
+            # a schema-valid program text is still refused when it is not a valid program (422)
+            "positive_data_acceptance": {"enabled": False},
+            # an oversized body is refused before it is read, with 413
+            "negative_data_rejection": {
+                "expected-statuses": [400, 401, 403, 404, 405, 406, 409, 413, 415, 422, 428, 429]
+            },
+        }
+    }
+)
 
 
 def test_no_operation_answers_a_server_error(live: Live):
     operator = live.client("operator")
     assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
-    schema = schemathesis.openapi.from_url(f"{live.base}/openapi.json", config=CONFIG,
-                                           timeout=WAIT)  # fmt: skip
+    schema = schemathesis.openapi.from_url(f"{live.base}/openapi.json", config=CONFIG, timeout=WAIT)
     headers = live.headers("operator")
     operations = [result.ok() for result in schema.get_all_operations()]
     assert len(operations) == 14  # GET /api/v1/whoami and POST /programs/{id}/load among them
@@ -44,9 +48,13 @@ def test_no_operation_answers_a_server_error(live: Live):
 
 
 def _fuzz(live, operation, mode, headers, codes: set[int]) -> None:
-    @settings(max_examples=EXAMPLES, deadline=None, database=None,
-              phases=[Phase.explicit, Phase.generate],
-              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @settings(
+        max_examples=EXAMPLES,
+        deadline=None,
+        database=None,
+        phases=[Phase.explicit, Phase.generate],
+        suppress_health_check=list(HealthCheck),
+    )
     @given(case=operation.as_strategy(mode, headers=headers))
     def call(case) -> None:
         response = case.call_and_validate(base_url=live.base, headers=headers, timeout=WAIT)

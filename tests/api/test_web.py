@@ -70,8 +70,12 @@ def test_the_page_and_its_files_are_served(root: Path):
 
 def test_only_three_s_build_and_modules_are_served(root: Path):
     client = _client(root)
-    for path in ("/vendor/three/package.json", "/vendor/three/build/../package.json",
-                 "/static/../index.html", "/vendor/three/build/%2e%2e/package.json"):  # fmt: skip
+    for path in (
+        "/vendor/three/package.json",
+        "/vendor/three/build/../package.json",
+        "/static/../index.html",
+        "/vendor/three/build/%2e%2e/package.json",
+    ):
         assert client.get(path).status_code == 404, path
 
 

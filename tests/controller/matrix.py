@@ -37,8 +37,18 @@ from tests.fieldbus.conftest import Mock, client_config, start_mock
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
-FAULTS = ("mute", "drop", "loom killed", "stall", "drive fault", "wrong position", "e-stop",
-          "full disk", "journal locked", "task raising")  # fmt: skip
+FAULTS = (
+    "mute",
+    "drop",
+    "loom killed",
+    "stall",
+    "drive fault",
+    "wrong position",
+    "e-stop",
+    "full disk",
+    "journal locked",
+    "task raising",
+)
 STATES = (State.IDLE, State.EXECUTE, State.HELD, State.STOPPED)
 SPEEDS = {"stroke_speed": 200.0, "takeup_speed": 200.0, "state_file": "loom.json"}
 AFTER = 1  # the instruction done when a run is held, stopped or faulted

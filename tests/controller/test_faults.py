@@ -121,8 +121,11 @@ def test_a_hold_whose_fault_persists_stays_held_with_the_reason(mock, tmp_path):
         await ctl.wait()
         assert ctl.packml.state is State.HELD
         # the sensor still reads wrong: the pending instruction is neither done nor undone
-        with pytest.raises(ControllerError, match=r"cannot resume: instruction 2 started and "
-                           r"not done: .*occupancy differs"):  # fmt: skip
+        with pytest.raises(
+            ControllerError,
+            match=r"cannot resume: instruction 2 started and "
+            r"not done: .*occupancy differs",
+        ):
             await ctl.command(Command.UNHOLD)
         assert ctl.packml.state is State.HELD and ctl.twin.done == 1
         assert "unhold" not in [c.name.lower() for c in ctl.status().allowed]
@@ -158,8 +161,9 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
         assert ctl.packml.state is State.HELD, ctl.packml.reason
         assert "locked" in ctl.packml.reason and "then Unhold" in ctl.packml.reason
         assert ctl.stop_cause is StopCause.JOURNAL
-        stall = [t for t, f in faults if f.cause is StopCause.JOURNAL and "not finished" in
-                 f.reason]  # fmt: skip
+        stall = [
+            t for t, f in faults if f.cause is StopCause.JOURNAL and "not finished" in f.reason
+        ]
         assert stall and stall[0] - locked[0] < 1.0, faults  # seen before the write gave up
         assert "the journal has not finished writing" in caplog.text
         assert ctl.twin.done == 3  # instruction 4 never started: its "started" met the lock
@@ -192,8 +196,11 @@ def test_nothing_moves_on_a_matrix_whose_cases_are_not_where_the_fill_puts_them(
         shifted = TEXT.replace("FILL row=1 col=0\n.XX.\n.XX.", "FILL row=0 col=0\nXX..\nXX..")
         pid = await ctl.load("shifted.bws", shifted)
         await ctl.command(Command.RESET)
-        with pytest.raises(ControllerError, match=r"occupancy sensors differ from the twin at "
-                           r"\(0, 0\), \(0, 1\)"):  # fmt: skip
+        with pytest.raises(
+            ControllerError,
+            match=r"occupancy sensors differ from the twin at "
+            r"\(0, 0\), \(0, 1\)",
+        ):
             await ctl.command(Command.START)
         assert ctl.packml.state is State.IDLE
         assert journal.program(pid).outcome == "loaded"  # the program is not consumed
@@ -267,9 +274,15 @@ def test_allowed_lists_exactly_the_commands_that_are_accepted(mock, tmp_path):
             await ctl.wait()
         return ctl
 
-    paths = [[], [Command.RESET], [Command.RESET, Command.START], [Command.RESET, Command.STOP],
-             [Command.ABORT], [Command.RESET, Command.START, Command.RESET],
-             [Command.ABORT, Command.CLEAR]]  # fmt: skip
+    paths = [
+        [],
+        [Command.RESET],
+        [Command.RESET, Command.START],
+        [Command.RESET, Command.STOP],
+        [Command.ABORT],
+        [Command.RESET, Command.START, Command.RESET],
+        [Command.ABORT, Command.CLEAR],
+    ]
 
     async def scenario() -> None:
         for n, path in enumerate(paths):

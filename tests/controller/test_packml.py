@@ -43,17 +43,49 @@ Completing   -         -        Stopping -       -         -          -         
 Complete     Resetting -        Stopping -       -         -          -            Aborting -
 """
 
-NUMBERS = {"Clearing": 1, "Stopped": 2, "Starting": 3, "Idle": 4, "Suspended": 5, "Execute": 6,
-           "Stopping": 7, "Aborting": 8, "Aborted": 9, "Holding": 10, "Held": 11,
-           "Unholding": 12, "Suspending": 13, "Unsuspending": 14, "Resetting": 15,
-           "Completing": 16, "Complete": 17}  # fmt: skip
-COMMAND_NUMBERS = {"Reset": 1, "Start": 2, "Stop": 3, "Hold": 4, "Unhold": 5, "Suspend": 6,
-                   "Unsuspend": 7, "Abort": 8, "Clear": 9}  # fmt: skip
+NUMBERS = {
+    "Clearing": 1,
+    "Stopped": 2,
+    "Starting": 3,
+    "Idle": 4,
+    "Suspended": 5,
+    "Execute": 6,
+    "Stopping": 7,
+    "Aborting": 8,
+    "Aborted": 9,
+    "Holding": 10,
+    "Held": 11,
+    "Unholding": 12,
+    "Suspending": 13,
+    "Unsuspending": 14,
+    "Resetting": 15,
+    "Completing": 16,
+    "Complete": 17,
+}
+COMMAND_NUMBERS = {
+    "Reset": 1,
+    "Start": 2,
+    "Stop": 3,
+    "Hold": 4,
+    "Unhold": 5,
+    "Suspend": 6,
+    "Unsuspend": 7,
+    "Abort": 8,
+    "Clear": 9,
+}
 
-COMPLETES = {"Resetting": "Idle", "Starting": "Execute", "Completing": "Complete",
-             "Holding": "Held", "Unholding": "Execute", "Suspending": "Suspended",
-             "Unsuspending": "Execute", "Stopping": "Stopped", "Aborting": "Aborted",
-             "Clearing": "Stopped"}  # fmt: skip
+COMPLETES = {
+    "Resetting": "Idle",
+    "Starting": "Execute",
+    "Completing": "Complete",
+    "Holding": "Held",
+    "Unholding": "Execute",
+    "Suspending": "Suspended",
+    "Unsuspending": "Execute",
+    "Stopping": "Stopped",
+    "Aborting": "Aborted",
+    "Clearing": "Stopped",
+}
 
 
 def parse_table() -> dict[tuple[str, str], str | None]:
@@ -91,8 +123,14 @@ def test_standard_numbers():
 
 def test_acting_and_waiting_sets():
     assert {s.label for s in ACTING} == {n for n in NUMBERS if n.endswith("ing")}
-    assert {s.label for s in WAITING} == {"Stopped", "Idle", "Suspended", "Held", "Complete",
-                                         "Aborted"}  # fmt: skip
+    assert {s.label for s in WAITING} == {
+        "Stopped",
+        "Idle",
+        "Suspended",
+        "Held",
+        "Complete",
+        "Aborted",
+    }
     assert not ACTING & WAITING
     assert set(State) - ACTING - WAITING == {State.EXECUTE}
 
@@ -122,8 +160,12 @@ def test_allowed_lists_exactly_the_accepted_commands(state: str):
 
 
 def test_allowed_order_and_message():
-    assert machine("Execute").allowed() == [Command.HOLD, Command.SUSPEND, Command.STOP,
-                                            Command.ABORT]  # fmt: skip
+    assert machine("Execute").allowed() == [
+        Command.HOLD,
+        Command.SUSPEND,
+        Command.STOP,
+        Command.ABORT,
+    ]
     with pytest.raises(InvalidCommand) as info:
         machine("Execute").command(Command.START)
     assert str(info.value) == (
@@ -385,6 +427,7 @@ def test_random_runs_keep_invariants(start: State, run: list[Command | UnitMode 
             assert CELLS[before.label, step.label] == packml.state.label
         if packml.mode is not mode_before:
             assert before.label in {"Stopped", "Idle", "Aborted"}
-        assert packml.accepts(Command.ABORT) is (packml.state not in {State.ABORTING,
-                                                                      State.ABORTED})  # fmt: skip
+        assert packml.accepts(Command.ABORT) is (
+            packml.state not in {State.ABORTING, State.ABORTED}
+        )
     assert all(old is not new for old, new in changes)

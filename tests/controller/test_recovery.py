@@ -14,8 +14,7 @@ from bwsd.program import parse_program
 from bwsd.twin import Twin
 from tests.fieldbus.conftest import MACHINE
 
-TEXT = ("YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
-        "WEFT x=15 y=-5 z=2 angle=0 length=20\n")  # fmt: skip
+TEXT = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nWEFT x=15 y=-5 z=2 angle=0 length=20\n"
 M = parse_config({"machine": MACHINE}).machine
 INSERT = axis_by_name(M, "weft_insert").index
 
@@ -32,14 +31,16 @@ def decide(strokes_now: int | None, journaled: dict[int, int] | None, fault: int
     weft = program.instructions[0]
     pred = twin.predict(weft)
     at_rest = twin.occupancy >= 0
-    decision = settle(weft, pred, machine(at_rest, strokes_now, fault), 0, Before(at_rest, 0), 0,
-                      10, journaled)  # fmt: skip
+    decision = settle(
+        weft, pred, machine(at_rest, strokes_now, fault), 0, Before(at_rest, 0), 0, 10, journaled
+    )
     return f"{decision.kind}: {decision.reason}"
 
 
 def test_a_weft_whose_insert_never_ran_is_run_again_not_committed():
-    assert decide(7, {INSERT: 7}).startswith("rerun: instruction 1 started, the weft was not "
-                                             "inserted")  # fmt: skip
+    assert decide(7, {INSERT: 7}).startswith(
+        "rerun: instruction 1 started, the weft was not inserted"
+    )
 
 
 def test_a_weft_whose_insert_counted_one_stroke_is_committed():
@@ -49,11 +50,13 @@ def test_a_weft_whose_insert_counted_one_stroke_is_committed():
 
 @pytest.mark.parametrize(
     ("now", "journaled", "fault", "reason"),
-    [(9, {INSERT: 7}, 0, "the insert counted 2 strokes since it started, not 0 or 1"),
-     (None, {INSERT: 7}, 0, "the bus reports no stroke counter (Modbus map 2)"),
-     (7, None, 0, "no stroke count of the insert was journaled"),
-     (7, {INSERT: 7}, 2, "the insert axis reports fault 2")],
-)  # fmt: skip
+    [
+        (9, {INSERT: 7}, 0, "the insert counted 2 strokes since it started, not 0 or 1"),
+        (None, {INSERT: 7}, 0, "the bus reports no stroke counter (Modbus map 2)"),
+        (7, None, 0, "no stroke count of the insert was journaled"),
+        (7, {INSERT: 7}, 2, "the insert axis reports fault 2"),
+    ],
+)
 def test_a_weft_that_cannot_be_told_is_blocked_for_the_operator(now, journaled, fault, reason):
     said = decide(now, journaled, fault)
     assert said.startswith("blocked: instruction 1 started and not done: ") and reason in said

@@ -57,8 +57,9 @@ def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
         await ctl.wait()
         assert ctl.packml.state is State.COMPLETE
         program = parse_program(TEXT)
-        assert bits(ctl.twin) == bits(simulate(client_config("modbus", mock.ports).machine,
-                                               program))  # fmt: skip
+        assert bits(ctl.twin) == bits(
+            simulate(client_config("modbus", mock.ports).machine, program)
+        )
         record = journal.program(pid)
         assert (record.outcome, record.done, record.instructions) == ("complete", 15, 15)
         assert [e["index"] for e in events if e["event"] == "instruction"] == list(range(1, 16))
@@ -99,8 +100,9 @@ def test_a_drive_fault_aborts_without_committing(mock, tmp_path):
         ctl, journal, _ = await controller(mock, tmp_path)
         await ctl.load("braid.bws", TEXT)
         await ctl.command(Command.RESET)
-        await request("127.0.0.1", mock.ports["control"],
-                      {"cmd": "fault", "kind": "drive", "axis": "col2"})  # fmt: skip
+        await request(
+            "127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "drive", "axis": "col2"}
+        )
         await ctl.command(Command.START)
         await ctl.wait()
         assert ctl.packml.state is State.ABORTED
@@ -263,13 +265,16 @@ def test_after_a_program_ends_every_command_still_lands_in_a_waiting_state(mock,
     [
         ({"cmd": "fault", "kind": "stall", "axis": "col1"}, State.ABORTED, "axis col1: stall"),
         ({"cmd": "fault", "kind": "drive", "axis": "col1"}, State.ABORTED, "drive fault"),
-        ({"cmd": "fault", "kind": "wrong_position", "axis": "col1"}, State.ABORTED,
-         "wrong position"),
+        (
+            {"cmd": "fault", "kind": "wrong_position", "axis": "col1"},
+            State.ABORTED,
+            "wrong position",
+        ),
         ({"cmd": "estop", "pressed": True}, State.ABORTED, "emergency stop"),
         ({"cmd": "fault", "kind": "mute"}, State.HELD, "instruction 2: "),
         ({"cmd": "fault", "kind": "drop"}, State.HELD, "instruction 2: "),
     ],
-)  # fmt: skip
+)
 def test_every_injected_fault_stops_with_its_reason_and_no_unpredicted_move(
     slow_mock, tmp_path, fault, state, words
 ):
@@ -355,8 +360,11 @@ def test_max_contacts_is_checked_by_the_dry_run(mock, tmp_path):
         most = simulate(client_config("modbus", mock.ports).machine, parse_program(TEXT))
         assert most.contact_count > 0
         ctl, journal, _ = await controller(mock, tmp_path, limits=Limits(max_contacts=1))
-        with pytest.raises(ControllerError, match=r"instruction \d+: \d+ contacts, more than "
-                           r"the limit of 1"):  # fmt: skip
+        with pytest.raises(
+            ControllerError,
+            match=r"instruction \d+: \d+ contacts, more than "
+            r"the limit of 1",
+        ):
             await ctl.load("braid.bws", TEXT)
         assert ctl.program is None and journal.history() == []
         await ctl.close()

@@ -26,8 +26,15 @@ from tests.controller.test_faults import after, machine_occupancy, poke
 from tests.controller.test_runner import bits, run
 from tests.fieldbus.conftest import Mock, client_config, start_mock
 
-MACHINE = {"rows": 8, "cols": 8, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0,
-           "c_mat": 0.5, "segments": ["ROW 3[0..3]", "COL 3[0..3]"]}  # fmt: skip
+MACHINE = {
+    "rows": 8,
+    "cols": 8,
+    "pitch_x": 10.0,
+    "pitch_y": 10.0,
+    "d_mat": 100.0,
+    "c_mat": 0.5,
+    "segments": ["ROW 3[0..3]", "COL 3[0..3]"],
+}
 CYCLE = """\
 ROW 1:+1 2:-1 3[0..3]:+1 4:-1 5:+1 6:-1
 COL 1:+1 2:-1 4:-1 5:+1 6:-1

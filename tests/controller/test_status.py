@@ -66,5 +66,8 @@ def test_a_failing_subscriber_is_logged_and_the_others_still_hear(caplog):
     assert heard == [event]
     assert "subscriber failed on the state event" in caplog.text
     wire = Fault("instruction 2: stall", StopCause.DRIVE_FAULT).wire()
-    assert (wire["event"], wire["cause"], wire["reason"]) == ("fault", "drive_fault",
-                                                              "instruction 2: stall")  # fmt: skip
+    assert (wire["event"], wire["cause"], wire["reason"]) == (
+        "fault",
+        "drive_fault",
+        "instruction 2: stall",
+    )

@@ -46,8 +46,11 @@ def test_docs_service_walk_runs_from_the_wheel_alone(tmp_path):
     tree = clean_tree(where / "tree")
     built = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(where), str(tree)],
-        capture_output=True, text=True, timeout=900, check=False,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
     assert built.returncode == 0, built.stderr[-2000:]
     (wheel,) = where.glob("bwsd-*.whl")
     opt = tmp_path / "opt" / "bwsd"
@@ -59,8 +62,15 @@ def test_docs_service_walk_runs_from_the_wheel_alone(tmp_path):
     here.mkdir()
     env["HOME"] = str(tmp_path)
     command = [*_namespaced(), "bash", "-euo", "pipefail", str(script)]
-    run = subprocess.Popen(command, cwd=here, env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+    run = subprocess.Popen(
+        command,
+        cwd=here,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = run.communicate(timeout=600)
     finally:

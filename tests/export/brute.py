@@ -53,8 +53,9 @@ def sample_depths(
     least = np.full(len(points), np.inf)
     d = sk.diameter
     for j in range(len(p0)):  # every segment, against the samples within d of its heights
-        lo, hi = np.searchsorted(points[:, 2], [min(p0[j, 2], p1[j, 2]) - d,
-                                                max(p0[j, 2], p1[j, 2]) + d])  # fmt: skip
+        lo, hi = np.searchsorted(
+            points[:, 2], [min(p0[j, 2], p1[j, 2]) - d, max(p0[j, 2], p1[j, 2]) + d]
+        )
         window = slice(lo, hi)
         other = yarn[window] != owner[j]
         v = p1[j] - p0[j]

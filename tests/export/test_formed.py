@@ -31,11 +31,13 @@ def test_the_one_over_h_law_holds_in_the_formed_zone():
     """tan(braid angle) x take-up per cycle is a length of the braid's geometry (the
     carriers' sideways travel in a cycle): it must not change with the take-up. The old
     whole-skeleton angle gave 1.8 to 6.1 mm over these take-ups."""
-    law = [math.tan(math.radians(braid(h, 20)["angles"]["warp"]["all"]["mean"])) * h
-           for h in TAKEUPS]  # fmt: skip
+    law = [
+        math.tan(math.radians(braid(h, 20)["angles"]["warp"]["all"]["mean"])) * h for h in TAKEUPS
+    ]
     assert max(law) / min(law) - 1 <= 0.10, law
-    old = [math.tan(math.radians(braid(h, 20)["skeleton_angles"]["warp"]["mean"])) * h
-           for h in TAKEUPS]  # fmt: skip
+    old = [
+        math.tan(math.radians(braid(h, 20)["skeleton_angles"]["warp"]["mean"])) * h for h in TAKEUPS
+    ]
     assert max(old) / min(old) - 1 > 0.5  # the flaw: it mixed in the cone still forming
 
 

@@ -135,10 +135,14 @@ def test_metrics_is_plain_json(small):
 
 def test_weft_contacts_name_the_loose_wefts_and_those_held_once():
     sk = build(
-        [warp([(0, 0, 0), (0, 0, 9), (0, 0, 99)]), weft([(0, 0, 3), (9, 0, 3)]),
-         weft([(0, 0, 5), (9, 0, 5)]), weft([(0, 0, 7), (9, 0, 7)], angle=30)],
+        [
+            warp([(0, 0, 0), (0, 0, 9), (0, 0, 99)]),
+            weft([(0, 0, 3), (9, 0, 3)]),
+            weft([(0, 0, 5), (9, 0, 5)]),
+            weft([(0, 0, 7), (9, 0, 7)], angle=30),
+        ],
         [(1, 0, 0, 1, 3), (2, 0, 1, 1, 4), (3, 0, 1, 2, 5)],
-    )  # fmt: skip
+    )
     found = weft_contacts(sk)
     assert found["count"] == 3 and found["per_weft"] == [2, 1, 0]
     assert (found["loose"], found["held_once"]) == ([3], [2])

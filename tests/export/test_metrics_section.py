@@ -162,8 +162,9 @@ def test_a_shipped_preform_is_one_group(stem):
 def test_metrics_say_a_shipped_shaped_braid_is_one_preform_of_mixed_carriers(capsys, stem):
     """From the program's own '# section:' line: one group, and (braid-L runs its K cycles)
     every carrier through flange and web; paper-L runs the paper's 10 cycles, fewer than K."""
-    result = run_json(capsys, str(ROOT / "examples" / f"{stem}.bws"),
-                      str(ROOT / "config" / f"{stem}.toml"))  # fmt: skip
+    result = run_json(
+        capsys, str(ROOT / "examples" / f"{stem}.bws"), str(ROOT / "config" / f"{stem}.toml")
+    )
     assert result["groups"]["count"] == 1 and result["unconnected"]["count"] == 0
     mixing = result["mixing"]
     assert (result["section_spec"]["shape"], result["section_spec"]["source"]) == ("L", "header")
@@ -248,8 +249,13 @@ def test_section_line_rules():
 
 def test_bad_section_text_is_one_line_from_the_console_script(braid):
     assert BWSD, "the bwsd console script is not installed beside this Python"
-    done = subprocess.run([BWSD, "metrics", braid[0], "--config", braid[1], "--section", "L:2x6"],
-                          capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    done = subprocess.run(
+        [BWSD, "metrics", braid[0], "--config", braid[1], "--section", "L:2x6"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 2
     assert done.stdout == ""
     assert done.stderr.startswith("bwsd: error: --section: not a section: 'L:2x6' (expected ")
@@ -263,16 +269,22 @@ def test_other_section_faults_end_with_one_line(tmp_path, capsys, braid):
         f"bwsd: error: {program}:2:12: # section: not a section: 'L:2x6'"
     )
     err = run_error(capsys, braid[0], "--config", braid[1], "--section", "L:2x6:4x2")
-    assert err == ("bwsd: error: section L:2x6:4x2 does not fit the 4 x 4 matrix of the config: "
-                   "its cell (1, 4) lies outside\n")  # fmt: skip
+    assert err == (
+        "bwsd: error: section L:2x6:4x2 does not fit the 4 x 4 matrix of the config: "
+        "its cell (1, 4) lies outside\n"
+    )
     for command in ("metrics", "slice"):  # argparse's usage, then one line naming --z
         with pytest.raises(SystemExit) as stop:
-            main([command, braid[0], "--config", braid[1], "--z", "nan", "-o", "x.png"][
-                 : 6 if command == "metrics" else 8])  # fmt: skip
+            main(
+                [command, braid[0], "--config", braid[1], "--z", "nan", "-o", "x.png"][
+                    : 6 if command == "metrics" else 8
+                ]
+            )
         assert stop.value.code == 2
         err = capsys.readouterr().err
-        assert err.endswith(f"bwsd {command}: error: argument --z: must be a finite height in "
-                            "mm, got 'nan'\n")  # fmt: skip
+        assert err.endswith(
+            f"bwsd {command}: error: argument --z: must be a finite height in mm, got 'nan'\n"
+        )
 
 
 # ----- footprint -----
@@ -285,8 +297,13 @@ def test_inscribed_discs_cover_pi_over_four_of_their_tiles():
     centres = [(2.5, 2.5), (7.5, 2.5), (2.5, 7.5), (7.5, 7.5), (12.5, 2.5)]
     sk = build([warp([(x, y, 0.0), (x, y, 10.0), (x, y, 100.0)]) for x, y in centres], diameter=5.0)
     result = footprint(sk, 5.0, parse_section("rect:2x2@0,0"))
-    assert result["nominal"] == {"section": "rect:2x2", "cells": 4, "area": 100.0,
-                                 "x": [0.0, 10.0], "y": [0.0, 10.0]}  # fmt: skip
+    assert result["nominal"] == {
+        "section": "rect:2x2",
+        "cells": 4,
+        "area": 100.0,
+        "x": [0.0, 10.0],
+        "y": [0.0, 10.0],
+    }
     assert result["grid"] == [5 / 64, 5 / 64]  # 64 steps of a tile of 5 mm: d / 64
     assert (result["crossings"], result["free"]) == (5, 0)
     assert result["coverage"] == pytest.approx(math.pi / 4, rel=0.01)
@@ -376,11 +393,25 @@ def test_metrics_with_section_and_height_needs_no_extra(tmp_path, braid):
     )
     path = os.pathsep.join(p for p in (str(tmp_path), os.environ.get("PYTHONPATH", "")) if p)
     done = subprocess.run(
-        [BWSD, "metrics", braid[0], "--config", braid[1], "--section", "rect:2x2", "--z", "100",
-         "--json"],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+        [
+            BWSD,
+            "metrics",
+            braid[0],
+            "--config",
+            braid[1],
+            "--section",
+            "rect:2x2",
+            "--z",
+            "100",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        cwd=tmp_path,
         env={**os.environ, "PYTHONPATH": path},
-    )  # fmt: skip
+    )
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert result["groups"]["count"] == 1

@@ -30,8 +30,9 @@ def _whole(sk) -> dict:
 
 
 def test_two_parallel_yarns_half_a_diameter_apart_overlap_along_their_common_length():
-    sk = build([warp([(0, 0, 0), (0, 0, 10), (0, 0, 99)]),
-                warp([(0.5, 0, 4), (0.5, 0, 20), (9, 9, 99)])])  # fmt: skip
+    sk = build(
+        [warp([(0, 0, 0), (0, 0, 10), (0, 0, 99)]), warp([(0.5, 0, 4), (0.5, 0, 20), (9, 9, 99)])]
+    )
     found = _whole(sk)
     # yarn 0 is within d = 1 of yarn 1 from z = 4 - sqrt(0.75) to 10, yarn 1 from 4 to 10.866
     near = 6 + math.sqrt(0.75)
@@ -42,8 +43,7 @@ def test_two_parallel_yarns_half_a_diameter_apart_overlap_along_their_common_len
 
 
 def test_two_yarns_crossing_at_right_angles_overlap_by_a_full_diameter():
-    sk = build([warp([(-5, 0, 0), (5, 0, 0), (0, 0, 99)]),
-                weft([(0, -5, 0), (0, 5, 0)], angle=90)])  # fmt: skip
+    sk = build([warp([(-5, 0, 0), (5, 0, 0), (0, 0, 99)]), weft([(0, -5, 0), (0, 5, 0)], angle=90)])
     found = _whole(sk)
     assert found["all"]["overlapping"] == pytest.approx(4.0)  # 2 d on each
     assert found["all"]["worst"] == pytest.approx(1.0)
@@ -56,10 +56,17 @@ def test_two_yarns_crossing_at_right_angles_overlap_by_a_full_diameter():
 def test_a_yarn_never_overlaps_itself_and_centrelines_overlap_nothing():
     sk = build([warp([(0, 0, 0), (0, 0, 10), (0.2, 0, 0), (0, 0, 99)])])
     assert _whole(sk)["all"]["overlapping"] == 0.0
-    crossing = build([warp([(-5, 0, 0), (5, 0, 0), (0, 0, 99)]),
-                      weft([(0, -5, 0), (0, 5, 0)], angle=90)], diameter=0.0)  # fmt: skip
-    assert _whole(crossing)["all"] == {"length": 20.0, "overlapping": 0.0, "share": 0.0,
-                                       "worst": 0.0, "p95": 0.0}  # fmt: skip
+    crossing = build(
+        [warp([(-5, 0, 0), (5, 0, 0), (0, 0, 99)]), weft([(0, -5, 0), (0, 5, 0)], angle=90)],
+        diameter=0.0,
+    )
+    assert _whole(crossing)["all"] == {
+        "length": 20.0,
+        "overlapping": 0.0,
+        "share": 0.0,
+        "worst": 0.0,
+        "p95": 0.0,
+    }
 
 
 def _table() -> dict[str, dict[str, str]]:
@@ -83,8 +90,9 @@ def _example(stem: str):
     program = load_program(ROOT / "examples" / f"{stem}.bws", machine)
     sk = simulate(machine, program).skeleton()
     arrays = Arrays.of(sk)
-    zone = find_zone(arrays, program.cycle_length, guide_heights(machine.d_mat,
-                                                                 takeups_of(program)))  # fmt: skip
+    zone = find_zone(
+        arrays, program.cycle_length, guide_heights(machine.d_mat, takeups_of(program))
+    )
     return sk, zone, interpenetration(arrays, pieces(arrays, zone))
 
 

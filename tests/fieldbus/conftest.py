@@ -17,11 +17,15 @@ from bwsd.config import Config, parse_config
 from tests.timing import scaled
 
 ROOT = Path(__file__).resolve().parents[2]
-MACHINE = {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0,
-           "c_mat": 0.5}  # fmt: skip
+MACHINE = {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0, "c_mat": 0.5}
 PROGRAM = "FILL row=1 col=0\n.XX.\n.XX.\nEND\n"  # cases at (1, 1), (1, 2), (2, 1), (2, 2)
-BUS = {"timeout": scaled(3.0), "io_timeout": scaled(0.5), "reconnect_delay": 0.05,
-       "reconnect_delay_max": 0.2, "reconnect_attempts": 4}  # fmt: skip
+BUS = {
+    "timeout": scaled(3.0),
+    "io_timeout": scaled(0.5),
+    "reconnect_delay": 0.05,
+    "reconnect_delay_max": 0.2,
+    "reconnect_attempts": 4,
+}
 
 
 def toml(data: dict[str, Any]) -> str:
@@ -58,24 +62,46 @@ class Mock:
                 pipe.close()
 
 
-def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | None = None, *,
-               machine: dict[str, Any] = MACHINE, program: str = PROGRAM,
-               tables: dict[str, dict[str, Any]] | None = None) -> Mock:  # fmt: skip
+def start_mock(
+    tmp: Path,
+    simulator: dict[str, Any],
+    ports: dict[str, int] | None = None,
+    *,
+    machine: dict[str, Any] = MACHINE,
+    program: str = PROGRAM,
+    tables: dict[str, dict[str, Any]] | None = None,
+) -> Mock:
     """The mock loom in its own process; ``program`` gives its FILL (the cases' places),
     ``tables`` more of its config (``{"fieldbus.modbus": {"map": 2}}``)."""
     ports = ports or {"modbus": 0, "socketcand": 0, "control": 0}
-    sim = {"modbus_port": ports["modbus"], "socketcand_port": ports["socketcand"],
-           "control_port": ports["control"], "heartbeat_ms": 50, **simulator}  # fmt: skip
+    sim = {
+        "modbus_port": ports["modbus"],
+        "socketcand_port": ports["socketcand"],
+        "control_port": ports["control"],
+        "heartbeat_ms": 50,
+        **simulator,
+    }
     config_path = tmp / "mock.toml"
     config_path.write_text(toml({"machine": machine, "simulator": sim, **(tables or {})}))
     program_path = tmp / "fill.bws"
     program_path.write_text(program)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "simulator_hw", "--config", str(config_path), "--program",
-         str(program_path)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-        cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "simulator_hw",
+            "--config",
+            str(config_path),
+            "--program",
+            str(program_path),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     assert proc.stdout is not None
     line = proc.stdout.readline()
     if not line.startswith("ready "):
@@ -85,16 +111,26 @@ def start_mock(tmp: Path, simulator: dict[str, Any], ports: dict[str, int] | Non
     return Mock(proc, {k: int(v) for k, v in found.items()}, config_path, program_path)
 
 
-def client_config(backend: str, ports: dict[str, int], *, machine: dict[str, Any] = MACHINE,
-                  **bus: Any) -> Config:  # fmt: skip
+def client_config(
+    backend: str, ports: dict[str, int], *, machine: dict[str, Any] = MACHINE, **bus: Any
+) -> Config:
     """A config for bwsd's side, pointing at the mock loom's ports."""
-    return parse_config({
-        "machine": machine,
-        "fieldbus": {"backend": backend, **BUS, **bus,
-                     "modbus": {"port": ports["modbus"]},
-                     "canopen": {"interface": "socketcand", "port": ports["socketcand"],
-                                 "heartbeat_ms": 50}},
-    })  # fmt: skip
+    return parse_config(
+        {
+            "machine": machine,
+            "fieldbus": {
+                "backend": backend,
+                **BUS,
+                **bus,
+                "modbus": {"port": ports["modbus"]},
+                "canopen": {
+                    "interface": "socketcand",
+                    "port": ports["socketcand"],
+                    "heartbeat_ms": 50,
+                },
+            },
+        }
+    )
 
 
 @pytest.fixture

@@ -14,9 +14,15 @@ from bwsd.fieldbus.modbus import MAX_AXES, ModbusBus, axis_shape, map_problem
 from bwsd.twin.machine import Machine, Segment
 
 PLAIN = Machine(rows=8, cols=8, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5)
-SEGMENTED = Machine(rows=8, cols=8, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5,
-                    segments=(Segment("row", 3, 0, 3), Segment("col", 3, 0, 3),
-                              Segment("row", 3, 5, 7)))  # fmt: skip
+SEGMENTED = Machine(
+    rows=8,
+    cols=8,
+    pitch_x=10,
+    pitch_y=12,
+    d_mat=100,
+    c_mat=0.5,
+    segments=(Segment("row", 3, 0, 3), Segment("col", 3, 0, 3), Segment("row", 3, 5, 7)),
+)
 
 
 def test_segment_axes_follow_the_take_up_in_the_order_declared():
@@ -54,8 +60,11 @@ def test_every_segment_axis_is_found_by_the_name_plan_gives_it():
 
 
 def test_an_unknown_axis_names_the_rows_cols_and_segments():
-    with pytest.raises(ValueError, match=r"no axis 'row3\[0\.\.4\]' \(rows 0\.\.7, cols 0\.\.7, "
-                       r"segments: row3\[0\.\.3\], col3\[0\.\.3\], row3\[5\.\.7\]\)"):  # fmt: skip
+    with pytest.raises(
+        ValueError,
+        match=r"no axis 'row3\[0\.\.4\]' \(rows 0\.\.7, cols 0\.\.7, "
+        r"segments: row3\[0\.\.3\], col3\[0\.\.3\], row3\[5\.\.7\]\)",
+    ):
         axis_by_name(SEGMENTED, "row3[0..4]")
     with pytest.raises(ValueError, match=r"segments: none declared in \[machine\] segments"):
         axis_by_name(PLAIN, "row3[0..3]")
@@ -75,18 +84,21 @@ def many_segments(rows: int, cols: int, per_row: int) -> list[str]:
 
 
 def test_a_machine_with_more_axes_than_modbus_blocks_is_refused_when_the_bus_is_built():
-    machine = {"rows": 100, "cols": 100, "pitch_x": 1, "pitch_y": 1, "d_mat": 10,
-               "c_mat": 0.5}  # fmt: skip
+    machine = {"rows": 100, "cols": 100, "pitch_x": 1, "pitch_y": 1, "d_mat": 10, "c_mat": 0.5}
     fits = parse_config({"machine": {**machine, "segments": many_segments(100, 100, 39)[:3883]}})
     assert len(machine_axes(fits.machine)) == MAX_AXES == 4089 and map_problem(fits.machine) == ""
     ModbusBus.from_config(fits)  # the last block ends at register 65535
     extra = Segment("row", 99, 50, 51)  # a config with it is refused at load (test_config)
-    over = dataclasses.replace(fits, machine=dataclasses.replace(
-        fits.machine, segments=(*fits.machine.segments, extra)))  # fmt: skip
+    over = dataclasses.replace(
+        fits, machine=dataclasses.replace(fits.machine, segments=(*fits.machine.segments, extra))
+    )
     assert "at most 4089 axes, the machine has 4090" in map_problem(over.machine)
-    with pytest.raises(ConfigError, match=r"\[machine\.segments\]: the Modbus map addresses at "
-                       r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 6 weft and "
-                       r"take-up axes, 3884 segments\)"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"\[machine\.segments\]: the Modbus map addresses at "
+        r"most 4089 axes, the machine has 4090 \(100 rows, 100 cols, 6 weft and "
+        r"take-up axes, 3884 segments\)",
+    ):
         ModbusBus.from_config(over)
 
 
@@ -95,13 +107,23 @@ def test_the_canopen_node_ids_count_the_segments():
     bus = {"backend": "canopen", "canopen": {"node_base": 1, "io_node": 127}}
 
     def config(segments: int) -> None:
-        parse_config({"machine": {**machine, "segments": many_segments(20, 20, 10)[:segments]},
-                      "fieldbus": bus})  # fmt: skip
+        parse_config(
+            {
+                "machine": {**machine, "segments": many_segments(20, 20, 10)[:segments]},
+                "fieldbus": bus,
+            }
+        )
 
     config(80)  # 20 + 20 + 3 + 80 + 3 = 126 drives: nodes 1..126
-    with pytest.raises(ConfigError, match=r"\[fieldbus\.canopen\.io_node\]: collides with the "
-                       r"drives' node ids 1\.\.127"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"\[fieldbus\.canopen\.io_node\]: collides with the "
+        r"drives' node ids 1\.\.127",
+    ):
         config(81)
-    with pytest.raises(ConfigError, match=r"\[fieldbus\.canopen\.node_base\]: 128 axes \(82 of "
-                       r"them segments\) from node 1 pass node id 127"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"\[fieldbus\.canopen\.node_base\]: 128 axes \(82 of "
+        r"them segments\) from node 1 pass node id 127",
+    ):
         config(82)

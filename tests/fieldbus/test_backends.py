@@ -103,9 +103,9 @@ class TestBackendContract:
         run(with_bus(mock, backend, body))
 
     @pytest.mark.parametrize(
-        ("kind", "code"), [("stall", FAULT_STALL), ("drive", FAULT_DRIVE),
-                           ("wrong_position", FAULT_POSITION)],
-    )  # fmt: skip
+        ("kind", "code"),
+        [("stall", FAULT_STALL), ("drive", FAULT_DRIVE), ("wrong_position", FAULT_POSITION)],
+    )
     def test_injected_axis_faults_are_drive_faults(self, slow_mock, backend, kind, code):
         async def body(bus: Fieldbus) -> None:
             await control(slow_mock, {"cmd": "fault", "kind": kind, "axis": "col2"})
@@ -187,8 +187,9 @@ def segment_mock(tmp_path) -> Any:
     running.stop()
 
 
-async def with_segment_bus(mock: Mock, backend: str,
-                           body: Callable[[Fieldbus], Awaitable[Any]]) -> Any:  # fmt: skip
+async def with_segment_bus(
+    mock: Mock, backend: str, body: Callable[[Fieldbus], Awaitable[Any]]
+) -> Any:
     bus = open_bus(client_config(backend, mock.ports, machine=SEGMENTED))
     await bus.connect()
     try:
@@ -206,16 +207,25 @@ class TestSegmentAxes:
     def test_the_segment_axes_follow_the_take_up_on_the_bus(self, segment_mock, backend):
         async def body(bus: Fieldbus) -> None:
             names = [axis.name for axis in bus.axes]
-            assert names[9:] == ["weft_angle", "weft_insert", "takeup", "row1[0..2]",
-                                 "col2[0..2]", "weft_x", "weft_y", "weft_z"]  # fmt: skip
+            assert names[9:] == [
+                "weft_angle",
+                "weft_insert",
+                "takeup",
+                "row1[0..2]",
+                "col2[0..2]",
+                "weft_x",
+                "weft_y",
+                "weft_z",
+            ]
             state = await bus.state()
             assert len(state.axes) == 17 and not any(a.fault for a in state.axes)
 
         run(with_segment_bus(segment_mock, backend, body))
 
     def test_a_segment_stroke_moves_only_the_cases_on_the_segment(self, segment_mock, backend):
-        twin = Twin(client_config(backend, segment_mock.ports, machine=SEGMENTED).machine,
-                    SEGMENT_FILL)  # fmt: skip
+        twin = Twin(
+            client_config(backend, segment_mock.ports, machine=SEGMENTED).machine, SEGMENT_FILL
+        )
         strokes = [("row", 1, 1), ("col", 2, 1), ("row", 1, -1), ("col", 2, -2)]
 
         async def body(bus: Fieldbus) -> None:
@@ -234,12 +244,15 @@ class TestSegmentAxes:
 
     @pytest.mark.parametrize(
         ("name", "k"),
-        [("row1[0..2]", 2),  # (1, 1) would leave the segment for the empty cell (1, 3)
-         ("col2[0..2]", 3),  # (0, 2) would leave it for (3, 2), where a case sits
-         ("col2[0..2]", -1)],  # (0, 2) would leave the matrix
-    )  # fmt: skip
-    def test_a_stroke_off_the_segment_is_a_jam_and_nothing_moves(self, segment_mock, backend,
-                                                                 name, k):  # fmt: skip
+        [
+            ("row1[0..2]", 2),  # (1, 1) would leave the segment for the empty cell (1, 3)
+            ("col2[0..2]", 3),  # (0, 2) would leave it for (3, 2), where a case sits
+            ("col2[0..2]", -1),
+        ],  # (0, 2) would leave the matrix
+    )
+    def test_a_stroke_off_the_segment_is_a_jam_and_nothing_moves(
+        self, segment_mock, backend, name, k
+    ):
         async def body(bus: Fieldbus) -> None:
             with pytest.raises(DriveFault) as err:
                 await bus.execute([stroke(bus, name, k)])

@@ -41,9 +41,12 @@ WEFT_ANGLE, WEFT_INSERT, TAKEUP = 5, 6, 7
 # An SDO answer may take more than 0.3 s on a loaded machine (the hub, the drives and the
 # master share this process): 1 s, the backend's default, times the machine's factor.
 SETTINGS = BusSettings(
-    timeout=scaled(2.0), io_timeout=scaled(1.0), reconnect_delay=0.01,
-    reconnect_delay_max=0.05, reconnect_attempts=3,
-)  # fmt: skip
+    timeout=scaled(2.0),
+    io_timeout=scaled(1.0),
+    reconnect_delay=0.01,
+    reconnect_delay_max=0.05,
+    reconnect_attempts=3,
+)
 
 
 @dataclass
@@ -62,11 +65,18 @@ async def rig(
     loom = Loom(MACHINE, fill, speeds or Speeds())
     hub = SocketcandHub(faults=loom.faults)
     await hub.start()
-    drives = CanopenLoom(loom, hub.local_channel, node_base=3, io_node=100,
-                         heartbeat_ms=20, loop=asyncio.get_running_loop())  # fmt: skip
+    drives = CanopenLoom(
+        loom,
+        hub.local_channel,
+        node_base=3,
+        io_node=100,
+        heartbeat_ms=20,
+        loop=asyncio.get_running_loop(),
+    )
     drives.start()
-    bus = CanopenBus(MACHINE, settings, port=hub.port, node_base=3, io_node=100,
-                     heartbeat_ms=heartbeat_ms)  # fmt: skip
+    bus = CanopenBus(
+        MACHINE, settings, port=hub.port, node_base=3, io_node=100, heartbeat_ms=heartbeat_ms
+    )
     r = Rig(loom, hub, drives, bus)
     try:
         await bus.connect()
@@ -230,8 +240,9 @@ def test_reconnects_after_the_hub_restarts_on_the_same_port():
         async with rig() as r:
             await r.bus.state()
             await r.hub.stop()
-            r.hub = SocketcandHub(port=r.hub.port, faults=r.loom.faults,
-                                  local_channel=r.hub.local_channel)  # fmt: skip
+            r.hub = SocketcandHub(
+                port=r.hub.port, faults=r.loom.faults, local_channel=r.hub.local_channel
+            )
             await r.hub.start()
             with pytest.raises(FieldbusConnectionError):
                 await r.bus.state()
@@ -259,8 +270,14 @@ def test_virtual_interface_in_one_process():
         loom = Loom(MACHINE, [(0, 0)], Speeds())
         drives = CanopenLoom(loom, "bwsd-test-virtual", loop=asyncio.get_running_loop())
         drives.start()
-        bus = CanopenBus(MACHINE, SETTINGS, interface="virtual", channel="bwsd-test-virtual",
-                         io_node=127, heartbeat_ms=50)  # fmt: skip
+        bus = CanopenBus(
+            MACHINE,
+            SETTINGS,
+            interface="virtual",
+            channel="bwsd-test-virtual",
+            io_node=127,
+            heartbeat_ms=50,
+        )
         try:
             await bus.connect()
             state = await bus.execute([AxisMove(ROW0, 20_000)])
@@ -279,12 +296,23 @@ def test_virtual_interface_in_one_process():
 
 
 def test_from_config_takes_both_tables():
-    config = parse_config({
-        "machine": {"rows": 2, "cols": 3, "pitch_x": 10, "pitch_y": 20, "d_mat": 100,
-                    "c_mat": 0.5},
-        "fieldbus": {"backend": "canopen", "io_timeout": 0.25,
-                     "canopen": {"port": 4000, "node_base": 10, "io_node": 5, "heartbeat_ms": 0}},
-    })  # fmt: skip
+    config = parse_config(
+        {
+            "machine": {
+                "rows": 2,
+                "cols": 3,
+                "pitch_x": 10,
+                "pitch_y": 20,
+                "d_mat": 100,
+                "c_mat": 0.5,
+            },
+            "fieldbus": {
+                "backend": "canopen",
+                "io_timeout": 0.25,
+                "canopen": {"port": 4000, "node_base": 10, "io_node": 5, "heartbeat_ms": 0},
+            },
+        }
+    )
     bus = CanopenBus.from_config(config)
     assert (bus.port, bus.io_node, bus.heartbeat_ms) == (4000, 5, 0)
     assert bus.drive_ids == list(range(10, 21)) and bus.settings.io_timeout == 0.25

@@ -19,19 +19,28 @@ BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
 def hw_config(tmp: Path, mock: Mock, backend: str, machine: dict[str, Any] = MACHINE) -> Path:
     path = tmp / f"{backend}.toml"
-    path.write_text(toml({
-        "machine": machine,
-        "fieldbus": {"backend": backend, **BUS},
-        "fieldbus.modbus": {"port": mock.ports["modbus"]},
-        "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
-    }))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": machine,
+                "fieldbus": {"backend": backend, **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
+            }
+        )
+    )
     return path
 
 
 def hw(config: Path, *args: str) -> subprocess.CompletedProcess[str]:
     assert BWSD, "the bwsd console script is not installed beside this Python"
-    return subprocess.run([BWSD, "hw", *args, "--config", str(config)], capture_output=True,
-                          text=True, timeout=120, check=False)  # fmt: skip
+    return subprocess.run(
+        [BWSD, "hw", *args, "--config", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
 
 
 @pytest.mark.parametrize("backend", ["modbus", "canopen"])

@@ -317,14 +317,25 @@ def test_an_unknown_unit_is_an_error_naming_the_address():
 def test_from_config_takes_every_setting():
     config = parse_config(
         {
-            "machine": {"rows": 3, "cols": 3, "pitch_x": 10, "pitch_y": 12, "d_mat": 100,
-                        "c_mat": 0.5},
-            "fieldbus": {"timeout": 7.0, "io_timeout": 0.5, "reconnect_delay": 0.2,
-                         "reconnect_delay_max": 3.0, "reconnect_attempts": 9,
-                         "position_tolerance": 25, "modbus": {"host": "10.0.0.5",
-                         "port": 1502, "device_id": 17}},
+            "machine": {
+                "rows": 3,
+                "cols": 3,
+                "pitch_x": 10,
+                "pitch_y": 12,
+                "d_mat": 100,
+                "c_mat": 0.5,
+            },
+            "fieldbus": {
+                "timeout": 7.0,
+                "io_timeout": 0.5,
+                "reconnect_delay": 0.2,
+                "reconnect_delay_max": 3.0,
+                "reconnect_attempts": 9,
+                "position_tolerance": 25,
+                "modbus": {"host": "10.0.0.5", "port": 1502, "device_id": 17},
+            },
         }
-    )  # fmt: skip
+    )
     bus = ModbusBus.from_config(config)
     assert (bus.host, bus.port, bus.device_id) == ("10.0.0.5", 1502, 17)
     assert bus.settings == BusSettings(7.0, 0.5, 0.2, 3.0, 9, 25)
@@ -338,17 +349,34 @@ def test_a_machine_beyond_the_input_address_space_is_refused():
 
 
 def test_a_loom_whose_segments_differ_is_refused():
-    ours = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5,
-                   segments=(Segment("row", 1, 0, 1),))  # fmt: skip
-    theirs = Machine(rows=3, cols=3, pitch_x=10, pitch_y=12, d_mat=100, c_mat=0.5,
-                     segments=(Segment("row", 1, 1, 2),))  # fmt: skip
+    ours = Machine(
+        rows=3,
+        cols=3,
+        pitch_x=10,
+        pitch_y=12,
+        d_mat=100,
+        c_mat=0.5,
+        segments=(Segment("row", 1, 0, 1),),
+    )
+    theirs = Machine(
+        rows=3,
+        cols=3,
+        pitch_x=10,
+        pitch_y=12,
+        d_mat=100,
+        c_mat=0.5,
+        segments=(Segment("row", 1, 1, 2),),
+    )
 
     async def scenario() -> None:
         async with rig(Loom(theirs, [], Speeds())) as (_, server):
             bus = ModbusBus(ours, SETTINGS, HOST, server.port, 1)
-            with pytest.raises(FieldbusError, match=r"axis 9 moves kind, line, first, last cell "
-                               r"\[1, 1, 1, 2\], expected \[1, 1, 0, 1\] \(segment "
-                               r"row1\[0\.\.1\]\)"):  # fmt: skip
+            with pytest.raises(
+                FieldbusError,
+                match=r"axis 9 moves kind, line, first, last cell "
+                r"\[1, 1, 1, 2\], expected \[1, 1, 0, 1\] \(segment "
+                r"row1\[0\.\.1\]\)",
+            ):
                 await bus.connect()
         async with rig(Loom(ours, [(1, 0)], Speeds())) as (_, server):
             bus = ModbusBus(ours, SETTINGS, HOST, server.port, 1)

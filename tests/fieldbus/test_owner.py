@@ -21,8 +21,11 @@ def test_the_lock_names_its_holder_and_is_free_once_released(tmp_path: Path):
     lock = BusLock.take(tmp_path, str(config))
     found = holder(tmp_path)
     assert found is not None and found.pid == os.getpid() and found.config == str(config)
-    with pytest.raises(BusHeld, match=rf"held by bwsd serve \(pid {os.getpid()}, config "
-                       rf"{config}, since"):  # fmt: skip
+    with pytest.raises(
+        BusHeld,
+        match=rf"held by bwsd serve \(pid {os.getpid()}, config "
+        rf"{config}, since",
+    ):
         BusLock.take(tmp_path, str(config))
     with pytest.raises(BusHeld, match=f"pid {os.getpid()}.*stop it, or command the machine"):
         refuse_if_held(tmp_path)

@@ -69,15 +69,20 @@ def writer() -> Iterator[Callable[[Path, str], subprocess.Popen[str]]]:
     def run(path: Path, mode: str) -> subprocess.Popen[str]:
         proc = subprocess.Popen(
             [sys.executable, "-c", WRITER, str(path), mode],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-        )  # fmt: skip
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            text=True,
+        )
         alive.append(proc)
         assert proc.stdout is not None and proc.stderr is not None
         if mode in ("held", "raise"):
             proc.wait(timeout=60)
             errors = proc.stderr.read()
-            assert (proc.returncode, "a bug" in errors) == ({"held": 0, "raise": 1}[mode],
-                                                            mode == "raise"), errors  # fmt: skip
+            assert (proc.returncode, "a bug" in errors) == (
+                {"held": 0, "raise": 1}[mode],
+                mode == "raise",
+            ), errors
             return proc
         assert proc.stdout.readline() == "ready\n", proc.stderr.read()
         if mode == "kill":

@@ -70,8 +70,10 @@ def test_check_of_a_killed_writer_reads_the_log_and_changes_nothing(
     assert lines["daemon"] == ["not running"]
     assert lines["integrity"] == ["ok (SQLite integrity_check)"]
     assert lines["consistency"] == ["ok (the journal's invariants)"]
-    assert lines["programs"] == [f"1; active: program 1 'part.bws', running, {DONE} of {TOTAL} "
-                                 f"done; instruction {DONE + 1} started, not done"]  # fmt: skip
+    assert lines["programs"] == [
+        f"1; active: program 1 'part.bws', running, {DONE} of {TOTAL} "
+        f"done; instruction {DONE + 1} started, not done"
+    ]
     assert "not closed" in lines["sessions"][0]
     assert files(path.parent) == before  # the file, its log and its index: byte for byte
     with Journal.open(path) as j:  # and the next start still recovers from the log
@@ -91,8 +93,9 @@ def test_check_finds_a_lost_log(
     assert "never closed it, and its write-ahead log journal.db-wal is missing" in problem
     assert "bwsd journal reset --i-understand" in problem
     assert report(out)["result"] == ["1 problem(s)"]
-    assert report(out)["programs"] == ["0, none active (as the file alone says, without its lost "
-                                       "log)"]  # fmt: skip
+    assert report(out)["programs"] == [
+        "0, none active (as the file alone says, without its lost log)"
+    ]
     assert files(path.parent) == before
 
 
@@ -156,10 +159,13 @@ def test_check_reports_broken_invariants(capsys: pytest.CaptureFixture[str], pat
     ]
 
 
-@pytest.mark.parametrize(("content", "problem"), [
-    (b"", "is empty (0 bytes)"),
-    (b"[machine]\nrows = 4\n", "not a usable journal: file is not a database"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        (b"", "is empty (0 bytes)"),
+        (b"[machine]\nrows = 4\n", "not a usable journal: file is not a database"),
+    ],
+)
 def test_check_reports_a_file_that_is_no_journal(
     capsys: pytest.CaptureFixture[str], path: Path, content: bytes, problem: str
 ) -> None:
@@ -182,8 +188,9 @@ def test_check_of_a_journal_in_use_says_so_and_reset_refuses(
     assert f"{DONE} of {TOTAL} done" in report(out)["programs"][0]
     status, _, err = run(capsys, "reset", "--i-understand", "--journal", str(path))
     assert status == 2
-    assert err == (f"bwsd: error: {path}: in use: a daemon (or another writer) has it open; "
-                   "stop it first\n")  # fmt: skip
+    assert err == (
+        f"bwsd: error: {path}: in use: a daemon (or another writer) has it open; stop it first\n"
+    )
     assert files(path.parent) == before
     assert proc.poll() is None
 
@@ -287,9 +294,11 @@ def test_reset_without_i_understand_says_what_it_would_do(
     before = files(path.parent)
     status, out, err = run(capsys, "reset", "--state-dir", str(path.parent))
     assert status == 2 and out == ""
-    assert err.count("\n") == 1 and err.startswith(f"bwsd: error: {path}: reset would move "
-                                                   "journal.db-wal, journal.db-shm, journal.db "
-                                                   "aside (renamed journal.db.reset-")  # fmt: skip
+    assert err.count("\n") == 1 and err.startswith(
+        f"bwsd: error: {path}: reset would move "
+        "journal.db-wal, journal.db-shm, journal.db "
+        "aside (renamed journal.db.reset-"
+    )
     assert "add --i-understand to do it" in err
     assert files(path.parent) == before
 
@@ -302,8 +311,11 @@ def test_reset_moves_the_journal_aside_and_the_next_start_makes_a_new_one(
     before = files(path.parent)
     status, out, err = run(capsys, "reset", "--i-understand", "--journal", str(path))
     assert status == 0, err
-    moved = {line.split(" -> ")[0][6:]: Path(line.split(" -> ")[1])
-             for line in out.splitlines() if line.startswith("moved ")}  # fmt: skip
+    moved = {
+        line.split(" -> ")[0][6:]: Path(line.split(" -> ")[1])
+        for line in out.splitlines()
+        if line.startswith("moved ")
+    }
     assert set(moved) == {str(path), f"{path}-shm"}
     aside = moved[str(path)]
     assert aside.name.startswith("journal.db.reset-")
@@ -338,8 +350,10 @@ def test_the_journal_is_found_as_serve_finds_it(
 ) -> None:
     config = tmp_path / "etc" / "bwsd.toml"
     config.parent.mkdir()
-    config.write_text("[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\n"
-                      "d_mat = 100.0\nc_mat = 0.5\n[journal]\npath = 'loom.db'\n")  # fmt: skip
+    config.write_text(
+        "[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\n"
+        "d_mat = 100.0\nc_mat = 0.5\n[journal]\npath = 'loom.db'\n"
+    )
     Journal.open(tmp_path / "sd" / "loom.db").close()
     Journal.open(tmp_path / "given" / "journal.db").close()
     Journal.open(tmp_path / "etc" / "state" / "loom.db").close()
@@ -367,27 +381,45 @@ def test_journal_with_config_is_an_error(capsys: pytest.CaptureFixture[str], pat
 
 def test_errors_are_one_line_without_a_traceback(tmp_path: Path) -> None:
     done = subprocess.run(
-        [sys.executable, "-m", "bwsd.cli", "journal", "check", "--journal",
-         str(tmp_path / "none.db")],
-        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "bwsd.cli",
+            "journal",
+            "check",
+            "--journal",
+            str(tmp_path / "none.db"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr == (f"bwsd: error: {tmp_path}/none.db: no journal here (the daemon "
-                           "creates one at its first start)\n")  # fmt: skip
+    assert done.stderr == (
+        f"bwsd: error: {tmp_path}/none.db: no journal here (the daemon "
+        "creates one at its first start)\n"
+    )
     assert not (tmp_path / "none.db").exists()
 
 
 # The rows a restart could not use, each damaged as a tool outside bwsd would (its triggers
 # dropped first): check names the row and exits 1; it said "result: ok" before.
 DAMAGE = {
-    "text": ("DROP TRIGGER programs_fixed; UPDATE programs SET text = 'TAKEUP 2\n' "
-             "WHERE id = 1;", "program 1: its text does not match its sha256"),
-    "payload": ("DROP TRIGGER instructions_fixed; UPDATE instructions SET started_payload = "
-                "'not json' WHERE idx = 1;", "program 1, instruction 1: its started payload "
-                "is not a JSON object"),
-    "snapshot": ("UPDATE snapshots SET data = x'00' WHERE idx = 1;",
-                 "program 1: the snapshot at instruction 1 does not match its sha256"),
-}  # fmt: skip
+    "text": (
+        "DROP TRIGGER programs_fixed; UPDATE programs SET text = 'TAKEUP 2\n' WHERE id = 1;",
+        "program 1: its text does not match its sha256",
+    ),
+    "payload": (
+        "DROP TRIGGER instructions_fixed; UPDATE instructions SET started_payload = "
+        "'not json' WHERE idx = 1;",
+        "program 1, instruction 1: its started payload is not a JSON object",
+    ),
+    "snapshot": (
+        "UPDATE snapshots SET data = x'00' WHERE idx = 1;",
+        "program 1: the snapshot at instruction 1 does not match its sha256",
+    ),
+}
 
 
 @pytest.mark.parametrize("damage", list(DAMAGE))

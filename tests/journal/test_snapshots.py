@@ -256,8 +256,13 @@ def test_schema_refuses_what_the_api_refuses(journal: Journal, path: Path) -> No
     journal.set_outcome(finished, "aborted")
     conn = raw(path)  # foreign keys off: the trigger alone refuses a missing program
     insert = "INSERT INTO snapshots (program_id, idx, data, sha256, created) VALUES (?, ?, ?, ?, 0)"
-    for row in [(pid, 2, b"x", "0" * 64), (finished, 0, b"x", "0" * 64), (pid, -1, b"x", "0" * 64),
-                (pid, 1, b"x", "short"), (99, 0, b"x", "0" * 64)]:  # fmt: skip
+    for row in [
+        (pid, 2, b"x", "0" * 64),
+        (finished, 0, b"x", "0" * 64),
+        (pid, -1, b"x", "0" * 64),
+        (pid, 1, b"x", "short"),
+        (99, 0, b"x", "0" * 64),
+    ]:
         with pytest.raises(sqlite3.IntegrityError):
             conn.execute(insert, row)
     conn.close()
@@ -383,8 +388,11 @@ def test_garbage_over_any_page_is_a_journal_error(path: Path) -> None:
 
 def test_an_empty_file_is_refused_not_taken_as_new(path: Path) -> None:
     path.write_bytes(b"")  # a journal truncated, or replaced by mistake
-    with pytest.raises(JournalError, match=r"is empty \(0 bytes\), where a journal was "
-                       r"expected: restore the journal, or move this file away"):  # fmt: skip
+    with pytest.raises(
+        JournalError,
+        match=r"is empty \(0 bytes\), where a journal was "
+        r"expected: restore the journal, or move this file away",
+    ):
         Journal.open(path)
     assert path.read_bytes() == b""  # left as it was
 
@@ -410,11 +418,12 @@ def _write_v1(path: Path) -> None:
     """A journal as version 1 wrote it: a finished program, a running one, a pending move."""
     conn = raw(path)
     conn.execute("PRAGMA journal_mode = WAL")
-    conn.executescript(f"BEGIN; {V1_SCHEMA} PRAGMA application_id = {APPLICATION_ID}; "
-                       "PRAGMA user_version = 1; COMMIT;")  # fmt: skip
+    conn.executescript(
+        f"BEGIN; {V1_SCHEMA} PRAGMA application_id = {APPLICATION_ID}; "
+        "PRAGMA user_version = 1; COMMIT;"
+    )
     digest = hashlib.sha256(TEXT.encode()).hexdigest()
-    add = ("INSERT INTO programs (name, text, sha256, instructions, created) "
-           "VALUES (?, ?, ?, ?, 10)")  # fmt: skip
+    add = "INSERT INTO programs (name, text, sha256, instructions, created) VALUES (?, ?, ?, ?, 10)"
     conn.execute(add, ("done.bws", TEXT, digest, 1))
     conn.execute("UPDATE programs SET outcome = 'running', started = 11 WHERE id = 1")
     conn.execute("INSERT INTO instructions VALUES (1, 1, 12, '{\"a\":1}', NULL, NULL)")
@@ -432,8 +441,10 @@ def _write_v1(path: Path) -> None:
 def _rows(path: Path) -> dict[str, list[tuple[object, ...]]]:
     conn = raw(path)
     try:
-        return {table: conn.execute(f"SELECT * FROM {table} ORDER BY 1, 2").fetchall()
-                for table in ("programs", "instructions", "events", "states")}  # fmt: skip
+        return {
+            table: conn.execute(f"SELECT * FROM {table} ORDER BY 1, 2").fetchall()
+            for table in ("programs", "instructions", "events", "states")
+        }
     finally:
         conn.close()
 
@@ -480,8 +491,12 @@ def test_a_failed_upgrade_leaves_the_file_at_version_1(path: Path) -> None:
         Journal.open(path)
     conn = raw(path)
     assert conn.execute("PRAGMA user_version").fetchone()[0] == 1
-    assert conn.execute("SELECT count(*) FROM sqlite_master WHERE type = 'trigger' "
-                        "AND name LIKE 'snapshots%'").fetchone()[0] == 0  # fmt: skip
+    assert (
+        conn.execute(
+            "SELECT count(*) FROM sqlite_master WHERE type = 'trigger' AND name LIKE 'snapshots%'"
+        ).fetchone()[0]
+        == 0
+    )
     conn.close()
     assert _rows(path) == before
     with pytest.raises(JournalError, match="cannot upgrade"):  # not "another writer"

@@ -80,10 +80,16 @@ def test_one_writer_at_a_time(path: Path) -> None:
         j.history()
 
 
-FOREIGN_BYTES = {"text": b"[machine]\nrows = 4\n", "binary": bytes(range(256)) * 32,
-                 "header": b"SQLite format 3\x00" + b"\xff" * 200}  # fmt: skip
-FOREIGN_SQL = {"sqlite": "CREATE TABLE moves (x)", "unknown": "PRAGMA user_version = 0",
-               "newer": f"PRAGMA user_version = {SCHEMA_VERSION + 1}"}  # fmt: skip
+FOREIGN_BYTES = {
+    "text": b"[machine]\nrows = 4\n",
+    "binary": bytes(range(256)) * 32,
+    "header": b"SQLite format 3\x00" + b"\xff" * 200,
+}
+FOREIGN_SQL = {
+    "sqlite": "CREATE TABLE moves (x)",
+    "unknown": "PRAGMA user_version = 0",
+    "newer": f"PRAGMA user_version = {SCHEMA_VERSION + 1}",
+}
 
 
 def _write_foreign(path: Path, kind: str) -> None:
@@ -202,7 +208,11 @@ def test_stopped_program_keeps_its_reason(journal: Journal) -> None:
     journal.set_outcome(pid, "aborted", "case would leave the matrix")
     [rec] = journal.history()
     assert (rec.outcome, rec.reason, rec.done, rec.instructions) == (
-        "aborted", "case would leave the matrix", 0, 3)  # fmt: skip
+        "aborted",
+        "case would leave the matrix",
+        0,
+        3,
+    )
 
 
 @pytest.mark.parametrize(
@@ -246,7 +256,10 @@ def test_started_and_done_in_order(journal: Journal) -> None:
     journal.started(pid, 2, {"targets": []})
     [one, two] = journal.instructions(pid)
     assert (one.index, one.started_payload, one.done_payload) == (
-        1, {"targets": [10, -20], "contacts": 2}, {"contacts": 2, "nodes": 5})  # fmt: skip
+        1,
+        {"targets": [10, -20], "contacts": 2},
+        {"contacts": 2, "nodes": 5},
+    )
     assert one.done is not None and one.done > one.started
     assert (two.index, two.done, two.done_payload) == (2, None, None)
     assert [r.index for r in journal.instructions(pid, after=1)] == [2]
@@ -421,8 +434,11 @@ def test_states_and_last_state(journal: Journal) -> None:
     first = journal.log_state(4, "Idle", "")
     journal.log_state(6, "Execute", "operator start")
     last = journal.log_state(11, "Held", "occupancy mismatch")
-    assert [(s.state, s.name) for s in journal.states()] == [(4, "Idle"), (6, "Execute"),
-                                                            (11, "Held")]  # fmt: skip
+    assert [(s.state, s.name) for s in journal.states()] == [
+        (4, "Idle"),
+        (6, "Execute"),
+        (11, "Held"),
+    ]
     assert [s.id for s in journal.states(after_id=first, limit=1)] == [first + 1]
     state = journal.last_state()
     assert state is not None and (state.id, state.reason) == (last, "occupancy mismatch")

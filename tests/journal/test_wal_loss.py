@@ -26,11 +26,13 @@ from tests.journal.conftest import DONE, TOTAL, downgrade, files
 from tests.test_daemon import LONG, Served, daemon_config
 
 Writer = Callable[[Path, str], subprocess.Popen[str]]
-LOST = (r"the daemon that opened this journal at .* \(pid \d+\) never closed it, and its "
-        r"write-ahead log journal\.db-wal {state}: the file alone may be older than what the "
-        r"loom did\. Put the journal\.db-wal of this journal back beside it and start again, or "
-        r"move this journal aside and start a new one with `bwsd journal reset "
-        r"--i-understand`")  # fmt: skip
+LOST = (
+    r"the daemon that opened this journal at .* \(pid \d+\) never closed it, and its "
+    r"write-ahead log journal\.db-wal {state}: the file alone may be older than what the "
+    r"loom did\. Put the journal\.db-wal of this journal back beside it and start again, or "
+    r"move this journal aside and start a new one with `bwsd journal reset "
+    r"--i-understand`"
+)
 
 
 @pytest.fixture
@@ -79,8 +81,11 @@ def test_a_log_emptied_or_garbled_after_a_kill_is_refused(
     bare file leaves), its header alone, zeros, or cut inside its first frame."""
     writer(path, "kill")
     log = wal(path).read_bytes()
-    wal(path).write_bytes({"empty": b"", "header": log[:32], "zeros": bytes(len(log)),
-                           "cut": log[:32 + 24 + 1000]}[kind])  # fmt: skip
+    wal(path).write_bytes(
+        {"empty": b"", "header": log[:32], "zeros": bytes(len(log)), "cut": log[: 32 + 24 + 1000]}[
+            kind
+        ]
+    )
     with pytest.raises(JournalError, match=LOST.format(state="holds no transaction")):
         Journal.open(path)
 
@@ -165,8 +170,10 @@ def test_a_log_without_its_journal_is_refused(path: Path, writer: Writer) -> Non
     """SQLite would replay a stray log into the new journal made in its place."""
     writer(path, "kill")
     path.rename(path.with_name("elsewhere.db"))
-    stray = (r"is missing, but its write-ahead log journal\.db-wal is here: put the journal "
-             r"back beside it, or move journal\.db-wal")  # fmt: skip
+    stray = (
+        r"is missing, but its write-ahead log journal\.db-wal is here: put the journal "
+        r"back beside it, or move journal\.db-wal"
+    )
     with pytest.raises(JournalError, match=stray):
         Journal.open(path)
     assert not path.exists()
@@ -210,13 +217,26 @@ def test_serve_refuses_a_journal_whose_log_was_lost_in_one_line(
     writer(path, "kill")
     wal(path).unlink()
     config = tmp_path / "bwsd.toml"
-    config.write_text("[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\n"
-                      "d_mat = 100.0\nc_mat = 0.5\n")  # fmt: skip
+    config.write_text(
+        "[machine]\nrows = 4\ncols = 4\npitch_x = 10.0\npitch_y = 10.0\n"
+        "d_mat = 100.0\nc_mat = 0.5\n"
+    )
     done = subprocess.run(
-        [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config), "--state-dir",
-         str(path.parent)],
-        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "bwsd.cli",
+            "serve",
+            "--config",
+            str(config),
+            "--state-dir",
+            str(path.parent),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert done.returncode == 2 and done.stdout == "", done.stderr
     assert "Traceback" not in done.stderr
     last = done.stderr.strip().splitlines()[-1]

@@ -133,8 +133,10 @@ def test_an_exception_reaches_its_caller_and_the_writer_goes_on(path: Path) -> N
 def test_close_drains_the_queue_then_closes(path: Path) -> None:
     async def main() -> None:
         writer = JournalWriter(Journal.open(path))
-        calls = [asyncio.create_task(writer.run(writer.journal.log_event, "e", {"n": n}))
-                 for n in range(50)]  # fmt: skip
+        calls = [
+            asyncio.create_task(writer.run(writer.journal.log_event, "e", {"n": n}))
+            for n in range(50)
+        ]
         closing = asyncio.create_task(writer.close())  # submitted after every call above
         ids = await asyncio.gather(*calls)
         await closing

@@ -67,14 +67,19 @@ def trust(server_folder: Path, cert: ClientCert) -> None:
 
 
 @asynccontextmanager
-async def session(url: str, cert: ClientCert | None, user: str | None = None,
-                  password: str | None = None) -> AsyncIterator[Client]:  # fmt: skip
+async def session(
+    url: str, cert: ClientCert | None, user: str | None = None, password: str | None = None
+) -> AsyncIterator[Client]:
     """A connected client: Basic256Sha256 Sign & Encrypt with ``cert`` (None: no security)."""
     client = Client(url, timeout=10)
     if cert is not None:
         client.application_uri = cert.uri
-        await client.set_security(SecurityPolicyBasic256Sha256, str(cert.cert), str(cert.key),
-                                  mode=ua.MessageSecurityMode.SignAndEncrypt)  # fmt: skip
+        await client.set_security(
+            SecurityPolicyBasic256Sha256,
+            str(cert.cert),
+            str(cert.key),
+            mode=ua.MessageSecurityMode.SignAndEncrypt,
+        )
     if user is not None:
         client.set_user(user)
         client.set_password(password or "")
@@ -112,8 +117,9 @@ class Rig:
 
 
 @asynccontextmanager
-async def rig(mock: Any, tmp_path: Path, *, trusted: bool = True,
-              **settings: Any) -> AsyncIterator[Rig]:  # fmt: skip
+async def rig(
+    mock: Any, tmp_path: Path, *, trusted: bool = True, **settings: Any
+) -> AsyncIterator[Rig]:
     """A controller on the mock loom, its OPC UA server, three users and a client (trusted
     unless ``trusted`` is false: then the state folder is as a fresh install leaves it)."""
     config = client_config("modbus", mock.ports)

@@ -69,13 +69,34 @@ def test_serve_stops_with_the_error_when_the_opcua_port_is_taken(tmp_path):
         held.listen()
         port = held.getsockname()[1]
         config = tmp_path / "bwsd.toml"
-        config.write_text(toml({"machine": MACHINE, "api": {"port": 0}, "plc": {"port": 0},
-                                "opcua": {"enabled": True, "port": port}}))  # fmt: skip
+        config.write_text(
+            toml(
+                {
+                    "machine": MACHINE,
+                    "api": {"port": 0},
+                    "plc": {"port": 0},
+                    "opcua": {"enabled": True, "port": port},
+                }
+            )
+        )
         served = subprocess.run(
-            [sys.executable, "-m", "bwsd.cli", "serve", "--config", str(config), "--state-dir",
-             str(tmp_path / "state")], capture_output=True, text=True, timeout=120, check=False,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "bwsd.cli",
+                "serve",
+                "--config",
+                str(config),
+                "--state-dir",
+                str(tmp_path / "state"),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
     assert served.returncode == 2, served.stderr
     assert served.stdout == ""  # never ready
-    assert served.stderr.endswith(f"bwsd: error: [opcua] cannot listen on 127.0.0.1:{port}: "
-                                  "Address already in use\n"), served.stderr[-300:]  # fmt: skip
+    assert served.stderr.endswith(
+        f"bwsd: error: [opcua] cannot listen on 127.0.0.1:{port}: Address already in use\n"
+    ), served.stderr[-300:]

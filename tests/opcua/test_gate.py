@@ -27,8 +27,10 @@ from tests.opcua.test_server import read
 V = ua.VariantType
 
 
-@pytest.mark.parametrize(("kind", "acts"), [(V.Int32, True), (V.Int16, True), (V.Double, False),
-                                            (V.UInt32, False), (V.String, False)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("kind", "acts"),
+    [(V.Int32, True), (V.Int16, True), (V.Double, False), (V.UInt32, False), (V.String, False)],
+)
 def test_a_command_written_as_a_wrong_type_acts_on_nothing(mock, tmp_path, kind, acts):
     """CntrlCmd as a PLC's INT (Int16) is the same number as Int32; any other type is
     refused (Bad_TypeMismatch) before the command runs: the loom does not move."""

@@ -18,8 +18,14 @@ from bwsd.opcua.space import NAMESPACE, TAGS, node_id
 from tests.opcua.conftest import TEXT, client_cert, loom, rig, run, session, var
 
 MAINTENANCE = ua.Variant(int(UnitMode.MAINTENANCE), ua.VariantType.Int32)
-EXPECTED_RUN = [State.RESETTING, State.IDLE, State.STARTING, State.EXECUTE, State.COMPLETING,
-                State.COMPLETE]  # fmt: skip
+EXPECTED_RUN = [
+    State.RESETTING,
+    State.IDLE,
+    State.STARTING,
+    State.EXECUTE,
+    State.COMPLETING,
+    State.COMPLETE,
+]
 
 
 class Changes:
@@ -60,8 +66,9 @@ def test_the_packml_object_is_browsed_with_types_units_and_methods(mock, tmp_pat
             children = {(await c.read_browse_name()).Name: c for c in await root.get_children()}
             assert {"Status", "Command", "Admin", "Machine"} <= set(children)
             assert {c.label for c in Command} | {"SetUnitMode"} <= set(children)
-            status = {(await c.read_browse_name()).Name
-                      for c in await children["Status"].get_children()}  # fmt: skip
+            status = {
+                (await c.read_browse_name()).Name for c in await children["Status"].get_children()
+            }
             assert {"StateCurrent", "UnitModeCurrent", "CurMachSpeed", "CurrentLine"} <= status
             state = await var(client, "Status/StateCurrent")
             assert state.nodeid == node_id(idx, "Status/StateCurrent")
@@ -89,8 +96,7 @@ def test_a_subscription_sees_every_transition_of_a_run_to_complete(slow_mock, tm
             )
             changes = Changes()
             sub = await client.create_subscription(20, changes)
-            await sub.subscribe_data_change(await var(client, "Status/StateCurrent"),
-                                            queuesize=100)  # fmt: skip
+            await sub.subscribe_data_change(await var(client, "Status/StateCurrent"), queuesize=100)
             await changes.until(lambda v: v == [State.STOPPED])
             await r.controller.load("braid.bws", TEXT)
             root = await loom(client)
@@ -200,11 +206,14 @@ def test_a_command_refused_in_the_wrong_state_says_why(mock, tmp_path):
                 await root.call_method(f"{idx}:Unhold")
             assert await read(client, "Status/CmdInvalid") is True
             reason = await read(client, "Status/CmdInvalidReason")
-            assert reason == ("Unhold is not accepted in state Stopped "
-                              "(accepted there: Reset, Abort)")  # fmt: skip
+            assert reason == (
+                "Unhold is not accepted in state Stopped (accepted there: Reset, Abort)"
+            )
             await root.call_method(f"{idx}:Reset")  # the next accepted one clears it
             assert (await read(client, "Status/CmdInvalid"), r.controller.packml.state) == (
-                False, State.IDLE)  # fmt: skip
+                False,
+                State.IDLE,
+            )
             cmd = await var(client, "Command/CntrlCmd")
             request = await var(client, "Command/CmdChangeRequest")
             with pytest.raises(ua.uaerrors.BadInvalidState):  # Start: no program is loaded
@@ -278,11 +287,15 @@ async def unsecured_session(url: str, user: str, password: str) -> Any:
     await client.send_hello()
     await client.open_secure_channel()  # None: allowed, for GetEndpoints (OPC 10000-4)
     params = ua.CreateSessionParameters(
-        ClientDescription=ua.ApplicationDescription(ApplicationUri="urn:intruder",
-                                                    ApplicationType=ua.ApplicationType.Client),
-        EndpointUrl=url, SessionName="intruder", ClientNonce=create_nonce(32),
-        RequestedSessionTimeout=60000, MaxResponseMessageSize=0,
-    )  # fmt: skip
+        ClientDescription=ua.ApplicationDescription(
+            ApplicationUri="urn:intruder", ApplicationType=ua.ApplicationType.Client
+        ),
+        EndpointUrl=url,
+        SessionName="intruder",
+        ClientNonce=create_nonce(32),
+        RequestedSessionTimeout=60000,
+        MaxResponseMessageSize=0,
+    )
     await client.uaclient.create_session(params)
     token = ua.UserNameIdentityToken(
         PolicyId="username", UserName=user, Password=password.encode(), EncryptionAlgorithm=None
@@ -296,17 +309,16 @@ def test_a_session_over_an_unsecured_channel_can_do_nothing(mock, tmp_path):
         async with rig(mock, tmp_path) as r:
             client = await unsecured_session(r.server.url, "operator", r.users["operator"])
             try:
-                idx = (await client.uaclient.read_attributes(
+                idx = await client.uaclient.read_attributes(
                     [ua.NodeId(ua.ObjectIds.Server_NamespaceArray)], ua.AttributeIds.Value
-                ))  # fmt: skip
+                )
                 pytest.fail(f"read over an unsecured channel: {idx}")
             except ua.uaerrors.BadUserAccessDenied:
                 pass
             idx = 0
             async with r.session("viewer") as secured:
                 idx = await secured.get_namespace_index(NAMESPACE)
-            call = ua.CallMethodRequest(ObjectId=node_id(idx, ""),
-                                        MethodId=node_id(idx, "Reset"))  # fmt: skip
+            call = ua.CallMethodRequest(ObjectId=node_id(idx, ""), MethodId=node_id(idx, "Reset"))
             with pytest.raises(ua.uaerrors.BadUserAccessDenied):
                 await client.uaclient.call([call])
             assert r.controller.packml.state is State.STOPPED

@@ -67,8 +67,14 @@ def test_asyncua_is_imported_off_the_event_loop(tmp_path):
         asyncio.run(main())
         print("main thread" if where and where[0] else "elsewhere" if where else "never")
     """)
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=180, check=False, cwd=tmp_path)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        check=False,
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.split() == ["elsewhere"], done.stdout
 
@@ -77,8 +83,13 @@ def test_serve_answers_healthz_while_opcua_starts(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
     config = _opcua_config(tmp_path)
-    served = subprocess.Popen([bwsd, "serve", "--config", str(config)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True, cwd=tmp_path)  # fmt: skip
+    served = subprocess.Popen(
+        [bwsd, "serve", "--config", str(config)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
     ready = threading.Event()
     lines: list[str] = []
     logged: queue.Queue[str] = queue.Queue()

@@ -25,20 +25,30 @@ from tests.fieldbus.conftest import BUS, MACHINE, start_mock, toml
 from tests.opcua.conftest import TEXT, client_cert, loom, run, session, trust, var
 from tests.test_daemon import Served
 
-READ = ("Status/StateCurrent", "Status/UnitModeCurrent", "Status/InstructionsDone",
-        "Status/InstructionCount", "Admin/StopReason/ID", "Machine/EStop")  # fmt: skip
+READ = (
+    "Status/StateCurrent",
+    "Status/UnitModeCurrent",
+    "Status/InstructionsDone",
+    "Status/InstructionCount",
+    "Admin/StopReason/ID",
+    "Machine/EStop",
+)
 
 
 def served_config(tmp: Path, modbus_port: int, **api: Any) -> Path:
     path = tmp / "bwsd.toml"
-    path.write_text(toml({
-        "machine": MACHINE,
-        "fieldbus": {"backend": "modbus", **BUS},
-        "fieldbus.modbus": {"port": modbus_port},
-        "api": {"port": 0, **api},
-        "plc": {"port": 0},
-        "opcua": {"enabled": True, "port": 0},
-    }))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": MACHINE,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": modbus_port},
+                "api": {"port": 0, **api},
+                "plc": {"port": 0},
+                "opcua": {"enabled": True, "port": 0},
+            }
+        )
+    )
     return path
 
 
@@ -91,8 +101,14 @@ async def _agree(served: Served, cert: Any, token: str) -> None:
             after = await rest(http)
             if before != after:
                 return None
-            plc_view = (tags.state_current, tags.unit_mode_current, tags.instruction_index,
-                        tags.instruction_count, tags.stop_reason, tags.estop)  # fmt: skip
+            plc_view = (
+                tags.state_current,
+                tags.unit_mode_current,
+                tags.instruction_index,
+                tags.instruction_count,
+                tags.stop_reason,
+                tags.estop,
+            )
             assert plc_view == before, f"Modbus {plc_view} != REST {before}"
             assert (*seen[:5], int(seen[5])) == before, f"OPC UA {seen} != REST {before}"
             return before

@@ -32,8 +32,10 @@ def run(scenario: Any) -> Any:
 @asynccontextmanager
 async def serving(action: Any, **hooks: Any) -> AsyncIterator[tuple[ModbusTcpServer, int]]:
     """A server of one device: registers 0..9 writable, 10..19 read-only, nothing beyond."""
-    holding = [SimData(0, count=10, datatype=DataType.REGISTERS),
-               SimData(10, count=10, datatype=DataType.REGISTERS, readonly=True)]  # fmt: skip
+    holding = [
+        SimData(0, count=10, datatype=DataType.REGISTERS),
+        SimData(10, count=10, datatype=DataType.REGISTERS, readonly=True),
+    ]
     device = SimDevice(id=UNIT, simdata=holding, action=action)
     server = ModbusTcpServer(device, address=("127.0.0.1", 0), **hooks)
     await server.serve_forever(background=True)

@@ -116,8 +116,12 @@ def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_pa
             running = await plc.command(START)
             assert running.state_current == State.EXECUTE and running.cmd_invalid == 0
             seen: list[tuple[int, int]] = []
-            end = await plc.until(lambda t: seen.append((t.state_current, t.instruction_index))
-                                  or t.state_current == State.COMPLETE)  # fmt: skip
+            end = await plc.until(
+                lambda t: (
+                    seen.append((t.state_current, t.instruction_index))
+                    or t.state_current == State.COMPLETE
+                )
+            )
             indices = [index for _, index in seen]
             assert indices == sorted(indices)  # the index only moves forward
             assert any(s == State.EXECUTE and 0 < i < 15 for s, i in seen)
@@ -174,8 +178,9 @@ def test_unit_mode_changes_in_idle_and_is_refused_in_execute(slow_mock, tmp_path
                 if mode := [e for e in journal.events(0, 100) if e.kind == "mode"]:
                     break
                 await asyncio.sleep(0.01)
-            assert [e.data for e in mode] == [{"from": "Production", "to": "Maintenance",
-                                               "by": "plc"}]  # fmt: skip
+            assert [e.data for e in mode] == [
+                {"from": "Production", "to": "Maintenance", "by": "plc"}
+            ]
             assert (await plc.command(START)).state_current == State.EXECUTE
             refused = await plc.mode(UnitMode.PRODUCTION)
             assert (refused.unit_mode_current, refused.cmd_invalid) == (UnitMode.MAINTENANCE, 1)
@@ -198,7 +203,10 @@ def test_a_pressed_estop_reads_1_and_refuses_reset_and_start(mock, tmp_path):
             await request(*control, {"cmd": "estop", "pressed": True})
             refused = await plc.command(RESET)
             assert (refused.state_current, refused.cmd_invalid, refused.estop) == (
-                State.STOPPED, 1, 1)  # fmt: skip
+                State.STOPPED,
+                1,
+                1,
+            )
             await request(*control, {"cmd": "estop", "pressed": False})
             idle = await plc.command(RESET)
             assert (idle.state_current, idle.cmd_invalid, idle.estop) == (State.IDLE, 0, 0)
@@ -309,13 +317,13 @@ def test_an_address_outside_the_allow_list_is_not_served(mock, tmp_path):
 
     async def scenario() -> None:
         async with rig(mock, tmp_path, allow=["127.0.0.1"]) as (ctl, _, plc):
-            stranger = AsyncModbusTcpClient("127.0.0.2", port=plc.port, timeout=1, retries=0,
-                                            source_address=("127.0.0.2", 0))  # fmt: skip
+            stranger = AsyncModbusTcpClient(
+                "127.0.0.2", port=plc.port, timeout=1, retries=0, source_address=("127.0.0.2", 0)
+            )
             await stranger.connect()
             answer = None
             with contextlib.suppress(ModbusException):
-                answer = await stranger.write_registers(REG_CNTRL_CMD, [RESET, 1],
-                                                        device_id=DEVICE)  # fmt: skip
+                answer = await stranger.write_registers(REG_CNTRL_CMD, [RESET, 1], device_id=DEVICE)
             stranger.close()
             assert answer is None or answer.isError()
             await asyncio.sleep(0.2)
@@ -328,8 +336,9 @@ def test_an_address_outside_the_allow_list_is_not_served(mock, tmp_path):
 def test_a_network_in_the_allow_list_admits_its_addresses(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path, allow=["127.0.0.0/30"]) as (_, _, plc):
-            other = AsyncModbusTcpClient("127.0.0.1", port=plc.port, timeout=2, retries=0,
-                                         source_address=("127.0.0.2", 0))  # fmt: skip
+            other = AsyncModbusTcpClient(
+                "127.0.0.1", port=plc.port, timeout=2, retries=0, source_address=("127.0.0.2", 0)
+            )
             assert await other.connect()
             answer = await other.read_holding_registers(0, count=REG_COUNT, device_id=DEVICE)
             other.close()
@@ -341,13 +350,15 @@ def test_a_network_in_the_allow_list_admits_its_addresses(mock, tmp_path):
 def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path, read_only=True) as (ctl, _, plc):
-            answer = await plc.client.write_registers(REG_CNTRL_CMD, [RESET, 1],
-                                                      device_id=DEVICE)  # fmt: skip
+            answer = await plc.client.write_registers(REG_CNTRL_CMD, [RESET, 1], device_id=DEVICE)
             assert answer.isError() and answer.exception_code == 1  # illegal function
             await asyncio.sleep(0.2)
             tags = await plc.tags()
             assert (tags.state_current, tags.cntrl_cmd, tags.cmd_change_request) == (
-                State.STOPPED, 0, 0)  # fmt: skip
+                State.STOPPED,
+                0,
+                0,
+            )
             assert ctl.packml.state is State.STOPPED
 
     run(scenario())

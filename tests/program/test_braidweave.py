@@ -54,8 +54,7 @@ def test_every_angle_goes_in_caught_and_the_braid_stays_one_preform():
 
 @pytest.mark.parametrize(("shape", "flange", "web"), [("L", (2, 6), (4, 2)), ("T", (2, 8), (4, 2))])
 def test_shaped_braid_weaves_take_wefts_across_the_junction(shape, flange, web):
-    gen = braid_weave(shape=shape, flange=flange, web=web, cycles=4, weft_every=2,
-                      angles=(0, 90))  # fmt: skip
+    gen = braid_weave(shape=shape, flange=flange, web=web, cycles=4, weft_every=2, angles=(0, 90))
     wefts = caught_and_connected(gen)
     assert {w.angle for w in wefts} == {0, 90}
     assert gen.machine.segments  # the corner lines' segments
@@ -92,11 +91,19 @@ def test_each_layer_lies_at_one_height_and_each_weft_is_held_twice():
 
 def _shed_of(gen: Generated, placer: Placer, weft: Weft) -> Shed:
     """The generator's shed for ``weft``: the one of its angle whose line lies nearest."""
-    section = parse_section(next(line.split(": ", 1)[1] for line in gen.program.splitlines()
-                                 if line.startswith("# section: ")))  # fmt: skip
+    section = parse_section(
+        next(
+            line.split(": ", 1)[1]
+            for line in gen.program.splitlines()
+            if line.startswith("# section: ")
+        )
+    )
     options = sheds(section, weft.angle)
-    lines = [(abs(c.x - weft.x) + abs(c.y - weft.y), s)
-             for s in options for c in placer.candidates(s, weft.z)]  # fmt: skip
+    lines = [
+        (abs(c.x - weft.x) + abs(c.y - weft.y), s)
+        for s in options
+        for c in placer.candidates(s, weft.z)
+    ]
     return min(lines, key=lambda pair: pair[0])[1]
 
 
@@ -157,17 +164,25 @@ def test_the_lines_of_an_angle():
         (lambda: braid_weave(cycles=5, weft_every=2), "must be a multiple of weft-every"),
         (lambda: braid_weave(angles=(float("nan"),)), "a finite number of degrees"),
         (lambda: braid_weave(2, 2, cycles=4, angles=(45,)), "no two neighbouring lines"),
-        (lambda: braid_weave(3, 3, cycles=2, diameter=6.0),
-         "a yarn diameter of 6 mm does not fit: it must be less than c_mat x the smaller"),
+        (
+            lambda: braid_weave(3, 3, cycles=2, diameter=6.0),
+            "a yarn diameter of 6 mm does not fit: it must be less than c_mat x the smaller",
+        ),
         # the L sizes whose diagonal layer used to be refused as a bare shed error: now the
         # generator names the weft whose shed no height opens
-        (lambda: braid_weave(shape="L"), r"layer 3, 45 degree weft between lines -4 and -3 "
-         r"\(cells \(4, 1\) to \(6, 2\)\): no height below the guides lets the whole 45 "
-         "degree layer in: this weft's shed is closed"),
-        (lambda: braid_weave(shape="L", flange=(3, 7), web=(7, 3)), "45 degree weft between "
-         "lines -8 and -7 .*: no height below the guides lets the whole 45 degree layer in"),
+        (
+            lambda: braid_weave(shape="L"),
+            r"layer 3, 45 degree weft between lines -4 and -3 "
+            r"\(cells \(4, 1\) to \(6, 2\)\): no height below the guides lets the whole 45 "
+            "degree layer in: this weft's shed is closed",
+        ),
+        (
+            lambda: braid_weave(shape="L", flange=(3, 7), web=(7, 3)),
+            "45 degree weft between "
+            "lines -8 and -7 .*: no height below the guides lets the whole 45 degree layer in",
+        ),
     ],
-)  # fmt: skip
+)
 def test_what_cannot_be_woven_is_refused_saying_why(call, message):
     with pytest.raises(ValueError, match=message):
         call()
@@ -187,11 +202,30 @@ def test_a_weft_the_twin_refuses_is_never_written():
 
 def test_the_command_line_prints_what_the_generator_makes(tmp_path):
     assert BWSD
-    done = subprocess.run([BWSD, "program", "braid-weave", "--cycles", "4", "--angles", "0,90",
-                           "--config-out", str(tmp_path / "c.toml")], capture_output=True,
-                          text=True, timeout=120, check=False)  # fmt: skip
+    done = subprocess.run(
+        [
+            BWSD,
+            "program",
+            "braid-weave",
+            "--cycles",
+            "4",
+            "--angles",
+            "0,90",
+            "--config-out",
+            str(tmp_path / "c.toml"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout == braid_weave(cycles=4, angles=(0, 90)).program
-    bad = subprocess.run([BWSD, "program", "braid-weave", "--angles", "0,x"],
-                         capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+    bad = subprocess.run(
+        [BWSD, "program", "braid-weave", "--angles", "0,x"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert bad.returncode == 2 and "expected angles in degrees" in bad.stderr

@@ -34,8 +34,16 @@ def _recorded_command(stem: str) -> list[str]:
 
 def test_every_example_has_a_config_and_a_registry_entry():
     assert sorted(EXAMPLES) == STEMS
-    assert {"twist", "braid-2x2", "weave-plain", "braid-L", "weave-U", "braid-24x24", "paper-L",
-            "paper-U"} <= set(STEMS)  # fmt: skip
+    assert {
+        "twist",
+        "braid-2x2",
+        "weave-plain",
+        "braid-L",
+        "weave-U",
+        "braid-24x24",
+        "paper-L",
+        "paper-U",
+    } <= set(STEMS)
     for stem in STEMS:
         assert (ROOT / "config" / f"{stem}.toml").is_file()
 

@@ -127,10 +127,12 @@ SECTIONS = [
 ]
 
 
-@pytest.mark.parametrize(("shape", "flange", "web", "segments", "carriers", "period", "k"),
-                         SECTIONS)  # fmt: skip
-def test_shaped_rules_mix_every_carrier_through_every_zone(shape, flange, web, segments,
-                                                           carriers, period, k):  # fmt: skip
+@pytest.mark.parametrize(
+    ("shape", "flange", "web", "segments", "carriers", "period", "k"), SECTIONS
+)
+def test_shaped_rules_mix_every_carrier_through_every_zone(
+    shape, flange, web, segments, carriers, period, k
+):
     sec = section(shape, flange=flange, web=web)
     rule, check = find_rule(sec, segments)
     assert (len(rule.carriers), check.legal, check.periodic) == (carriers, True, True)
@@ -167,8 +169,9 @@ STUDY = [  # (shape, flange, web, schedule, axis or None for whole lines, P, K)
 
 
 @pytest.mark.parametrize(("shape", "flange", "web", "which", "axis", "period", "k"), STUDY)
-def test_the_known_schedules_give_the_numbers_of_the_cell_grid_study(shape, flange, web, which,
-                                                                     axis, period, k):  # fmt: skip
+def test_the_known_schedules_give_the_numbers_of_the_cell_grid_study(
+    shape, flange, web, which, axis, period, k
+):
     """Each schedule on the size it was found for, as an independent checker counted it."""
     sec = section(shape, flange=flange, web=web)
     if axis is None:
@@ -224,8 +227,9 @@ def test_every_shaped_braid_is_one_preform_by_its_k_cycles(shape, flange, web, s
         ("T", (2, 7), (3, 2), True, "even number"),
     ],
 )
-def test_sizes_no_rule_mixes_are_refused_naming_sizes_that_do(shape, flange, web, segments,
-                                                              message):  # fmt: skip
+def test_sizes_no_rule_mixes_are_refused_naming_sizes_that_do(
+    shape, flange, web, segments, message
+):
     with pytest.raises(ValueError) as refused:
         braid4(shape=shape, flange=flange, web=web, segments=segments)
     text = str(refused.value)
@@ -298,8 +302,11 @@ def test_u_section_wefts_stop_at_the_opening():
 def test_a_yarn_too_thick_for_the_machine_is_refused_by_the_generator():
     """Warps start c_mat x pitch (5 mm here) apart at the fell: a 10 mm yarn cannot fit,
     which the generator says (it used to search for an open shed and report none)."""
-    with pytest.raises(ValueError, match=r"a yarn diameter of 10 mm does not fit: it must be "
-                       r"less than c_mat x the smaller pitch \(5 mm\)"):  # fmt: skip
+    with pytest.raises(
+        ValueError,
+        match=r"a yarn diameter of 10 mm does not fit: it must be "
+        r"less than c_mat x the smaller pitch \(5 mm\)",
+    ):
         weave_plain(4, cycles=1, diameter=10.0)
 
 

@@ -23,8 +23,9 @@ PAPER = {"paper-L": 504, "paper-U": 610}  # the paper's interferences for its 10
 def _results() -> dict[str, dict[str, str]]:
     """The rows of the doc's first table with a ``contacts (bwsd)`` column, by example."""
     lines = DOC.read_text(encoding="utf-8").splitlines()
-    start = next(i for i, line in enumerate(lines)
-                 if line.startswith("|") and "contacts (bwsd)" in line)  # fmt: skip
+    start = next(
+        i for i, line in enumerate(lines) if line.startswith("|") and "contacts (bwsd)" in line
+    )
     header = _cells(lines[start])
     rows = {}
     for line in lines[start + 2 :]:
@@ -96,7 +97,13 @@ def test_the_measured_table_sets_no_ratio_across_hardware_and_the_doc_says_what_
     text = DOC.read_text(encoding="utf-8")
     assert "## What the paper compares, and what is still open" in text
     section = text.split("## What the paper compares, and what is still open")[1]
-    for item in ("width and thickness", "braid angle", "relaxation", "tension equilibrium",
-                 "non-circular sections", "weft crimp"):  # fmt: skip
+    for item in (
+        "width and thickness",
+        "braid angle",
+        "relaxation",
+        "tension equilibrium",
+        "non-circular sections",
+        "weft crimp",
+    ):
         assert f"| {item}" in section, item
     assert "138.15 s" in text and "376 s" in text  # the paper's times, quoted as its own

@@ -27,8 +27,9 @@ def test_the_woven_u_keeps_its_legs_base_and_opening_between_fell_and_guide_scal
     x0, x1 = guides_x[LEG - 1] + p / 2, guides_x[WARPS - LEG] - p / 2
     y1 = guides_y[LAYERS - BASE] - p / 2
     for z in np.linspace(lo, hi, 7):
-        points = np.array([(c.x, c.y) for c in crossings(sk, float(z))
-                           if sk.yarns[c.yarn].kind == "warp"])  # fmt: skip
+        points = np.array(
+            [(c.x, c.y) for c in crossings(sk, float(z)) if sk.yarns[c.yarn].kind == "warp"]
+        )
         assert len(points) == len(warps), z  # each warp crosses once
         width, height = np.ptp(points[:, 0]), np.ptp(points[:, 1])
         assert m.c_mat * guide_w <= width <= guide_w + 2 * m.yarn_diameter, (z, width)

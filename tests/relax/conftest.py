@@ -23,8 +23,9 @@ EXAMPLES = ["twist", "braid-2x2", "weave-U", "paper-U", "braid-L", "paper-L"]
 @cache
 def simulated(name: str) -> tuple[SkeletonData, Program]:
     """The twin's skeleton of a shipped example, and its program."""
-    return simulate_program(str(ROOT / "config" / f"{name}.toml"),
-                            str(ROOT / "examples" / f"{name}.bws"))  # fmt: skip
+    return simulate_program(
+        str(ROOT / "config" / f"{name}.toml"), str(ROOT / "examples" / f"{name}.bws")
+    )
 
 
 def twin_of(name: str) -> SkeletonData:

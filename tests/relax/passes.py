@@ -19,8 +19,15 @@ from bwsd.twin.skeleton import FloatArray, IntArray
 DEPTH = 40
 
 
-def _distance(old: FloatArray, new: FloatArray, a: IntArray, b: IntArray, i: IntArray,
-              j: IntArray, t: FloatArray) -> FloatArray:  # fmt: skip
+def _distance(
+    old: FloatArray,
+    new: FloatArray,
+    a: IntArray,
+    b: IntArray,
+    i: IntArray,
+    j: IntArray,
+    t: FloatArray,
+) -> FloatArray:
     """Distance of the segment pairs (i, j) at times t of the step."""
 
     def at(n: IntArray) -> FloatArray:
@@ -30,8 +37,9 @@ def _distance(old: FloatArray, new: FloatArray, a: IntArray, b: IntArray, i: Int
     return closest(at(a[i]), at(b[i]), at(a[j]), at(b[j]))[2]
 
 
-def passes_through(old: FloatArray, new: FloatArray, a: IntArray, b: IntArray,
-                   yarn: IntArray) -> int:  # fmt: skip
+def passes_through(
+    old: FloatArray, new: FloatArray, a: IntArray, b: IntArray, yarn: IntArray
+) -> int:
     """How many pairs of segments (ends ``a``, ``b``; ``yarn`` per segment) meet during the
     step from ``old`` to ``new`` positions."""
     move = np.linalg.norm(new - old, axis=1)

@@ -37,26 +37,42 @@ def test_a_machine_with_more_axes_than_node_ids_is_served_over_modbus_only():
         "node ids 1..127"
     )
     assert MockLoom(over, []).hub is None
-    with pytest.raises(ConfigError, match=r"\[fieldbus\.canopen\.node_base\]: the drives of "
-                       r"its 128 axes"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"\[fieldbus\.canopen\.node_base\]: the drives of "
+        r"its 128 axes",
+    ):
         MockLoom(over, [], canopen=True)
 
 
 def test_the_mock_loom_says_when_it_serves_modbus_only(tmp_path: Path):
     config = tmp_path / "mock.toml"
-    config.write_text(toml({"machine": segmented(82), "simulator": {"modbus_port": 0,
-                            "socketcand_port": 0, "control_port": 0}}))  # fmt: skip
-    mock = subprocess.Popen([sys.executable, "-m", "simulator_hw", "--config", str(config)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                            stdin=subprocess.DEVNULL)  # fmt: skip
+    config.write_text(
+        toml(
+            {
+                "machine": segmented(82),
+                "simulator": {"modbus_port": 0, "socketcand_port": 0, "control_port": 0},
+            }
+        )
+    )
+    mock = subprocess.Popen(
+        [sys.executable, "-m", "simulator_hw", "--config", str(config)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+    )
     try:
         assert mock.stdout is not None and mock.stderr is not None
         line = mock.stdout.readline()
         assert line.startswith("ready "), line + mock.stderr.read()
         assert [p.split("=")[0] for p in line.split()[1:]] == ["modbus", "control"]
-        assert mock.stderr.readline() == ("simulator_hw: serving Modbus only: the drives of its "
-                                          "128 axes (nodes 1..128) and the I/O node 127 do not "
-                                          "fit CANopen node ids 1..127\n")  # fmt: skip
+        assert mock.stderr.readline() == (
+            "simulator_hw: serving Modbus only: the drives of its "
+            "128 axes (nodes 1..128) and the I/O node 127 do not "
+            "fit CANopen node ids 1..127\n"
+        )
     finally:
         mock.terminate()
         mock.communicate(timeout=20)

@@ -60,8 +60,14 @@ async def rig(speeds: Speeds | None = None) -> AsyncIterator[Rig]:
     loom = Loom(MACHINE, [(0, 0), (1, 2)], speeds or Speeds())
     hub = SocketcandHub(faults=loom.faults)
     await hub.start()
-    drives = CanopenLoom(loom, hub.local_channel, node_base=NODE_BASE, io_node=IO_NODE,
-                         heartbeat_ms=20, loop=asyncio.get_running_loop())  # fmt: skip
+    drives = CanopenLoom(
+        loom,
+        hub.local_channel,
+        node_base=NODE_BASE,
+        io_node=IO_NODE,
+        heartbeat_ms=20,
+        loop=asyncio.get_running_loop(),
+    )
     drives.start()
     network = canopen.Network()
     network.NOTIFIER_CYCLE = 0.05

@@ -72,8 +72,10 @@ def test_a_browsers_cross_origin_post_never_reaches_the_loom():
         try:
             body = b'{"cmd": "estop", "pressed": true}\n'
             reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
-            head = (b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n"
-                    b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n")  # fmt: skip
+            head = (
+                b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n"
+                b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n"
+            )
             writer.write(head + body)
             await writer.drain()
             answered = await asyncio.wait_for(reader.read(), 10)  # until the loom closes it

@@ -99,8 +99,15 @@ def test_quick_stop_and_home(kind):
 
 
 # A 3 x 6 loom with segments of row 1 (cells 0..2) and column 4 (cells 0..1): axes 12, 13.
-SEGMENTED = Machine(rows=3, cols=6, pitch_x=10, pitch_y=20, d_mat=100, c_mat=0.5,
-                    segments=(Segment("row", 1, 0, 2), Segment("col", 4, 0, 1)))  # fmt: skip
+SEGMENTED = Machine(
+    rows=3,
+    cols=6,
+    pitch_x=10,
+    pitch_y=20,
+    d_mat=100,
+    c_mat=0.5,
+    segments=(Segment("row", 1, 0, 2), Segment("col", 4, 0, 1)),
+)
 ROW1_SEGMENT, COL4_SEGMENT = 12, 13
 
 
@@ -126,11 +133,13 @@ def test_a_segment_stroke_latches_only_the_cases_on_its_cells():
 
 @pytest.mark.parametrize(
     ("fill", "axis", "cells_"),
-    [([(1, 2), (1, 3)], ROW1_SEGMENT, 1),  # (1, 2) would leave the segment for the empty (1, 3)
-     ([(1, 0)], ROW1_SEGMENT, -1),  # (1, 0) would leave the matrix
-     ([(1, 4), (2, 4)], COL4_SEGMENT, 1),  # (1, 4) would leave it onto the case at (2, 4)
-     ([(1, 4)], COL4_SEGMENT, 1)],  # (1, 4) would leave it for the empty (2, 4)
-)  # fmt: skip
+    [
+        ([(1, 2), (1, 3)], ROW1_SEGMENT, 1),  # (1, 2) would leave the segment for the empty (1, 3)
+        ([(1, 0)], ROW1_SEGMENT, -1),  # (1, 0) would leave the matrix
+        ([(1, 4), (2, 4)], COL4_SEGMENT, 1),  # (1, 4) would leave it onto the case at (2, 4)
+        ([(1, 4)], COL4_SEGMENT, 1),
+    ],  # (1, 4) would leave it for the empty (2, 4)
+)
 def test_a_segment_stroke_off_its_cells_jams_and_nothing_moves(fill, axis, cells_):
     loom = Loom(SEGMENTED, fill, Speeds())
     pitch = 10_000 if axis == ROW1_SEGMENT else 20_000

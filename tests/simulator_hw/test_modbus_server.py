@@ -36,8 +36,9 @@ LIMIT = scaled(3.0)  # s: a bound for waiting, never an expected duration
 
 
 @asynccontextmanager
-async def serving(loom: Loom, device_id: int = 1,
-                  version: int = MAP_VERSION) -> AsyncIterator[ModbusLoomServer]:  # fmt: skip
+async def serving(
+    loom: Loom, device_id: int = 1, version: int = MAP_VERSION
+) -> AsyncIterator[ModbusLoomServer]:
     server = ModbusLoomServer(loom, "127.0.0.1", 0, device_id, version)
     await server.start()
     try:
@@ -122,9 +123,16 @@ def test_a_shift_stroke_moves_the_cases_and_completes():
 
 
 def test_each_shift_axis_says_which_cells_it_moves():
-    segmented = Machine(rows=2, cols=3, pitch_x=10, pitch_y=10, d_mat=100, c_mat=0.5,
-                        segments=(Segment("row", 1, 1, 2), Segment("col", 0, 0, 1)),
-                        weft_axes=())  # fmt: skip
+    segmented = Machine(
+        rows=2,
+        cols=3,
+        pitch_x=10,
+        pitch_y=10,
+        d_mat=100,
+        c_mat=0.5,
+        segments=(Segment("row", 1, 1, 2), Segment("col", 0, 0, 1)),
+        weft_axes=(),
+    )
 
     async def test(client: AsyncModbusTcpClient) -> None:
         assert await regs(client, 1, 1) == [N + 2]
@@ -143,8 +151,7 @@ def test_each_shift_axis_says_which_cells_it_moves():
 
 def test_a_machine_beyond_the_map_is_refused_by_the_server():
     segments = tuple(Segment("row", r, 2 * j, 2 * j + 1) for r in range(100) for j in range(39))
-    huge = Machine(rows=100, cols=100, pitch_x=1, pitch_y=1, d_mat=10, c_mat=0.5,
-                   segments=segments)  # fmt: skip
+    huge = Machine(rows=100, cols=100, pitch_x=1, pitch_y=1, d_mat=10, c_mat=0.5, segments=segments)
     with pytest.raises(FieldbusError, match="at most 4089 axes, the machine has 4106"):
         ModbusLoomServer(Loom(huge, [], Speeds()))
 
@@ -383,8 +390,10 @@ def test_a_claim_is_refused_while_another_client_holds_the_loom():
 
 def test_map_2_is_still_served_when_asked_for():
     async def scenario() -> None:
-        async with serving(Loom(MACHINE, [(0, 0)], Speeds()), version=2) as server, \
-                client_of(server) as client:  # fmt: skip
+        async with (
+            serving(Loom(MACHINE, [(0, 0)], Speeds()), version=2) as server,
+            client_of(server) as client,
+        ):
             assert (await regs(client, 0, 4)) == [2, N, 2, 3]
             assert (await client.read_input_registers(0, count=1, device_id=1)).isError()
             assert (await client.read_holding_registers(6, count=1, device_id=1)).isError()

@@ -61,14 +61,22 @@ def reference(kind: str, params: dict[str, Any]) -> dict[str, Any]:
     sk = twin.skeleton()
     band = section(sk)
     z = None if band is None else (band["z"][0] + band["z"][1]) / 2
-    return metrics(sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named,
-                   visits=visits)  # fmt: skip
+    return metrics(
+        sk, program.cycle_length, takeups=takeups_of(program), z=z, named=named, visits=visits
+    )
 
 
 def bwsd(*args: str, cwd: Path, timeout: float = 180) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    return subprocess.run([sys.executable, "-m", "bwsd.cli", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=cwd, env=env, check=False)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "bwsd.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+        env=env,
+        check=False,
+    )
 
 
 def without_timing(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

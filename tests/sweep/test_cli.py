@@ -35,11 +35,20 @@ def test_csv_beside_an_output_named_csv_is_refused(tmp_path, capsys):
 
 
 def test_the_shipped_example_runs_by_name(tmp_path):
-    run = bwsd("sweep", "example:braid-angle.sweep.toml", "-o", "b.parquet", "--workers", "2",
-               "--csv", cwd=tmp_path)  # fmt: skip
+    run = bwsd(
+        "sweep",
+        "example:braid-angle.sweep.toml",
+        "-o",
+        "b.parquet",
+        "--workers",
+        "2",
+        "--csv",
+        cwd=tmp_path,
+    )
     assert run.returncode == 0, run.stderr
-    assert run.stdout.startswith("b.parquet: 24 candidates, 23 ok, 1 refused; 0 already done, "
-                                 "24 run now (2 workers, ")  # fmt: skip
+    assert run.stdout.startswith(
+        "b.parquet: 24 candidates, 23 ok, 1 refused; 0 already done, 24 run now (2 workers, "
+    )
     table = pq.read_table(tmp_path / "b.parquet")
     assert table.num_rows == 24 and (tmp_path / "b.csv").exists()
     assert sorted(set(table.column("c_mat").to_pylist())) == [0.3, 0.5, 0.7]
@@ -58,10 +67,18 @@ def test_without_the_sweep_extra_the_command_names_it_and_writes_nothing(tmp_pat
     )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), str(ROOT)])}
     spec = write(tmp_path, '[sweep]\ngenerator = "twist"\n')
-    for args in (["sweep", str(spec), "-o", "r.parquet"], ["sweep", "plot", "r.parquet",
-                                                          "--x", "a", "--y", "b"]):  # fmt: skip
-        run = subprocess.run([sys.executable, "-m", "bwsd.cli", *args], cwd=tmp_path, env=env,
-                             capture_output=True, text=True, check=False)  # fmt: skip
+    for args in (
+        ["sweep", str(spec), "-o", "r.parquet"],
+        ["sweep", "plot", "r.parquet", "--x", "a", "--y", "b"],
+    ):
+        run = subprocess.run(
+            [sys.executable, "-m", "bwsd.cli", *args],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
         assert run.returncode == 2, run.stderr
         assert "needs " in run.stderr and "pip install 'bwsd[sweep]'" in run.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site", "spec.toml"]

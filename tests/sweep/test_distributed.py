@@ -26,8 +26,9 @@ DASK = str(Path(sys.executable).parent / "dask")
 
 def _start(args: list[str], folder: Path, name: str) -> subprocess.Popen[bytes]:
     log = open(folder / f"{name}.log", "wb")  # noqa: SIM115 - the process owns it
-    return subprocess.Popen([DASK, *args], cwd=folder, stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True)  # fmt: skip
+    return subprocess.Popen(
+        [DASK, *args], cwd=folder, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+    )
 
 
 def _stop(proc: subprocess.Popen[bytes]) -> None:
@@ -55,14 +56,46 @@ def cluster(tmp_path_factory) -> Iterator[str]:
     """The address of a scheduler with two one-thread workers, all on 127.0.0.1."""
     folder = tmp_path_factory.mktemp("dask")
     file = folder / "scheduler.json"
-    procs = [_start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                     "--scheduler-file", str(file)], folder, "scheduler")]  # fmt: skip
+    procs = [
+        _start(
+            [
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(file),
+            ],
+            folder,
+            "scheduler",
+        )
+    ]
     try:
         address = _address(file, procs[0])
         for name in ("one", "two"):
-            procs.append(_start(["worker", address, "--host", "127.0.0.1", "--nthreads", "1",
-                                 "--nworkers", "1", "--no-dashboard", "--name", name,
-                                 "--local-directory", str(folder)], folder, name))  # fmt: skip
+            procs.append(
+                _start(
+                    [
+                        "worker",
+                        address,
+                        "--host",
+                        "127.0.0.1",
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                        "--name",
+                        name,
+                        "--local-directory",
+                        str(folder),
+                    ],
+                    folder,
+                    name,
+                )
+            )
         with Client(address, timeout="30s") as client:
             client.wait_for_workers(2, timeout=60)
         assert address.startswith("tcp://127.0.0.1:")
@@ -75,8 +108,17 @@ def cluster(tmp_path_factory) -> Iterator[str]:
 def test_a_sweep_on_a_scheduler_runs_on_its_workers_and_equals_one_by_one(cluster, tmp_path):
     spec_path = write(tmp_path, BRAID_SPEC)
     output = tmp_path / "remote.parquet"
-    run = bwsd("sweep", str(spec_path), "-o", str(output), "--scheduler", cluster, "--batch",
-               "1", cwd=tmp_path)  # fmt: skip
+    run = bwsd(
+        "sweep",
+        str(spec_path),
+        "-o",
+        str(output),
+        "--scheduler",
+        cluster,
+        "--batch",
+        "1",
+        cwd=tmp_path,
+    )
     assert run.returncode == 0, run.stderr
     assert "20 candidates, 20 ok, 0 refused; 0 already done, 20 run now (2 workers, " in run.stdout
     rows = pq.read_table(output).to_pylist()
@@ -89,8 +131,15 @@ def test_a_sweep_on_a_scheduler_runs_on_its_workers_and_equals_one_by_one(cluste
 
 def test_refusals_on_a_scheduler_are_rows(cluster, tmp_path):
     output = tmp_path / "weave.parquet"
-    run = bwsd("sweep", str(write(tmp_path, WEAVE_SPEC)), "-o", str(output), "--scheduler",
-               cluster, cwd=tmp_path)  # fmt: skip
+    run = bwsd(
+        "sweep",
+        str(write(tmp_path, WEAVE_SPEC)),
+        "-o",
+        str(output),
+        "--scheduler",
+        cluster,
+        cwd=tmp_path,
+    )
     assert run.returncode == 0, run.stderr
     rows = pq.read_table(output).to_pylist()
     assert [r["stage"] for r in rows] == [None, "simulate", "validate", "validate"]

@@ -28,10 +28,14 @@ def _rows(**change):
 
 
 def test_one_line_per_hue_value_through_the_mean_of_each_point():
-    rows = [_rows(takeup=1.0, angle_warp=10.0), _rows(takeup=2.0, angle_warp=8.0),
-            _rows(takeup=2.0, angle_warp=6.0), _rows(c_mat=0.6, angle_warp=12.0),
-            _rows(c_mat=0.6, takeup=3.0, angle_warp=None),
-            _rows(c_mat=0.9, status="refused", angle_warp=None)]  # fmt: skip
+    rows = [
+        _rows(takeup=1.0, angle_warp=10.0),
+        _rows(takeup=2.0, angle_warp=8.0),
+        _rows(takeup=2.0, angle_warp=6.0),
+        _rows(c_mat=0.6, angle_warp=12.0),
+        _rows(c_mat=0.6, takeup=3.0, angle_warp=None),
+        _rows(c_mat=0.9, status="refused", angle_warp=None),
+    ]
     fig = figure(rows, "takeup", "angle_warp", "c_mat")
     lines = fig.axes[0].get_lines()
     assert [line.get_label() for line in lines] == ["0.3", "0.6"]  # refused: no line
@@ -57,13 +61,35 @@ def test_the_png_has_a_line_of_each_colour(results, tmp_path):
 
 
 def test_plot_command_and_its_errors(results, tmp_path):
-    run = bwsd("sweep", "plot", str(results), "--x", "takeup", "--y", "contacts", "--hue",
-               "cycles", "-o", str(tmp_path / "c.png"), cwd=tmp_path)  # fmt: skip
+    run = bwsd(
+        "sweep",
+        "plot",
+        str(results),
+        "--x",
+        "takeup",
+        "--y",
+        "contacts",
+        "--hue",
+        "cycles",
+        "-o",
+        str(tmp_path / "c.png"),
+        cwd=tmp_path,
+    )
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == f"{tmp_path / 'c.png'}: contacts against takeup, 2 lines"
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    bad = bwsd("sweep", "plot", str(results), "--x", "take_up", "--y", "contacts",
-               "-o", str(tmp_path / "d.png"), cwd=tmp_path)  # fmt: skip
+    bad = bwsd(
+        "sweep",
+        "plot",
+        str(results),
+        "--x",
+        "take_up",
+        "--y",
+        "contacts",
+        "-o",
+        str(tmp_path / "d.png"),
+        cwd=tmp_path,
+    )
     assert bad.returncode == 2
     assert "bwsd: error: --x take_up: no such column (columns: id, index, rows" in bad.stderr
     assert not (tmp_path / "d.png").exists()

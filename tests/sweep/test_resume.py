@@ -57,9 +57,13 @@ def test_a_killed_sweep_resumes_without_redoing_finished_candidates(tmp_path):
     output = tmp_path / "slow.parquet"
     log = log_path(output)
     args = ["sweep", str(spec_path), "-o", str(output), "--workers", "1", "--batch", "1"]
-    proc = subprocess.Popen([sys.executable, "-m", "bwsd.cli", *args], cwd=tmp_path,
-                            start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bwsd.cli", *args],
+        cwd=tmp_path,
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     _kill_when_rows(proc, log, 4)
     assert proc.returncode == -signal.SIGKILL
     assert not output.exists()

@@ -29,8 +29,14 @@ def test_a_grid_is_every_combination_in_order_with_stable_ids(tmp_path):
     first = spec.candidates()
     assert len(first) == 20
     assert [c.index for c in first] == list(range(20))
-    assert first[0].columns == {"rows": 3, "cols": 3, "diameter": 0.5, "takeup": 2.0,
-                                "c_mat": 0.3, "cycles": 12}  # fmt: skip
+    assert first[0].columns == {
+        "rows": 3,
+        "cols": 3,
+        "diameter": 0.5,
+        "takeup": 2.0,
+        "c_mat": 0.3,
+        "cycles": 12,
+    }
     assert isinstance(first[0].params["takeup"], float)  # 2 in TOML, a float parameter
     again = load_spec(write(tmp_path, BRAID_SPEC, "again.toml")).candidates()
     assert [c.id for c in again] == [c.id for c in first]
@@ -51,8 +57,10 @@ def test_a_random_sample_is_the_same_for_the_same_seed_and_differs_for_another(t
 
 
 def test_a_random_draw_repeated_is_one_candidate(tmp_path):
-    text = RANDOM.replace('takeup = { low = 1.0, high = 5.0 }\nrows = { low = 2, high = 3 }\n',
-                          "takeup = [1.0, 2.0]\n")  # fmt: skip
+    text = RANDOM.replace(
+        "takeup = { low = 1.0, high = 5.0 }\nrows = { low = 2, high = 3 }\n",
+        "takeup = [1.0, 2.0]\n",
+    )
     spec = load_spec(write(tmp_path, text))
     found = spec.candidates()
     assert len(found) == 4  # 2 take-ups x 2 flanges drawn 30 times
@@ -63,9 +71,11 @@ def test_a_random_draw_repeated_is_one_candidate(tmp_path):
 def test_a_fixed_program_sweeps_its_config_keys(tmp_path):
     spec = load_spec(write(tmp_path, WEAVE_SPEC))
     assert [c.columns for c in spec.candidates()] == [
-        {"rows": 3, "pitch": 10.0}, {"rows": 3, "pitch": 5.0},
-        {"rows": 2, "pitch": 10.0}, {"rows": 2, "pitch": 5.0},
-    ]  # fmt: skip
+        {"rows": 3, "pitch": 10.0},
+        {"rows": 3, "pitch": 5.0},
+        {"rows": 2, "pitch": 10.0},
+        {"rows": 2, "pitch": 5.0},
+    ]
 
 
 def test_file_names_are_relative_to_the_spec(tmp_path):

@@ -373,10 +373,9 @@ class RefTwin:
             lo, hi = span if span is not None else (0, (cols if shift.axis == "row" else rows) - 1)
             along = 1 if shift.axis == "row" else 0  # the coordinate that changes
             cells = sorted(
-                (cell for cell in occupied
-                 if cell[1 - along] == line and lo <= cell[along] <= hi),
+                (cell for cell in occupied if cell[1 - along] == line and lo <= cell[along] <= hi),
                 key=lambda c: c[along],
-            )  # fmt: skip
+            )
             if k > 0:
                 cells.reverse()  # the leading case first
             for cell in cells:

@@ -48,8 +48,10 @@ def _valid(occupied: set[tuple[int, int]], machine: Machine, ins: Shift) -> set 
 def segments(draw, machine: Machine) -> Machine:
     """``machine`` with a segment on some of its lines (cells first..last along the line)."""
     found = []
-    for axis, lines, along in (("row", machine.rows, machine.cols), ("col", machine.cols,
-                                                                      machine.rows)):  # fmt: skip
+    for axis, lines, along in (
+        ("row", machine.rows, machine.cols),
+        ("col", machine.cols, machine.rows),
+    ):
         for line in range(lines):
             if draw(st.booleans()):
                 lo = draw(st.integers(0, along - 2))
@@ -255,8 +257,11 @@ def kernel_path(request, monkeypatch):
 
 
 @pytest.mark.parametrize("kernel_path", ["exact-only", "one-cell", "fine-cells"], indirect=True)
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-          HealthCheck.function_scoped_fixture])  # fmt: skip
+@settings(
+    max_examples=15,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(braids())
 @example(FLAT_CROSSING)
 def test_every_kernel_path_matches_reference(kernel_path, case):

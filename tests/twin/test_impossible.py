@@ -19,8 +19,9 @@ from tests.twin.conftest import WORKED_CYCLE, WORKED_FILL, assert_same
 from tests.twin.reference import Jam, RefTwin
 
 
-def _until_jam(machine: Machine, fill, diameter: float,
-               instructions: list[Instruction]) -> tuple[Twin, RefTwin, JamError]:  # fmt: skip
+def _until_jam(
+    machine: Machine, fill, diameter: float, instructions: list[Instruction]
+) -> tuple[Twin, RefTwin, JamError]:
     """Run kernel and reference side by side up to the first jam, which both must refuse
     alike; then both hold the state before it."""
     twin, ref = Twin(machine, fill, diameter), RefTwin(machine, list(fill), diameter)
@@ -44,8 +45,9 @@ def test_the_twist_that_winds_up_is_refused_as_a_jam_at_the_same_instruction_as_
     generated = GENERATORS["twist"](turns=100)
     program = parse_program(generated.program)
     machine = generated.machine
-    twin, _, exc = _until_jam(machine, program.fill, machine.yarn_diameter,
-                              list(program.instructions))  # fmt: skip
+    twin, _, exc = _until_jam(
+        machine, program.fill, machine.yarn_diameter, list(program.instructions)
+    )
     assert exc.instruction == 114
     assert sorted(exc.yarns) == [0, 1]
     guides = machine.d_mat
@@ -67,8 +69,12 @@ def test_a_runaway_take_up_is_refused_as_a_jam_early():
         simulate(generated.machine, program)
     refused = found.value.instruction
     assert refused < 60
-    twin, _, exc = _until_jam(generated.machine, program.fill, generated.machine.yarn_diameter,
-                              list(program.instructions[:refused]))  # fmt: skip
+    twin, _, exc = _until_jam(
+        generated.machine,
+        program.fill,
+        generated.machine.yarn_diameter,
+        list(program.instructions[:refused]),
+    )
     assert exc.instruction == refused
     assert twin.contact_count < 100
 

@@ -83,8 +83,9 @@ def test_neighbours_in_sorted_order_find_exactly_the_overlaps_every_pair_finds(s
     segments = []
     for _ in range(rng.randint(2, 9)):
         lo = rng.randint(0, 10)
-        segments.append(Segment(rng.choice(("row", "col")), rng.randint(0, 2), lo,
-                                rng.randint(lo + 1, 12)))  # fmt: skip
+        segments.append(
+            Segment(rng.choice(("row", "col")), rng.randint(0, 2), lo, rng.randint(lo + 1, 12))
+        )
     pair = first_overlap(segments)
     assert (pair is not None) == _brute_force_overlaps(segments)
     if pair is not None:
@@ -96,8 +97,12 @@ def test_neighbours_in_sorted_order_find_exactly_the_overlaps_every_pair_finds(s
 def test_a_full_tiling_of_every_line_is_accepted():
     """Every row and column of a 12x12 matrix cut into pairs of cells: 144 segments, none
     overlapping, declared in shuffled order."""
-    tiles = [Segment(axis, line, lo, lo + 1) for axis in ("row", "col") for line in range(12)
-             for lo in range(0, 12, 2)]  # fmt: skip
+    tiles = [
+        Segment(axis, line, lo, lo + 1)
+        for axis in ("row", "col")
+        for line in range(12)
+        for lo in range(0, 12, 2)
+    ]
     random.Random(7).shuffle(tiles)
     assert len(machine(*tiles, rows=12, cols=12).segments) == 144
     with pytest.raises(ValueError, match=r"overlaps"):

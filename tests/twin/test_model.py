@@ -108,8 +108,13 @@ def test_a_prediction_is_immutable():
     pred = twin.predict(WORKED_CYCLE[1])
     with pytest.raises(FrozenInstanceError):
         pred.index = 3  # type: ignore[misc]
-    for table in (pred.occupancy, pred.contact_table, pred.node_table, pred.moved_table,
-                  pred.length_table):  # fmt: skip
+    for table in (
+        pred.occupancy,
+        pred.contact_table,
+        pred.node_table,
+        pred.moved_table,
+        pred.length_table,
+    ):
         with pytest.raises(ValueError):
             table.flat[0] = 7
 

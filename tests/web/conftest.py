@@ -24,9 +24,17 @@ __all__ = ["Browsing", "browser", "live", "mock", "page", "slow_live", "slow_moc
 
 CHROMIUM = os.environ.get("BWSD_CHROMIUM", "/usr/bin/chromium")
 # Headless, and quiet: this machine's network is closed, so nothing that phones home.
-ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--disable-quic", "--disable-default-apps"]  # fmt: skip
+ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-quic",
+    "--disable-default-apps",
+]
 MS = int(WAIT * 1000)
 _DRIVER_NOTE = re.compile(r"\[\.WebGL-[0-9a-fx]+\]GL Driver Message \(OpenGL, Performance,")
 

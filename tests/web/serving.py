@@ -32,9 +32,17 @@ def serve(tmp: Path, machine: dict[str, object], text: str) -> tuple[Served, Moc
     token: the daemon, the loom and the token; the caller stops both."""
     mock = start_mock(tmp, {}, machine=machine, program=text)
     config = tmp / "bwsd.toml"
-    config.write_text(toml({"machine": machine, "fieldbus": {"backend": "modbus", **BUS},
-                            "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                            "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
+    config.write_text(
+        toml(
+            {
+                "machine": machine,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0},
+            }
+        )
+    )
     state = tmp / "state"
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")
@@ -55,6 +63,7 @@ def api_client(live: Live, role: str) -> httpx.Client:
 def loom_control(mock: Mock, message: dict[str, Any]) -> None:
     """A request on the mock loom's control channel (in a thread: Playwright's loop runs)."""
     with ThreadPoolExecutor(1) as pool:
-        answer = pool.submit(asyncio.run, request("127.0.0.1", mock.ports["control"],
-                                                  message)).result(timeout=WAIT)  # fmt: skip
+        answer = pool.submit(
+            asyncio.run, request("127.0.0.1", mock.ports["control"], message)
+        ).result(timeout=WAIT)
     assert answer["ok"], answer

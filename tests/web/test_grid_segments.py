@@ -17,8 +17,15 @@ from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
 
-MACHINE = {"rows": 4, "cols": 6, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0, "c_mat": 0.5,
-           "segments": ["ROW 1[0..2]", "ROW 1[3..5]", "COL 2[1..3]"]}  # fmt: skip
+MACHINE = {
+    "rows": 4,
+    "cols": 6,
+    "pitch_x": 10.0,
+    "pitch_y": 10.0,
+    "d_mat": 100.0,
+    "c_mat": 0.5,
+    "segments": ["ROW 1[0..2]", "ROW 1[3..5]", "COL 2[1..3]"],
+}
 FILL = "FILL row=0 col=0\n......\nX....X\n..X...\nX.....\nEND\n"
 # Row 1's two segments go opposite ways while row 3 moves whole; then column 2's segment.
 ROWS_FIRST = f"YARN diameter=1\n{FILL}ROW 1[0..2]:+1 1[3..5]:-1 3:+1\nCOL 2[1..3]:-1\n"
@@ -62,9 +69,17 @@ def served(tmp_path: Path) -> Iterator[tuple[Served, str]]:
 
 def _config(tmp: Path, mock: Mock) -> Path:
     path = tmp / "bwsd.toml"
-    path.write_text(toml({"machine": MACHINE, "fieldbus": {"backend": "modbus", **BUS},
-                          "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                          "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
+    path.write_text(
+        toml(
+            {
+                "machine": MACHINE,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0},
+            }
+        )
+    )
     return path
 
 
@@ -88,10 +103,12 @@ def test_a_row_segment_move_highlights_only_the_segments_cells(served, page: Bro
     assert sorted(shown["cells"]) == sorted(row1 + [[3, c] for c in range(6)])
     assert shown["spans"] == [[1, 0, 2], [1, 3, 5], [3, 0, 5]]
     assert page.page.evaluate(ARROWS) == [
-        {"text": "⇄\u2009±", "title": "row 1: cells 0..2 move +1, cells 3..5 move -1 along "
-                                        "its columns"},
+        {
+            "text": "⇄\u2009±",
+            "title": "row 1: cells 0..2 move +1, cells 3..5 move -1 along its columns",
+        },
         {"text": "→\u2009+1", "title": "row 3: moves +1 along its columns"},
-    ]  # fmt: skip
+    ]
     assert "ROW 1[0..2]:+1 1[3..5]:-1 3:+1" in page.page.locator("#next").inner_text()
     assert page.errors == []
 

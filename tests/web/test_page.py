@@ -54,8 +54,9 @@ def test_the_page_loads_clean_and_draws_the_preform(live: Live, page: Browsing):
     assert drawn.sum() > 500, "the 3D view is blank"
     assert len(np.unique(np.round(pixels[drawn], 2), axis=0)) > 3  # yarns in more than one colour
     occupied = page.page.locator("#grid [data-yarn]")
-    cells = sorted(int(occupied.nth(i).get_attribute("data-yarn") or -1)
-                   for i in range(occupied.count()))  # fmt: skip
+    cells = sorted(
+        int(occupied.nth(i).get_attribute("data-yarn") or -1) for i in range(occupied.count())
+    )
     occupancy = _skeleton(live)["occupancy"]
     assert cells == sorted(y for row in occupancy for y in row if y >= 0) == [0, 1, 2, 3]
     assert page.page.locator("#grid .moving").count() == 2  # next: ROW 1:+1 2:-1
@@ -91,15 +92,24 @@ def test_the_buttons_drive_the_state_machine(slow_live: Live, page: Browsing):
     page.state("Stopped")
     button = page.page.locator
     assert button('button[data-command="start"]').is_disabled()
-    steps = [("reset", "Idle"), ("start", "Execute"), ("hold", "Held"), ("unhold", "Execute"),
-             ("stop", "Stopped"), ("reset", "Idle"), ("abort", "Aborted"),
-             ("clear", "Stopped")]  # fmt: skip
+    steps = [
+        ("reset", "Idle"),
+        ("start", "Execute"),
+        ("hold", "Held"),
+        ("unhold", "Execute"),
+        ("stop", "Stopped"),
+        ("reset", "Idle"),
+        ("abort", "Aborted"),
+        ("clear", "Stopped"),
+    ]
     for command, state in steps:
         target = button(f'button[data-command="{command}"]')
         target.wait_for(state="visible", timeout=MS)
         page.page.wait_for_function(
-            "c => !document.querySelector(`button[data-command=\"${c}\"]`).disabled",
-            arg=command, timeout=MS)  # fmt: skip
+            'c => !document.querySelector(`button[data-command="${c}"]`).disabled',
+            arg=command,
+            timeout=MS,
+        )
         target.click()
         if command in ("stop", "abort"):  # asked first (tests/web/test_page_job.py)
             page.page.locator("#confirm-ok").click()
@@ -110,8 +120,7 @@ def test_the_buttons_drive_the_state_machine(slow_live: Live, page: Browsing):
     assert page.errors == []
 
 
-def test_a_bad_program_shows_its_error_line_and_a_good_one_its_dry_run(live: Live,
-                                                                       page: Browsing):  # fmt: skip
+def test_a_bad_program_shows_its_error_line_and_a_good_one_its_dry_run(live: Live, page: Browsing):
     page.open(live, live.tokens["operator"])
     page.ready()
     bad = BRAID.replace("COL 1:+1 2:-1", "COL 1:+1 2:?1")
@@ -121,10 +130,13 @@ def test_a_bad_program_shows_its_error_line_and_a_good_one_its_dry_run(live: Liv
     result.get_by_text("line 8").wait_for(timeout=MS)
     assert "COL 1:+1 2:?1" in result.inner_text()  # the line itself, quoted
     assert live.controller.program is None
-    page.page.set_input_files("#program-file", files=[
-        {"name": "braid.bws", "mimeType": "text/plain", "buffer": BRAID.encode()}])  # fmt: skip
-    page.page.wait_for_function("t => document.querySelector('#program-text').value === t",
-                                arg=BRAID, timeout=MS)  # fmt: skip
+    page.page.set_input_files(
+        "#program-file",
+        files=[{"name": "braid.bws", "mimeType": "text/plain", "buffer": BRAID.encode()}],
+    )
+    page.page.wait_for_function(
+        "t => document.querySelector('#program-text').value === t", arg=BRAID, timeout=MS
+    )
     page.page.click("#check")
     result.get_by_text("contacts").wait_for(timeout=MS)
     assert str(BRAID_STEPS) in result.inner_text()

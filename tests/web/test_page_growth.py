@@ -37,8 +37,9 @@ def braid(tmp_path: Path) -> Iterator[tuple[Served, Mock, str, str]]:
     text = text.replace("REPEAT 10 ", f"REPEAT {CYCLES} ", 1)
     served, mock, token = serve(tmp_path, machine, text)
     try:
-        loaded = served.http.post("/programs", json={"name": "braid.bws", "text": text},
-                                  timeout=300)  # fmt: skip
+        loaded = served.http.post(
+            "/programs", json={"name": "braid.bws", "text": text}, timeout=300
+        )
         assert loaded.status_code == 201, loaded.text
         yield served, mock, token, text
     finally:

@@ -100,12 +100,14 @@ def test_the_time_left_comes_from_the_recent_instruction_rate(slow_live: Live, p
     eta = page.page.locator("#eta")
     page.page.wait_for_function(
         "() => document.querySelector('#eta').textContent.startsWith('time left: about')",
-        timeout=MS)  # fmt: skip
+        timeout=MS,
+    )
     assert "instructions/s over the last" in eta.inner_text()
     _command(live, "hold")
     page.state("Held")
-    page.page.wait_for_function("() => document.querySelector('#eta').textContent === ''",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "() => document.querySelector('#eta').textContent === ''", timeout=MS
+    )
     # the estimate itself: 10 instructions in 5 s, 100 left -> 50 s
     estimate = page.page.evaluate("""async () => {
         const { RateWindow, duration } = await import(new URL('static/eta.js', location.href));
@@ -139,14 +141,16 @@ def test_the_history_pages_programs_and_follows_states_and_events(live: Live, pa
     log = page.page.locator("#history-log")
     page.page.wait_for_function(
         "() => document.querySelector('#history-log').textContent.includes('Maintenance')",
-        timeout=MS)  # fmt: skip
+        timeout=MS,
+    )
     entries = log.locator("li").all_inner_texts()
     assert [e for e in entries if "Resetting" in e or "Idle" in e]
     assert "mode Production → Maintenance by admin-token" in entries[-1]
     # a program's text goes back to the Program panel, to be checked or loaded again
     page.page.locator('#history-programs li[data-program="3"] button').click()
-    page.page.wait_for_function("t => document.querySelector('#program-text').value === t",
-                                arg=BRAID, timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "t => document.querySelector('#program-text').value === t", arg=BRAID, timeout=MS
+    )
     assert page.page.input_value("#program-name") == "p3.bws"
     assert page.errors == []
 
@@ -186,8 +190,10 @@ def test_abort_and_stop_ask_first(slow_live: Live, page: Browsing):
     dialog = page.page.locator("#confirm")
     for command, dismiss in (("abort", "cancel"), ("abort", "Escape"), ("stop", "cancel")):
         page.page.wait_for_function(
-            "c => !document.querySelector(`button[data-command=\"${c}\"]`).disabled",
-            arg=command, timeout=MS)  # fmt: skip
+            'c => !document.querySelector(`button[data-command="${c}"]`).disabled',
+            arg=command,
+            timeout=MS,
+        )
         page.page.click(f'button[data-command="{command}"]')
         dialog.wait_for(state="visible", timeout=MS)
         assert page.page.locator("#confirm-ok").inner_text() == command
@@ -198,8 +204,9 @@ def test_abort_and_stop_ask_first(slow_live: Live, page: Browsing):
             page.page.click("#confirm-cancel")
         dialog.wait_for(state="hidden", timeout=MS)
         said = f"{command}: cancelled, nothing sent"
-        page.page.wait_for_function("t => document.querySelector('#message').textContent === t",
-                                    arg=said, timeout=MS)  # fmt: skip
+        page.page.wait_for_function(
+            "t => document.querySelector('#message').textContent === t", arg=said, timeout=MS
+        )
     time.sleep(0.3)
     assert sent == [] and _state(live)["name"] == "Execute"
     page.page.fill("#reason-input", "yarn break")
@@ -239,31 +246,34 @@ def test_an_admin_changes_the_unit_mode_where_packml_allows_it(live: Live, page:
     page.open(live, live.tokens["admin"])
     page.ready()
     mode = page.page.locator("#mode-select")
-    page.page.wait_for_function("() => !document.querySelector('#mode-select').disabled",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "() => !document.querySelector('#mode-select').disabled", timeout=MS
+    )
     assert mode.input_value() == "production"
     mode.select_option("maintenance")
     page.page.wait_for_function(
         "() => document.querySelector('#mode-message').textContent === 'now Maintenance'",
-        timeout=MS)  # fmt: skip
+        timeout=MS,
+    )
     assert _state(live)["mode_name"] == "Maintenance"
     assert mode.input_value() == "maintenance"
     _command(live, "reset")
     _command(live, "start")
     _command(live, "hold")
     page.state("Held")  # PackML takes no mode change here: the switch is closed
-    page.page.wait_for_function("() => document.querySelector('#mode-select').disabled",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function("() => document.querySelector('#mode-select').disabled", timeout=MS)
     # What the daemon answers is shown as it is: a change sent anyway (the switch forced
     # open) is refused, and the switch goes back to the mode in force.
     mode.evaluate("e => { e.disabled = false; }")
     mode.select_option("manual")
     page.page.wait_for_function(
         "() => document.querySelector('#mode-message').textContent.startsWith('refused: ')",
-        timeout=MS)  # fmt: skip
+        timeout=MS,
+    )
     assert "not accepted in state Held" in page.page.locator("#mode-message").inner_text()
-    page.page.wait_for_function("m => document.querySelector('#mode-select').value === m",
-                                arg="maintenance", timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "m => document.querySelector('#mode-select').value === m", arg="maintenance", timeout=MS
+    )
     assert _state(live)["mode_name"] == "Maintenance"
     errors = [e for e in page.errors if "409" not in e]  # the refusal, by design
     assert errors == []
@@ -295,8 +305,7 @@ def test_a_program_too_big_shows_where_and_the_size_it_needs(live: Live, page: B
     assert errors == []
 
 
-def test_a_yarn_picked_in_the_matrix_or_the_view_is_selected_in_both(live: Live,
-                                                                     page: Browsing):  # fmt: skip
+def test_a_yarn_picked_in_the_matrix_or_the_view_is_selected_in_both(live: Live, page: Browsing):
     _load(live)
     _command(live, "reset")
     _command(live, "start")
@@ -352,8 +361,9 @@ def _no_overflow(page: Page, view: str, width: int) -> None:
     assert wider == [], (view, width, wider)
 
 
-def test_three_window_sizes_without_overflow_in_every_view(stoppable, slow_mock: Mock,
-                                                           browser: Browser):  # fmt: skip
+def test_three_window_sizes_without_overflow_in_every_view(
+    stoppable, slow_mock: Mock, browser: Browser
+):
     """A run, the question before Stop, the e-stop and a daemon gone, each at 420, 1024 and
     1600 px wide: nothing wider than the window (and the pictures for docs/preview.md)."""
     live, stop = stoppable
@@ -371,15 +381,18 @@ def test_three_window_sizes_without_overflow_in_every_view(stoppable, slow_mock:
         for tab in pages:
             tab.wait_for_function(
                 "() => document.querySelector('#eta').textContent.startsWith('time left: about')",
-                timeout=MS)  # fmt: skip
+                timeout=MS,
+            )
         views = _views(live, slow_mock, pages, stop)
         for view in views:
             for (width, _), tab in zip(SIZES, pages, strict=True):
                 view(tab)
                 _no_overflow(tab, view.__name__, width)
                 if shots:
-                    tab.screenshot(path=folder / f"preview-{view.__name__}-{width}.png",
-                                   full_page=width < 900 and view.__name__ == "run")  # fmt: skip
+                    tab.screenshot(
+                        path=folder / f"preview-{view.__name__}-{width}.png",
+                        full_page=width < 900 and view.__name__ == "run",
+                    )
     finally:
         for context in contexts:
             context.close()

@@ -33,11 +33,19 @@ from tests.web.conftest import MS, Browsing
 ROOT = Path(__file__).resolve().parents[2]
 # A shed open from the start (rows 0 and 2 full, row 1 empty): the first instruction is a WEFT.
 WEAVE = {"rows": 3, "cols": 10, "pitch_x": 10.0, "pitch_y": 8.0, "d_mat": 100.0, "c_mat": 0.5}
-SHED = ("YARN diameter=1\nFILL row=0 col=0\nXXXXXXXXXX\n..........\nXXXXXXXXXX\nEND\n"
-        "WEFT x=45 y=8 z=10.5 angle=0 length=60.775\nTAKEUP 4\n")  # fmt: skip
+SHED = (
+    "YARN diameter=1\nFILL row=0 col=0\nXXXXXXXXXX\n..........\nXXXXXXXXXX\nEND\n"
+    "WEFT x=45 y=8 z=10.5 angle=0 length=60.775\nTAKEUP 4\n"
+)
 BIG = load_config(ROOT / "config" / "braid-24x24.toml").machine
-LOOM26 = {"rows": BIG.rows, "cols": BIG.cols, "pitch_x": BIG.pitch_x, "pitch_y": BIG.pitch_y,
-          "d_mat": BIG.d_mat, "c_mat": BIG.c_mat}  # fmt: skip
+LOOM26 = {
+    "rows": BIG.rows,
+    "cols": BIG.cols,
+    "pitch_x": BIG.pitch_x,
+    "pitch_y": BIG.pitch_y,
+    "d_mat": BIG.d_mat,
+    "c_mat": BIG.c_mat,
+}
 BRAID26 = (ROOT / "examples" / "braid-24x24.bws").read_text()
 # The shipped L braid: its corner lines move on segments (row3[0..3] first).
 BRAID_L = tomllib.loads((ROOT / "config" / "braid-L.toml").read_text())["machine"]
@@ -124,9 +132,17 @@ def _serve(folder: Path, machine: dict[str, Any], text: str) -> Loom:
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")
     config = folder / "bwsd.toml"
-    config.write_text(toml({"machine": machine, "fieldbus": {"backend": "modbus", **BUS},
-                            "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                            "api": {"port": 0}, "plc": {"port": 0}}))  # fmt: skip
+    config.write_text(
+        toml(
+            {
+                "machine": machine,
+                "fieldbus": {"backend": "modbus", **BUS},
+                "fieldbus.modbus": {"port": mock.ports["modbus"]},
+                "api": {"port": 0},
+                "plc": {"port": 0},
+            }
+        )
+    )
     try:
         served = Served(config, state, token)
     except BaseException:
@@ -196,13 +212,15 @@ def test_a_sensor_fault_marks_the_cell_with_what_the_sensor_reads(looms, page: B
     status = page.page.locator("#grid .matrix-machine")
     page.page.wait_for_function(
         "() => document.querySelector('#grid .matrix-machine').dataset.alarm === 'false'",
-        timeout=MS)  # fmt: skip
+        timeout=MS,
+    )
     assert status.inner_text() == "sensors agree with the twin"
     # The sensor of a full cell reads empty, the sensor of an empty one reads a case.
     loom.control({"cmd": "fault", "kind": "sensor", "cell": [1, 1]})
     loom.control({"cmd": "fault", "kind": "sensor", "cell": [0, 0]})
-    page.page.wait_for_function("() => document.querySelectorAll('#grid .differs').length === 2",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "() => document.querySelectorAll('#grid .differs').length === 2", timeout=MS
+    )
     assert _marks(page) == [[0, 0, "case"], [1, 1, "empty"]]
     title = page.page.locator('#grid .cell[data-row="1"][data-col="1"] title').text_content()
     assert title == "row 1, col 1: yarn 0 — sensor: empty (differs from the twin)"
@@ -259,12 +277,15 @@ def _covered(page: Browsing, host: str, selector: str) -> list[list[int]]:
 
 @pytest.mark.parametrize(
     ("machine", "text", "axis", "cells"),
-    [(MACHINE, BRAID, "row1", [[1, c] for c in range(4)]),
-     (BRAID_L, BRAID_L_TEXT, "row3[0..3]", [[3, c] for c in range(4)])],
+    [
+        (MACHINE, BRAID, "row1", [[1, c] for c in range(4)]),
+        (BRAID_L, BRAID_L_TEXT, "row3[0..3]", [[3, c] for c in range(4)]),
+    ],
     ids=["line", "segment"],
-)  # fmt: skip
-def test_a_faulted_axis_marks_its_line(looms, page: Browsing, machine: dict[str, Any], text: str,
-                                       axis: str, cells: list[list[int]]):  # fmt: skip
+)
+def test_a_faulted_axis_marks_its_line(
+    looms, page: Browsing, machine: dict[str, Any], text: str, axis: str, cells: list[list[int]]
+):
     loom = looms(machine, text)
     loom.open(page)
     # The axis's drive faults on its next set-point: the first instruction moves it.
@@ -285,8 +306,10 @@ def test_axis_names_mark_a_line_a_segment_or_nothing(looms, page: Browsing):
     loom.open(page)
     host = _under_test(page)
     page.page.evaluate(FEED)
-    page.page.evaluate("window.underTest.grid.setMachine({differs: [], estop: false, "
-                       "faulted: ['col2', 'row3[1..2]', 'weft_insert', 'row9']})")  # fmt: skip
+    page.page.evaluate(
+        "window.underTest.grid.setMachine({differs: [], estop: false, "
+        "faulted: ['col2', 'row3[1..2]', 'weft_insert', 'row9']})"
+    )
     assert _covered(page, host, '.faulted[data-axis="col2"]') == [[r, 2] for r in range(4)]
     assert _covered(page, host, '.faulted[data-axis="row3[1..2]"]') == [[3, 1], [3, 2]]
     assert page.page.locator(f"{host} .faulted").count() == 2  # weft_insert and row9: no line
@@ -336,12 +359,15 @@ def test_the_next_wefts_path_is_drawn_at_the_guides_scale(looms, page: Browsing)
     # Any angle: the same scaling along both axes about the matrix's centre.
     for angle in (30.0, 90.0, -45.0):
         other = {**weft, "angle": angle, "x": 20.0, "y": 4.0}
-        ends = page.page.evaluate("""async ([w, m]) => {
+        ends = page.page.evaluate(
+            """async ([w, m]) => {
             const url = new URL('static/matrix-geometry.js', location.href);
             const { weftInCells } = await import(url);
             const cells = weftInCells(w, m);
             return { from: cells.from, to: cells.to };
-          }""", [other, WEAVE])  # fmt: skip
+          }""",
+            [other, WEAVE],
+        )
         want = _weft_in_cells(other, WEAVE)
         assert ends == {"from": pytest.approx(want["from"]), "to": pytest.approx(want["to"])}
     # Once the weft is in, its path goes.
@@ -404,8 +430,9 @@ def test_on_pick_gets_the_yarn_or_null_and_highlight_follows_the_yarn(looms, pag
 
 
 @pytest.mark.parametrize("size", [(1600, 1000), (1024, 768)], ids=["1600x1000", "1024x768"])
-def test_a_26x26_loom_fits_the_panel_with_cells_of_14_px(loom26: Loom, browser: Browser,
-                                                          size: tuple[int, int]):  # fmt: skip
+def test_a_26x26_loom_fits_the_panel_with_cells_of_14_px(
+    loom26: Loom, browser: Browser, size: tuple[int, int]
+):
     context = browser.new_context(viewport={"width": size[0], "height": size[1]})
     page = Browsing(context.new_page())
     try:
@@ -471,7 +498,8 @@ def test_zoom_pan_and_fit(loom26: Loom, page: Browsing):
     page.page.locator("#grid .matrix-frame").press("0")
     assert _cell_px(page) == pytest.approx(fit)
     # a two-finger pinch, spreading to twice the span, zooms twice
-    page.page.evaluate("""([x, y]) => {
+    page.page.evaluate(
+        """([x, y]) => {
         const frame = document.querySelector('#grid .matrix-frame');
         const send = (type, id, dx) => frame.dispatchEvent(new PointerEvent(type, {
           pointerId: id, pointerType: 'touch', isPrimary: id === 1, bubbles: true,
@@ -479,7 +507,9 @@ def test_zoom_pan_and_fit(loom26: Loom, page: Browsing):
         send('pointerdown', 1, -20); send('pointerdown', 2, 20);
         send('pointermove', 1, -40); send('pointermove', 2, 40);
         send('pointerup', 1, -40); send('pointerup', 2, 40);
-      }""", [x, y])  # fmt: skip
+      }""",
+        [x, y],
+    )
     page.until(BIGGER, 1.9 * fit)
     assert _cell_px(page) == pytest.approx(2 * fit, rel=1e-3)
     assert page.errors == []

@@ -90,10 +90,18 @@ def test_no_button_is_enabled_that_the_daemon_would_refuse(slow_live: Live, page
     _load(live, LONG)
     assert _in_step(page, live, "Stopped") == ["reset", "abort"]
     # (command, state reached, the run has ended: Start is refused from here on)
-    walk = [("reset", "Idle", False), ("start", "Execute", False), ("hold", "Held", False),
-            ("unhold", "Execute", False), ("suspend", "Suspended", False),
-            ("unsuspend", "Execute", False), ("stop", "Stopped", True), ("reset", "Idle", True),
-            ("abort", "Aborted", True), ("clear", "Stopped", True)]  # fmt: skip
+    walk = [
+        ("reset", "Idle", False),
+        ("start", "Execute", False),
+        ("hold", "Held", False),
+        ("unhold", "Execute", False),
+        ("suspend", "Suspended", False),
+        ("unsuspend", "Execute", False),
+        ("stop", "Stopped", True),
+        ("reset", "Idle", True),
+        ("abort", "Aborted", True),
+        ("clear", "Stopped", True),
+    ]
     for command, state, ended in walk:
         _click(page, command)
         enabled = _in_step(page, live, state)
@@ -122,8 +130,7 @@ def test_a_viewer_never_sees_an_enabled_button(live: Live, page: Browsing):
     assert page.errors == []
 
 
-def test_a_token_link_opened_in_a_tab_showing_the_page_logs_in_with_it(live: Live,
-                                                                      page: Browsing):  # fmt: skip
+def test_a_token_link_opened_in_a_tab_showing_the_page_logs_in_with_it(live: Live, page: Browsing):
     _load(live)
     page.open(live, live.tokens["viewer"])
     page.ready()
@@ -226,8 +233,9 @@ def slow_watched(slow_live: Live) -> Iterator[Live]:
     stop()
 
 
-def test_a_pressed_estop_shows_red_and_is_not_a_bus_error(watched: Live, mock: Mock,
-                                                          page: Browsing):  # fmt: skip
+def test_a_pressed_estop_shows_red_and_is_not_a_bus_error(
+    watched: Live, mock: Mock, page: Browsing
+):
     live = watched
     _load(live)
     page.open(live, live.tokens["operator"])
@@ -246,14 +254,16 @@ def test_a_pressed_estop_shows_red_and_is_not_a_bus_error(watched: Live, mock: M
     loom_control(mock, {"cmd": "estop", "pressed": False})
     page.page.locator("#estop-banner").wait_for(state="hidden", timeout=MS)
     assert not page.page.locator("#estop-badge").is_visible()
-    page.page.wait_for_function("() => document.querySelector('#machine').textContent === 'ok'",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "() => document.querySelector('#machine').textContent === 'ok'", timeout=MS
+    )
     assert _in_step(page, live, "Stopped") == ["reset", "abort"]
     assert page.errors == []
 
 
-def test_a_stall_shows_as_a_drive_fault_of_its_axis(slow_watched: Live, slow_mock: Mock,
-                                                    page: Browsing):  # fmt: skip
+def test_a_stall_shows_as_a_drive_fault_of_its_axis(
+    slow_watched: Live, slow_mock: Mock, page: Browsing
+):
     live = slow_watched
     _load(live, LONG)
     page.open(live, live.tokens["operator"])
@@ -266,8 +276,8 @@ def test_a_stall_shows_as_a_drive_fault_of_its_axis(slow_watched: Live, slow_moc
     state = api_client(live, "viewer").get("/state").json()
     assert state["stop_cause"] == "drive_fault"
     page.page.wait_for_function(
-        "() => document.querySelector('#machine').textContent.includes('row1: stall')",
-        timeout=MS)  # fmt: skip
+        "() => document.querySelector('#machine').textContent.includes('row1: stall')", timeout=MS
+    )
     reason = page.page.locator("#reason").inner_text()
     assert reason.startswith("drive fault: ") and "row1" in reason and "stall" in reason
     assert page.page.locator("#bus").inner_text() == "connected"
@@ -305,8 +315,9 @@ def test_the_token_is_kept_for_the_session_unless_remembered(live: Live, browser
         context.close()
 
 
-def test_a_lost_bus_is_said_while_lost_and_gone_once_back(slow_watched: Live, slow_mock: Mock,
-                                                          page: Browsing):  # fmt: skip
+def test_a_lost_bus_is_said_while_lost_and_gone_once_back(
+    slow_watched: Live, slow_mock: Mock, page: Browsing
+):
     """The bus goes mute during a run (Held, bus lost with its error), comes back, and the
     run resumes: no stale reason next to a green "connected", while running or at Complete."""
     live = slow_watched
@@ -319,8 +330,9 @@ def test_a_lost_bus_is_said_while_lost_and_gone_once_back(slow_watched: Live, sl
     page.until("() => window.bwsd.done >= 2")
     loom_control(slow_mock, {"cmd": "fault", "kind": "mute"})
     _in_step(page, live, "Held")
-    page.page.wait_for_function("() => document.querySelector('#bus').textContent === 'lost'",
-                                timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "() => document.querySelector('#bus').textContent === 'lost'", timeout=MS
+    )
     assert page.page.locator("#bus-error").inner_text() != ""
     assert page.page.locator("#reason").inner_text().startswith("bus lost or timed out")
     loom_control(slow_mock, {"cmd": "clear"})
@@ -339,8 +351,9 @@ def test_a_lost_bus_is_said_while_lost_and_gone_once_back(slow_watched: Live, sl
     assert page.errors == []
 
 
-def test_after_stop_progress_and_next_line_are_what_the_daemon_says(slow_live: Live,
-                                                                    page: Browsing):  # fmt: skip
+def test_after_stop_progress_and_next_line_are_what_the_daemon_says(
+    slow_live: Live, page: Browsing
+):
     live = slow_live
     _load(live, LONG)
     page.open(live, live.tokens["operator"])
@@ -354,8 +367,9 @@ def test_after_stop_progress_and_next_line_are_what_the_daemon_says(slow_live: L
     state = api_client(live, "viewer").get("/state").json()
     assert state["next"] is None and 3 <= state["index"] < state["count"]
     expected = f"{state['index']} / {state['count']}"
-    page.page.wait_for_function("t => document.querySelector('#progress-text').textContent === t",
-                                arg=expected, timeout=MS)  # fmt: skip
+    page.page.wait_for_function(
+        "t => document.querySelector('#progress-text').textContent === t", arg=expected, timeout=MS
+    )
     ended = f"ended after instruction {state['index']} of {state['count']}"
     page.page.wait_for_function(
         "t => document.querySelector('#job-note').textContent.startsWith(t)", arg=ended, timeout=MS
@@ -371,8 +385,9 @@ def reads_open(mock: Mock, tmp_path: Path) -> Iterator[Live]:
     yield from start_live(mock, tmp_path, open_reads=True)
 
 
-def test_open_reads_show_everything_and_offer_nothing_without_a_token(reads_open: Live,
-                                                                     page: Browsing):  # fmt: skip
+def test_open_reads_show_everything_and_offer_nothing_without_a_token(
+    reads_open: Live, page: Browsing
+):
     live = reads_open
     _load(live)
     page.page.add_init_script(WATCH_ENABLED)

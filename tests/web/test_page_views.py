@@ -130,9 +130,11 @@ def test_axes_and_a_millimetre_scale_with_sensible_labels(runs: Runs, page: Brow
     titles = {e["axis"]: e for e in labels if e["title"]}
     assert {k: v["text"] for k, v in titles.items()} == {"x": "x mm", "y": "y mm", "z": "z mm"}
     assert all(t["shown"] for t in titles.values())  # the 3D view sees every axis
-    for axis, extent in (("x", (machine["cols"] - 1) * machine["pitch_x"]),
-                         ("y", (machine["rows"] - 1) * machine["pitch_y"]),
-                         ("z", machine["d_mat"] + run.skeleton["takeup"])):  # fmt: skip
+    for axis, extent in (
+        ("x", (machine["cols"] - 1) * machine["pitch_x"]),
+        ("y", (machine["rows"] - 1) * machine["pitch_y"]),
+        ("z", machine["d_mat"] + run.skeleton["takeup"]),
+    ):
         ticks = [float(e["text"]) for e in labels if e["axis"] == axis and not e["title"]]
         steps = {round(b - a, 9) for a, b in itertools.pairwise(ticks)}
         assert len(steps) == 1, (axis, ticks)  # evenly spaced, a round step
@@ -175,8 +177,9 @@ def test_each_preset_view_sets_the_camera(runs: Runs, page: Browsing):
         assert page.page.locator("#ortho").is_checked()
         # Without pixels: the frame's axes on screen (y down): x right in top and front, y up
         # in top and right in side, z up in front and side.
-        o, x, y, z = _project(page, [[30.0, 30.0, 40.0], [40.0, 30.0, 40.0], [30.0, 40.0, 40.0],
-                                     [30.0, 30.0, 50.0]])  # fmt: skip
+        o, x, y, z = _project(
+            page, [[30.0, 30.0, 40.0], [40.0, 30.0, 40.0], [30.0, 40.0, 40.0], [30.0, 30.0, 50.0]]
+        )
         right = {"top": x, "front": x, "side": y}[name]
         up = {"top": y, "front": z, "side": z}[name]
         assert right[0] - o[0] > 5 and abs(right[1] - o[1]) < 0.5, name
@@ -242,8 +245,11 @@ def test_the_section_equals_bwsd_slice_crossings(runs: Runs, page: Browsing, ste
     assert page.page.locator("#section-pane").is_visible()
     z = _heights(run.skeleton)[2]
     page.page.fill("#section-z-value", str(z))
-    shown = page.until("""z => { const s = window.bwsd.view.tools.sectionView.shown;
-        return s && s.z === z && s.found.length; }""", z)  # fmt: skip
+    shown = page.until(
+        """z => { const s = window.bwsd.view.tools.sectionView.shown;
+        return s && s.z === z && s.found.length; }""",
+        z,
+    )
     assert shown == len(crossings(sk, z))
     assert page.errors == []
 
@@ -353,8 +359,9 @@ def test_contact_points_exist_sized_by_the_diameter(runs: Runs, page: Browsing):
     _open(page, run)
     page.page.check("#show-contacts")
     page.until("n => window.bwsd.view.contactPoints?.shown === n", len(run.skeleton["contacts"]))
-    nodes = {i: p for y in run.skeleton["yarns"] for i, p in zip(y["node_ids"], y["nodes"],
-                                                                   strict=True)}  # fmt: skip
+    nodes = {
+        i: p for y in run.skeleton["yarns"] for i, p in zip(y["node_ids"], y["nodes"], strict=True)
+    }
     shown = _view(page, "v => Array.from(v.contactPoints.array.subarray(0, 6))")
     for k, contact in enumerate(run.skeleton["contacts"][:2]):
         a, b = (nodes[n] for n in contact["nodes"])
