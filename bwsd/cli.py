@@ -29,7 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "journal": ("bwsd.journal.cli", "check, export or reset the daemon's journal"),
     "hw": ("bwsd.fieldbus.cli", "commissioning: talk to the loom's actuators directly"),
     "opcua": ("bwsd.opcua.cli", "the OPC UA server's certificate"),
-    "simulate": ("bwsd.run", "run a program through the twin"),
+    "simulate": ("bwsd.simulate", "run a program through the twin"),
     "program": ("bwsd.program.cli", "print a generated .bws program"),
     "relax": (
         "bwsd.relax.cli",

@@ -76,7 +76,7 @@ def test_the_core_imports_and_simulates_without_the_extras(blocked, tmp_path):
     code = (
         "import sys\n"
         "import bwsd.api.app, bwsd.cli, bwsd.daemon, bwsd.daemon_cli, bwsd.export\n"
-        "import bwsd.export.cli, bwsd.fieldbus.modbus, bwsd.plc.tags, bwsd.run\n"
+        "import bwsd.export.cli, bwsd.fieldbus.modbus, bwsd.plc.tags, bwsd.simulate\n"
         "import simulator_hw.app, simulator_hw.__main__\n"
         "loaded = sorted(n for n, m in sys.modules.items()\n"
         f"                if m is not None and n.partition('.')[0] in {BLOCKED!r})\n"

@@ -94,7 +94,7 @@ def load_inputs(config: str, program: str) -> tuple[Machine, Program]:
 
 def simulate_program(config: str, program: str) -> tuple[SkeletonData, Program]:
     """Load the config and the program, run the twin, return the final skeleton."""
-    from bwsd.run import refused_at_line
+    from bwsd.simulate import refused_at_line
     from bwsd.twin import simulate
 
     machine, parsed = load_inputs(config, program)
@@ -121,7 +121,7 @@ def run_metrics(args: argparse.Namespace) -> int:
     from bwsd.export.formed import takeups_of
     from bwsd.export.metrics import metrics
     from bwsd.export.mixing import check_fits, section_option, simulate_with_visits
-    from bwsd.run import refused_at_line
+    from bwsd.simulate import refused_at_line
     from bwsd.twin import simulate
 
     named = section_option(args.section) if args.section is not None else None
