@@ -1,4 +1,4 @@
-/* bwsd.twin._kernel: the twin's compiled kernel as a Python type (see bwsd/twin/kernel.py).
+/* bwsd.twin._kernel: the twin's compiled kernel as a Python type (typed in bwsd/twin/_kernel.pyi).
  *
  * Arrays cross as bytes in native byte order; bwsd.twin reads them with numpy. An instruction
  * runs with the interpreter lock released. The object refuses a second caller while one is
