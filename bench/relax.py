@@ -4,6 +4,7 @@ docs/benchmarks.md ("Relaxation").
     python bench/relax.py                   # the examples, 3 runs each, one core
     python bench/relax.py --repeat 5 --big  # also the 24 x 24 braid (10 cycles)
     python bench/relax.py --metrics --slices docs   # metrics before and after, and slices
+    python bench/relax.py --unit-cell       # a relaxed 4-step braid against the unit cell
 
 For each example, measured in this run: the twin's ``simulate`` (the baseline) and
 ``relax`` of its skeleton (median and 99th percentile of the runs), their ratio, the solver's
@@ -36,6 +37,7 @@ from bwsd.export.metrics import contact_zone, metrics  # noqa: E402
 from bwsd.export.overlap import interpenetration  # noqa: E402
 from bwsd.export.slice import draw_slice  # noqa: E402
 from bwsd.relax import crimp, relax  # noqa: E402
+from bwsd.relax.unitcell import compare  # noqa: E402
 from bwsd.twin import simulate  # noqa: E402
 from bwsd.twin.skeleton import SkeletonData  # noqa: E402
 
@@ -122,13 +124,40 @@ def metrics_rows(stem: str, folder: Path | None) -> list[str]:
     return out
 
 
+UNIT_CELL_TARGET = 0.25  # the relaxed fraction within this share of the model's
+
+
+def unit_cell_rows() -> list[str]:
+    """The relaxed formed-zone volume fraction of rectangular braid4 braids beside the jammed
+    unit-cell model's at the same braid angle (docs/relax.md, "Against a unit-cell model")."""
+    out = [
+        "| braid | braid angle (formed, warp) deg | relaxed Vf | model Vf (whole section) "
+        "| model Vf (interior) | ratio | target: within 25 % |",
+        "|---|---:|---:|---:|---:|---:|---|",
+    ]
+    found = compare(6, 6, 12)
+    met = abs(found.ratio - 1) <= UNIT_CELL_TARGET
+    out.append(
+        f"| {found.braid} | {found.angle:.1f} | {found.relaxed * 100:.1f} % "
+        f"| {found.model * 100:.1f} % | {found.interior * 100:.1f} % | {found.ratio:.2f} "
+        f"| {'met' if met else '**missed**'} |"
+    )
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--big", action="store_true", help="also the 24 x 24 braid")
     parser.add_argument("--metrics", action="store_true", help="the metrics before and after")
     parser.add_argument("--slices", type=Path, help="draw slices before and after into DIR")
+    parser.add_argument(
+        "--unit-cell", action="store_true", help="a relaxed braid against the unit-cell model"
+    )
     args = parser.parse_args()
+    if args.unit_cell:
+        print("\n".join(unit_cell_rows()), flush=True)
+        return
     if args.metrics or args.slices:
         print(
             "| example | skeleton | braid angle (formed, warp) deg | within d | volume "

@@ -174,9 +174,9 @@ def _simulate_cmd(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     relaxed = None
     if args.relax:
-        from bwsd.relax.cli import relax_skeleton
+        from bwsd.relax.cli import options_of, relax_skeleton
 
-        relaxed = relax_skeleton(twin.skeleton(), args.config, not args.json)
+        relaxed = relax_skeleton(twin.skeleton(), options_of(args.config), not args.json)
     _write_exports(twin, args.skeleton, args.export, relaxed)
     loose = loose_wefts(twin, program)
     _warn_loose(loose, args.program)

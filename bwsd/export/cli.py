@@ -156,11 +156,9 @@ def run_metrics(args: argparse.Namespace) -> int:
 
 def _relaxed(sk: SkeletonData, config: str, show: bool) -> tuple[SkeletonData, dict[str, Any]]:
     """The relaxed skeleton, and the metrics it adds: weft crimp and the solver's figures."""
-    from bwsd.relax import crimp
-    from bwsd.relax.cli import relax_skeleton
+    from bwsd.relax.cli import options_of, relaxed_metrics
 
-    relaxed = relax_skeleton(sk, config, show)
-    return relaxed.skeleton, {"crimp": crimp(relaxed.skeleton), "relaxed": relaxed.summary()}
+    return relaxed_metrics(sk, options_of(config), show)
 
 
 def _header_section(program: str) -> NamedSection | None:

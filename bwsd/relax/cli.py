@@ -12,6 +12,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the parser imports nothing heavy: the handlers import what they need
+    from bwsd.config import Config
     from bwsd.relax import Options, Relaxed
     from bwsd.twin.skeleton import SkeletonData
 
@@ -41,11 +42,17 @@ def configure(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def options_of(config: str) -> Options:
-    """The relaxation's options from a config's ``[yarn]`` tensions."""
+    """The relaxation's options from the ``[yarn]`` tensions of the config file ``config``."""
     from bwsd.config import load_config
+
+    return options_from(load_config(config))
+
+
+def options_from(config: Config) -> Options:
+    """The relaxation's options from a loaded config's ``[yarn]`` tensions."""
     from bwsd.relax import Options
 
-    yarn = load_config(config).table("yarn")
+    yarn = config.table("yarn")
     return Options(warp_tension=yarn["tension"], weft_tension=yarn["weft_tension"])
 
 
@@ -70,12 +77,25 @@ def progress(enabled: bool) -> Iterator[Callable[[str, int, int], None] | None]:
         yield report
 
 
-def relax_skeleton(sk: SkeletonData, config: str, show: bool) -> Relaxed:
-    """Relax ``sk`` with the config's tensions, with progress on a terminal when ``show``."""
+def relax_skeleton(sk: SkeletonData, options: Options, show: bool = False) -> Relaxed:
+    """Relax ``sk`` with ``options`` (a config's tensions: ``options_of``), with progress on
+    a terminal when ``show``."""
     from bwsd.relax import relax
 
     with progress(show and sys.stderr.isatty()) as report:
-        return relax(sk, options_of(config), report)
+        return relax(sk, options, report)
+
+
+def relaxed_metrics(
+    sk: SkeletonData, options: Options, show: bool = False
+) -> tuple[SkeletonData, dict[str, Any]]:
+    """What `bwsd metrics --relaxed` measures: the relaxed skeleton (its metrics are taken as
+    the twin's are), and what it adds to them: weft crimp and the solver's figures. A sweep
+    with ``relax = true`` measures each candidate with it too."""
+    from bwsd.relax import crimp
+
+    relaxed = relax_skeleton(sk, options, show)
+    return relaxed.skeleton, {"crimp": crimp(relaxed.skeleton), "relaxed": relaxed.summary()}
 
 
 def run_relax(args: argparse.Namespace) -> int:
@@ -84,7 +104,7 @@ def run_relax(args: argparse.Namespace) -> int:
     from bwsd.relax.document import write_relaxed
 
     sk, _ = simulate_program(args.config, args.program)
-    relaxed = relax_skeleton(sk, args.config, not args.json)
+    relaxed = relax_skeleton(sk, options_of(args.config), not args.json)
     for path in ([args.output] if args.output else []) + list(args.export):
         write_relaxed(relaxed, path)
     summary = relaxed.summary()

@@ -11,12 +11,14 @@ import functools
 import hashlib
 import json
 import time
+import tomllib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from decimal import Decimal
+from typing import TYPE_CHECKING, Any
 
-from bwsd.config import parse_config
+from bwsd.config import Config, parse_config
 from bwsd.errors import BwsdError, TwinError
 from bwsd.export.arrays import Arrays
 from bwsd.export.formed import takeups_of
@@ -26,6 +28,9 @@ from bwsd.program.generators import GENERATORS
 from bwsd.program.parser import MAX_INSTRUCTIONS, parse_program_with_positions
 from bwsd.program.validate import validate
 from bwsd.twin import Machine, Program, Twin, simulate
+
+if TYPE_CHECKING:
+    from bwsd.relax import Options
 
 Row = dict[str, Any]
 # Columns every row has, in this order; the parameters come after ``index``, the metrics
@@ -76,13 +81,16 @@ class Candidate:
     source: Source
     params: Mapping[str, Any]
     columns: Mapping[str, Any]
+    relax: bool = False  # measure the relaxed preform (the spec's ``relax = true``)
 
 
-def candidate_id(source: Source, columns: Mapping[str, Any]) -> str:
-    """A stable id: the same source and parameter values give the same id in every run."""
-    text = json.dumps(
-        {"source": source.fingerprint(), "params": dict(columns)}, sort_keys=True, allow_nan=False
-    )
+def candidate_id(source: Source, columns: Mapping[str, Any], relax: bool = False) -> str:
+    """A stable id: the same source and parameter values give the same id in every run; a
+    relaxed candidate's differs from the same candidate's without relaxation."""
+    key: dict[str, Any] = {"source": source.fingerprint(), "params": dict(columns)}
+    if relax:  # only then, so that the ids of sweeps without it stay as they were
+        key["relax"] = True
+    text = json.dumps(key, sort_keys=True, allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -105,7 +113,7 @@ def stage(name: str, *also: type[Exception]) -> Iterator[None]:
         raise Refused(name, str(exc)) from exc
 
 
-def _configured(source: ProgramSource, params: Mapping[str, Any]) -> Machine:
+def _configured(source: ProgramSource, params: Mapping[str, Any]) -> Config:
     """The source's config with the candidate's keys changed, validated as a config file."""
     data = {table: dict(values) for table, values in source.config.items()}
     machine = data.setdefault("machine", {})
@@ -116,19 +124,44 @@ def _configured(source: ProgramSource, params: Mapping[str, Any]) -> Machine:
             data.setdefault("yarn", {})["diameter"] = value
         else:
             machine[name] = value
-    config = parse_config(data, source.config_name)
-    return config.machine
+    return parse_config(data, source.config_name)
 
 
-def _build(candidate: Candidate) -> tuple[Machine, str, str]:
-    """The candidate's machine, program text and program name."""
+@dataclass(frozen=True)
+class Built:
+    """A candidate ready to run: its machine, program text and name, and its config's
+    relaxation options (None unless the candidate is relaxed)."""
+
+    machine: Machine
+    text: str
+    name: str
+    relax: Options | None = None
+
+
+def _build(candidate: Candidate) -> Built:
+    """The candidate's machine, program and, when relaxed, its config's tensions."""
     source = candidate.source
     if isinstance(source, GeneratorSource):
         with stage("generate", ValueError):
             generated = GENERATORS[source.kind](**candidate.params)
-        return generated.machine, generated.program, f"<{source.kind}>"
+        name = f"<{source.kind}>"
+        options = None
+        if candidate.relax:  # the config the generator writes beside its program
+            data = tomllib.loads(generated.config_toml(), parse_float=Decimal)
+            with stage("config"):
+                options = _options(parse_config(data, name))
+        return Built(generated.machine, generated.program, name, options)
     with stage("config", ValueError):
-        return _configured(source, candidate.params), source.text, source.name
+        config = _configured(source, candidate.params)
+    return Built(
+        config.machine, source.text, source.name, _options(config) if candidate.relax else None
+    )
+
+
+def _options(config: Config) -> Options:
+    from bwsd.relax.cli import options_from
+
+    return options_from(config)
 
 
 def _run(
@@ -151,10 +184,17 @@ def _run(
 
 
 def measure(candidate: Candidate) -> Row:
-    """The metrics of one candidate as flat columns; a refusal raises ``Refused``."""
-    machine, text, name = _build(candidate)
-    twin, program, visits, named = _run(machine, text, name)
+    """The metrics of one candidate as flat columns (of its relaxed preform when the
+    candidate is relaxed, and the solver's figures after them); a refusal raises
+    ``Refused``."""
+    built = _build(candidate)
+    twin, program, visits, named = _run(built.machine, built.text, built.name)
     sk = twin.skeleton()
+    added: Mapping[str, Any] | None = None
+    if built.relax is not None:  # as `bwsd metrics --relaxed` does
+        from bwsd.relax.cli import relaxed_metrics
+
+        sk, added = relaxed_metrics(sk, built.relax)
     with stage("metrics"):
         arrays = Arrays.of(sk)
         band = section(sk, arrays)
@@ -168,7 +208,31 @@ def measure(candidate: Candidate) -> Row:
             visits=visits,
             arrays=arrays,
         )
-    return flatten(found, z)
+    row = flatten(found, z)
+    if added is not None:
+        row.update(relaxed_columns(added))
+    return row
+
+
+def relaxed_columns(added: Mapping[str, Any]) -> Row:
+    """The solver's figures and the weft crimp (`bwsd metrics --relaxed`) as columns."""
+    solver, crimp = added["relaxed"], added["crimp"]
+    return {
+        "relax_separate_steps": solver["separate_steps"],
+        "relax_steps": solver["steps"],
+        "relax_rejected_steps": solver["rejected_steps"],
+        "relax_added_nodes": solver["added_nodes"],
+        "relax_tension_length_twin": solver["tension_length"]["twin"],
+        "relax_tension_length": solver["tension_length"]["relaxed"],
+        "relax_worst_overlap": solver["worst_overlap"],
+        "relax_worst_overlap_share": solver["worst_overlap_share"],
+        "relax_force_residual": solver["force_residual"],
+        "relax_sides_kept": solver["sides"]["kept"],
+        "relax_sides_told": solver["sides"]["told"],
+        "relax_seconds": solver["seconds"],
+        "weft_crimp": crimp["mean"],
+        "weft_crimp_max": crimp["max"],
+    }
 
 
 def flatten(found: Mapping[str, Any], z: float | None) -> Row:

@@ -36,7 +36,7 @@ CONFIG_PARAMS = {
     "c_mat": "float",
     "diameter": "float",
 }
-SWEEP_KEYS = ("generator", "program", "config", "sample", "count", "seed")
+SWEEP_KEYS = ("generator", "program", "config", "sample", "count", "seed", "relax")
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,7 @@ class Spec:
     sample: str = "grid"
     count: int = 0
     seed: int = 0
+    relax: bool = False  # measure each candidate's relaxed preform (docs/relax.md)
 
     def candidates(self) -> list[Candidate]:
         """Every candidate, in order, each once (a random draw repeated is run once)."""
@@ -70,10 +71,10 @@ class Spec:
         for values in self._points():
             params = {**self.fixed, **values}
             columns = {name: column(value, self.kinds[name]) for name, value in params.items()}
-            cid = candidate_id(self.source, columns)
+            cid = candidate_id(self.source, columns, self.relax)
             if cid not in seen:
                 seen.add(cid)
-                out.append(Candidate(len(out), cid, self.source, params, columns))
+                out.append(Candidate(len(out), cid, self.source, params, columns, self.relax))
         return out
 
     def _points(self) -> Iterator[dict[str, Any]]:
@@ -256,6 +257,13 @@ def _sample(reader: _Reader, sweep: dict[str, Any]) -> tuple[str, int, int]:
     return sample, count, seed
 
 
+def _relax(reader: _Reader, sweep: dict[str, Any]) -> bool:
+    relax = sweep.get("relax", False)
+    if type(relax) is not bool:
+        raise reader.error(f"must be true or false, got {relax!r}", "sweep", "relax")
+    return relax
+
+
 def _check_tables(reader: _Reader, data: Mapping[str, Any]) -> dict[str, Any]:
     for name in data:
         if name not in ("sweep", "fixed", "vary"):
@@ -275,6 +283,7 @@ def parse_spec(data: Mapping[str, Any], path: str = "<spec>", folder: Path = Pat
     sweep = _check_tables(reader, data)
     source, kinds = _source(reader, sweep, folder)
     sample, count, seed = _sample(reader, sweep)
+    relax = _relax(reader, sweep)
     fixed, vary = reader.table(data, "fixed"), reader.table(data, "vary")
     for table, names in (("fixed", fixed), ("vary", vary)):
         for name in names:
@@ -291,7 +300,7 @@ def parse_spec(data: Mapping[str, Any], path: str = "<spec>", folder: Path = Pat
         size = math.prod(len(v) for v in checked_vary.values() if isinstance(v, list))
         if size > MAX_CANDIDATES:
             raise reader.error(f"{size} candidates: at most {MAX_CANDIDATES}", "vary")
-    return Spec(path, source, kinds, checked_fixed, checked_vary, sample, count, seed)
+    return Spec(path, source, kinds, checked_fixed, checked_vary, sample, count, seed, relax)
 
 
 def _check_program_diameter(reader: _Reader, source: Source, table: str) -> None:

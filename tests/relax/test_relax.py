@@ -1,5 +1,5 @@
 """The relaxed preform (docs/relax.md): one test per limit of the paper's model that the
-relaxation lifts, and the issue's targets that can be checked on every run."""
+relaxation lifts, and the targets that can be checked on every run."""
 
 from __future__ import annotations
 

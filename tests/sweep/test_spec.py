@@ -125,6 +125,14 @@ BAD = [
     ('[sweep]\ngenerator = "braid4"\nsample = "random"\n', r"\[sweep\.count\]: must be an integer"),
     ('[sweep]\ngenerator = "braid4"\nseed = 3\n', r"\[sweep\.seed\]: only a random sample"),
     (
+        '[sweep]\ngenerator = "braid4"\nrelax = "yes"\n',
+        r"\[sweep\.relax\]: must be true or false, got 'yes'",
+    ),
+    (
+        '[sweep]\ngenerator = "braid4"\nrelax = 1\n',
+        r"\[sweep\.relax\]: must be true or false, got 1",
+    ),
+    (
         '[sweep]\ngenerator = "braid4"\n[fixed]\nflange = "2by6"\n',
         r"\[fixed\.flange\]: must be a block like \"2x6\"",
     ),
