@@ -1,3 +1,4 @@
+// @ts-check
 // The daemon's REST API and event stream, as the page uses them.
 //
 // Every URL is relative to the page, so the panel also works behind a reverse proxy

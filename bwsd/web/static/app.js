@@ -1,3 +1,4 @@
+// @ts-check
 // The operator's panel: the predicted preform, which line moves next, why the machine
 // stopped, and the PackML commands to start, hold and stop it.
 //
@@ -250,7 +251,7 @@ function judge(event) {
   const delta = event.skeleton;
   if (!live.loaded || event.program_id !== live.programId) {
     // An event of a program older than the one shown is history; a newer one needs it all.
-    const older = live.loaded && event.program_id != null && event.program_id < live.programId;
+    const older = live.loaded && event.program_id !== undefined && event.program_id !== null && event.program_id < live.programId;
     return older ? 'ignore' : 'refetch';
   }
   if (!delta || typeof delta.since !== 'number') return 'refetch';

@@ -1,3 +1,4 @@
+// @ts-check
 // One run of some work at a time: asking while it runs asks for one more run after it.
 
 export class Coalesced {

@@ -1,3 +1,4 @@
+// @ts-check
 // Yarn colours, shared by the 3D view, the section and the machine matrix so a case in the
 // grid has the colour of its yarn in the preform.
 //

@@ -1,3 +1,4 @@
+// @ts-check
 // The PackML commands and the unit mode: buttons enabled only for what the daemon accepts
 // now, a question before Stop and Abort, the reason sent with Stop, Hold and Abort, and the
 // daemon's answer or refusal said as it is.

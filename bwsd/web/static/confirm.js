@@ -1,3 +1,4 @@
+// @ts-check
 // The question asked before Stop and Abort: a modal dialog the operator must confirm, with
 // the reason that goes with the command. Cancel, Escape or closing it sends nothing.
 

@@ -1,3 +1,4 @@
+// @ts-check
 // Whether the daemon answers: up while the event stream is open and the last request was
 // answered; `lastSeen` is when it last answered or sent an event (what the page shows as
 // "disconnected since").

@@ -1,3 +1,4 @@
+// @ts-check
 // Instructions and runs in words, as the program writes them.
 
 import { signed } from './grid.js';

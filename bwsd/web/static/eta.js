@@ -1,3 +1,4 @@
+// @ts-check
 // The time left of a run, from the recent instruction rate.
 //
 // The window holds the daemon's time stamps (`at`, seconds) of the last WINDOW instructions

@@ -1,3 +1,4 @@
+// @ts-check
 // The machine matrix: rows × cols cells, row 0 at the top as in the program's FILL block,
 // each cell showing the id of the warp whose case is in it, in that yarn's colour. Over the
 // twin's picture: the lines the next shift moves (with an arrow and step each), the cells

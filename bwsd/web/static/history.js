@@ -1,3 +1,4 @@
+// @ts-check
 // The history: the programs loaded (newest first, paged back with `before`) and the journal's
 // PackML states and events (oldest first, paged on with `after_state` / `after_event`),
 // brought up to date whenever the daemon announces a change.

@@ -1,3 +1,4 @@
+// @ts-check
 // The job: the loaded program's text with the line that runs next marked, how far the run
 // is with the time left, and the skeleton's exports as downloads.
 //

@@ -1,3 +1,4 @@
+// @ts-check
 // The matrix's marks as SVG: the cells' overlays in the drawing's units (CELL per cell,
 // row 0 at the top), and the rulers and move arrows in the element's pixels, laid out
 // again whenever the view zooms or pans.

@@ -1,3 +1,4 @@
+// @ts-check
 // What the matrix draws, worked out without the page: which cells a shift moves, which
 // line a faulted axis drives, and where the next weft runs in the matrix's coordinates.
 // Every result is in cells: column c, row r is the cell's centre (c + 0.5, r + 0.5) on screen.

@@ -1,3 +1,4 @@
+// @ts-check
 // The matrix panel around the drawing: the zoom buttons, the frame the matrix is drawn in
 // (with the e-stop sign and the hover label), the line saying what the machine reports, and
 // the legend of the marks.

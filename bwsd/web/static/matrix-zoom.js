@@ -1,3 +1,4 @@
+// @ts-check
 // Zoom and pan of the matrix: a scale and an offset from the drawing's units to the
 // element's pixels, driven by the wheel, a drag, a two-finger pinch and the keyboard. A
 // press that does not move is a tap (a pick); the pointer over the element is reported

@@ -1,3 +1,4 @@
+// @ts-check
 // The message line of the Control panel: what the daemon answered or refused, or why
 // nothing was sent. A success fades after a while, an error stays.
 

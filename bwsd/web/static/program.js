@@ -1,3 +1,4 @@
+// @ts-check
 // The program panel: pick a .bws file (or type it), check it with a dry run, load it.
 //
 // A dry run answers the totals the twin predicts (instructions, contacts, yarns, nodes,

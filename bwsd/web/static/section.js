@@ -1,3 +1,4 @@
+// @ts-check
 // The cross-section at a height z of the preform frame, by the rules of `bwsd slice`
 // (pure: numbers in, numbers out; the drawing is view-section.js).
 //

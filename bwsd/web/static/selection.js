@@ -1,3 +1,4 @@
+// @ts-check
 // The yarn picked in the 3D view or the matrix: highlighted in both, described in the
 // Selection panel (id, kind, family, contacts, length, as the 3D view knows the yarn).
 

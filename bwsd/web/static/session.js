@@ -1,3 +1,4 @@
+// @ts-check
 // Who is logged in: the token (api.js keeps it), its holder and role as `/whoami` names
 // them, the login form with "remember me", log out, and a `#token=` link opened in a tab
 // that shows the page already.

@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view of the predicted preform: the twin's skeleton as yarn polylines.
 //
 // Coordinates are the skeleton's preform frame (mm): z is up, z = 0 is the fell at the

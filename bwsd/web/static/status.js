@@ -1,3 +1,4 @@
+// @ts-check
 // What the daemon says about the machine, drawn as it says it: the header's state badge and
 // e-stop badge, the e-stop and disconnected banners, and the Status panel (machine health,
 // bus, why it stopped, recovery, unit mode).

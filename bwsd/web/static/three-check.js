@@ -1,3 +1,4 @@
+// @ts-check
 // Says so on the page when three.js is not installed beside it (`npm ci` was not run before
 // bwsd was built or installed, docs/preview.md): without it the page's scripts cannot load,
 // and the page would stay blank. It imports nothing, so it runs whatever is missing.

@@ -1,3 +1,4 @@
+// @ts-check
 // Axes of the preform frame in the 3D view, with millimetre ticks, and a scale bar.
 //
 // Three axes start at a corner below the machine's footprint: x along the front edge

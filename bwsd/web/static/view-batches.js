@@ -1,3 +1,4 @@
+// @ts-check
 // What the 3D view hands the GPU: yarn polylines batched into few draw calls, node
 // positions by id, and contact points. Buffers grow by doubling and are uploaded in the
 // parts that changed only.

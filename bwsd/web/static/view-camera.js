@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view's camera: a perspective and an orthographic one sharing one orbit control,
 // and the preset views of a textile drawing.
 //

@@ -1,3 +1,4 @@
+// @ts-check
 // The two layers that keep a big preform smooth while it grows (see skeleton.js): the
 // settled part of every yarn, drawn into an off-screen image, and the live tails, drawn
 // every frame over it. The split advances by drawing only what newly settled into the

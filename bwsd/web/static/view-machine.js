@@ -1,3 +1,4 @@
+// @ts-check
 // The machine in the 3D view: the converged matrix at the fell (outlined and lightly
 // filled), the outline of the guide matrix and its guides, occupied ones in their yarn's
 // colour. Drawn on top of the yarns, the same whether those are settled or live.

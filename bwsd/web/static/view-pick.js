@@ -1,3 +1,4 @@
+// @ts-check
 // Picking a yarn in the 3D view: the yarn whose drawn polyline passes nearest a clicked
 // pixel, within a few pixels. Every segment is projected with the camera (a few ms for a
 // hundred thousand nodes, and only on a click); a segment above the section cut, when the

@@ -1,3 +1,4 @@
+// @ts-check
 // The cross-section at a height z, drawn as `bwsd slice` draws it: a 2D view with x and y
 // in mm at equal scale (y up, as in the top view), every crossing a circle of the yarn
 // diameter, filled with a dark rim where the yarn is laid (a fixed segment), open where it

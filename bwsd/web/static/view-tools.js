@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view's tools beyond drawing the yarns: the section (its height, the plane and
 // crossings in 3D, the cut above it, the 2D view beside), the braided section's zones for
 // colouring, picking a yarn with the mouse, the view's controls in the page and its test

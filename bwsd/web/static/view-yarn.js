@@ -1,3 +1,4 @@
+// @ts-check
 // One yarn of the 3D view: its node ids and exact coordinates, in a buffer grown by doubling.
 
 /** One yarn: its node ids and coordinates (exactly as the daemon sent them). */

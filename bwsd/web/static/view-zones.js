@@ -1,3 +1,4 @@
+// @ts-check
 // Braided sections and their zones, as bwsd/program/sections.py defines them (pure), and
 // the program's "# section: SPEC" line, as bwsd/export/mixing.py reads it.
 //
