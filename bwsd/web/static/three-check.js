@@ -14,6 +14,7 @@ async function checkThree() {
   }
   if (answer.status !== 404) return;
   const banner = document.getElementById('page-banner');
+  if (!banner) return;
   banner.textContent =
     'three.js is missing from this installation of bwsd, so the page cannot draw the preform ' +
     'or run. Install it where bwsd was built (npm ci --prefix bwsd/web) and reinstall bwsd, ' +
