@@ -129,3 +129,10 @@ export interface InstructionEvent extends DaemonEvent {
   next?: Next | null;
   skeleton?: SkeletonDelta | null;
 }
+
+/** A command's answer (`POST /api/v1/commands/{name}`): the state it led to. */
+export interface CommandAnswer {
+  name: string;
+  reason?: string;
+  allowed: string[];
+}
