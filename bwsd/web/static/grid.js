@@ -18,7 +18,7 @@ export { signed } from './matrix-draw.js';
 /** @import { Palette } from './colours.js' */
 /** @import { LineMarks } from './matrix-draw.js' */
 /** @import { Span, WeftCells } from './matrix-geometry.js' */
-/** @import { MachineMarks } from './matrix-panel.js' */
+/** @import { MachineRead } from './matrix-panel.js' */
 
 /**
  * A cell of the matrix: its SVG parts and the yarn shown in it (-1: none; null before the
@@ -54,7 +54,7 @@ export class MatrixGrid {
     this.weftCells = null;
     /** @type {Machine | null} the skeleton JSON's `machine`: pitches and convergence */
     this.geometry = null;
-    /** @type {MachineMarks | null} the machine as last read */
+    /** @type {MachineRead | null} the machine as last read */
     this.machine = null;
     /** @type {number | null} the highlighted yarn id */
     this.picked = null;

@@ -11,7 +11,7 @@ import { patterns, svg } from './matrix-draw.js';
 const LAYERS = /** @type {const} */ (['cells', 'faults', 'differs', 'highlights', 'marks', 'weft']); // bottom to top
 
 /** @typedef {Record<typeof LAYERS[number], SVGElement>} Layers the drawing's layers, by name */
-/** @typedef {{differs: Cell[], estop: boolean, faulted: string[]}} MachineMarks the machine as read */
+/** @typedef {{differs: Cell[], estop: boolean, faulted: string[]}} MachineRead the machine as read */
 
 /**
  * Build the panel in `host`; `actions` {zoomOut, zoomIn, fit} for the buttons. Returns its
@@ -97,7 +97,7 @@ function legend() {
  * The line under the matrix, and whether it is an alarm: the e-stop, the faulted axes,
  * where the sensors differ (`twin(r, c)`: the twin's yarn in a cell), the next weft, the
  * picked yarn and its cell ({r, c} or null).
- * @param {MachineMarks | null} machine
+ * @param {MachineRead | null} machine
  * @param {(r: number, c: number) => number | null | undefined} twin the yarn id, -1 for none
  * @param {boolean} shown
  * @param {WeftInstruction | null} weft
