@@ -1,7 +1,16 @@
+// @ts-check
 // The daemon's REST API and event stream, as the page uses them.
 //
 // Every URL is relative to the page, so the panel also works behind a reverse proxy
 // that serves the daemon under a sub-path.
+
+/** @import { DaemonEvent } from '../types/daemon' */
+
+/**
+ * An answer of the API: its status, and its body parsed from JSON (null when empty; the
+ * shape is the endpoint's, docs/api.md).
+ * @typedef {{status: number, ok: boolean, body: any}} Answer
+ */
 
 const TOKEN_KEY = 'bwsd.token';
 
@@ -11,6 +20,10 @@ const TOKEN_KEY = 'bwsd.token';
 // keeps it in local storage instead, for the next sessions too. Only one of the two
 // holds it at a time.
 
+/**
+ * @param {'local' | 'session'} kind
+ * @returns {Storage | null}
+ */
 function store(kind) {
   try {
     return kind === 'local' ? window.localStorage : window.sessionStorage;
@@ -37,9 +50,13 @@ export function tokenRemembered() {
   }
 }
 
-/** Keep `token` for this session, or beyond it with `remember` (null or '' forgets it). */
+/**
+ * Keep `token` for this session, or beyond it with `remember` (null or '' forgets it).
+ * @param {string | null} token
+ * @param {boolean} [remember]
+ */
 export function setToken(token, remember = false) {
-  for (const kind of ['session', 'local']) {
+  for (const kind of /** @type {const} */ (['session', 'local'])) {
     try {
       const place = store(kind);
       if (!place) continue;
@@ -74,11 +91,16 @@ const REQUEST_MS = 10000; // a request not answered by then counts as the daemon
  * One request to the API: `{status, body}`, body the parsed JSON answer (or null).
  * HTTP errors are answers, not exceptions: the caller shows a 409's `error` to the
  * operator. Only a network failure, or no answer within `timeoutMs`, throws.
+ * @param {string} path
+ * @param {{method?: string, body?: unknown, timeoutMs?: number}} [options]
+ * @returns {Promise<Answer>}
  */
 export async function request(path, { method = 'GET', body, timeoutMs = REQUEST_MS } = {}) {
+  /** @type {Record<string, string>} */
   const headers = { Accept: 'application/json' };
   const token = getToken();
   if (token) headers.Authorization = `Bearer ${token}`;
+  /** @type {RequestInit} */
   const init = { method, headers, cache: 'no-store' };
   if (timeoutMs) init.signal = AbortSignal.timeout(timeoutMs);
   if (body !== undefined) {
@@ -101,13 +123,18 @@ export async function request(path, { method = 'GET', body, timeoutMs = REQUEST_
 /**
  * GET `path` with the token and save the answer as the file `name` (the browser's download).
  * `{ok, status, error}`; the file is saved only for a 200.
+ * @param {string} path
+ * @param {string} name
+ * @returns {Promise<{ok: boolean, status: number, error: string}>}
  */
 export async function download(path, name) {
+  /** @type {Record<string, string>} */
   const headers = {};
   const token = getToken();
   if (token) headers.Authorization = `Bearer ${token}`;
   const response = await fetch(path, { headers, cache: 'no-store' });
   if (!response.ok) {
+    /** @type {Pick<Answer, 'status' | 'body'>} */
     const answer = { status: response.status, body: null };
     try {
       answer.body = await response.json();
@@ -128,7 +155,10 @@ export async function download(path, name) {
   return { ok: true, status: response.status, error: '' };
 }
 
-/** The `error` of a refused request, with a fallback naming the status. */
+/**
+ * The `error` of a refused request, with a fallback naming the status.
+ * @param {Pick<Answer, 'status' | 'body'>} answer
+ */
 export function errorText(answer) {
   const error = answer.body && typeof answer.body.error === 'string' ? answer.body.error : '';
   return error || `the daemon answered ${answer.status}`;
@@ -146,12 +176,19 @@ const LAST_RETRY_MS = 5000;
  * up or down. `start()` connects (again, e.g. with a new token), `stop()` hangs up for good.
  */
 export class EventLink {
+  /**
+   * @param {object} callbacks
+   * @param {(event: DaemonEvent) => void} callbacks.onEvent
+   * @param {(live: boolean) => void} callbacks.onLink
+   */
   constructor({ onEvent, onLink }) {
     this.onEvent = onEvent;
     this.onLink = onLink;
+    /** @type {WebSocket | null} */
     this.socket = null;
     this.retryMs = FIRST_RETRY_MS;
-    this.timer = null;
+    /** @type {ReturnType<typeof setTimeout> | undefined} */
+    this.timer = undefined;
     this.wanted = false;
   }
 
@@ -175,7 +212,7 @@ export class EventLink {
   stop() {
     this.wanted = false;
     clearTimeout(this.timer);
-    this.timer = null;
+    this.timer = undefined;
     if (this.socket) {
       const socket = this.socket;
       this.socket = null;

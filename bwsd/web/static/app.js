@@ -1,3 +1,4 @@
+// @ts-check
 // The operator's panel: the predicted preform, which line moves next, why the machine
 // stopped, and the PackML commands to start, hold and stop it.
 //
@@ -21,6 +22,7 @@ import { Commands } from './commands.js';
 import { dismissConfirm } from './confirm.js';
 import { Connection } from './connection.js';
 import { describeNext } from './describe.js';
+import { byId as $, optionalById } from './dom.js';
 import { MatrixGrid } from './grid.js';
 import { HistoryPanel } from './history.js';
 import { JobPanel } from './job.js';
@@ -31,7 +33,9 @@ import { Session } from './session.js';
 import { PreformView } from './skeleton.js';
 import { StatusPanel } from './status.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { CommandAnswer, DaemonEvent, InstructionEvent, Next, Skeleton, State } from '../types/daemon' */
+/** @import { Answer } from './api.js' */
+
 const { Palette, css } = colours;
 const COLOUR_KEY = 'bwsd.colourBy';
 const COLOUR_MODES = colours.COLOUR_MODES ?? ['family', 'yarn'];
@@ -44,6 +48,25 @@ const LOADABLE = new Set(['Stopped', 'Idle', 'Complete', 'Aborted']);
 const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspending']);
 
 // ----- test and diagnostics hooks -----
+/**
+ * @typedef {object} Hooks
+ * @property {boolean} ready
+ * @property {number} done
+ * @property {number} nodes
+ * @property {number} yarns
+ * @property {number} contacts
+ * @property {string | null} state
+ * @property {string[]} allowed
+ * @property {boolean} online
+ * @property {string | null} role
+ * @property {number | null} selected
+ * @property {number[]} latencies
+ * @property {number[]} frames
+ * @property {number[]} drawn
+ * @property {{ms: number, nodes: number}[]} work
+ * @property {() => ReturnType<PreformView['dump']>} dump
+ */
+/** @type {Hooks} */
 const hooks = {
   ready: false, // the first state and skeleton are on screen
   done: 0, // instructions applied to the 3D view
@@ -63,6 +86,11 @@ const hooks = {
 };
 window.bwsd = hooks;
 
+/**
+ * @template T
+ * @param {T[]} samples
+ * @param {T} value
+ */
 function keep(samples, value) {
   samples.push(value);
   if (samples.length > KEEP) samples.splice(0, samples.length - KEEP);
@@ -71,6 +99,20 @@ function keep(samples, value) {
 // ----- what the page knows -----
 let live = fresh();
 
+/**
+ * What the page knows of the daemon and shows.
+ * @typedef {object} Live
+ * @property {State | null} state the last GET state answer
+ * @property {number | null} programId the program whose skeleton is shown
+ * @property {boolean} loaded a skeleton is shown
+ * @property {boolean} noProgram the daemon has no program loaded
+ * @property {number} done instructions in the skeleton shown
+ * @property {number} eventIndex the newest instruction index seen in an event since the last state
+ * @property {Next | null} eventNext and the "next" it announced
+ * @property {boolean} fetchedOnce
+ */
+
+/** @returns {Live} */
 function fresh() {
   return {
     state: null, // the last GET state answer
@@ -93,8 +135,10 @@ const connection = new Connection(() => {
 });
 let generation = 0; // counts logins and logouts: an answer asked for before one is dropped
 
-let inbox = []; // instruction events to apply at the next frame
-let waiting = []; // instruction events that arrived while the skeleton was being fetched
+/** @type {InstructionEvent[]} instruction events to apply at the next frame */
+let inbox = [];
+/** @type {InstructionEvent[]} instruction events that arrived while the skeleton was being fetched */
+let waiting = [];
 
 let frameRequested = false;
 let lastTick = 0; // time of the previous frame while updates flow (0: none)
@@ -105,7 +149,8 @@ const SLOW_FRAME_MS = 20; // a drawing that takes longer than this leaves time f
 let renderedAt = 0; // time of the frame that last drew the 3D view
 let renderCost = 0; // ms from that frame to the next one: what drawing the view costs
 let measured = true; // renderCost measured since the last drawing
-let unshown = []; // instruction events applied but not drawn yet
+/** @type {InstructionEvent[]} instruction events applied but not drawn yet */
+let unshown = [];
 let panelsDrawn = 0; // time the matrix and the status were last drawn while updates flow
 // While instructions flow, the matrix, the status and the job are drawn at most this often:
 // repainting hundreds of SVG cells at every frame (a 24x24 braid moves half of them at each
@@ -116,12 +161,12 @@ const PANEL_MS = 200;
 let colourMode = 'family';
 try {
   const kept = localStorage.getItem(COLOUR_KEY);
-  if (COLOUR_MODES.includes(kept)) colourMode = kept;
+  if (kept !== null && COLOUR_MODES.includes(kept)) colourMode = kept;
 } catch {
   // storage disabled
 }
 const palette = new Palette(colourMode);
-const view = new PreformView($('view'), palette, scheduleFrame);
+const view = new PreformView($('view', HTMLCanvasElement), palette, scheduleFrame);
 const grid = new MatrixGrid($('grid'), palette);
 const status = new StatusPanel();
 const job = new JobPanel({ onAnswer: answered, onUnreachable: unreachable });
@@ -147,7 +192,7 @@ const commands = new Commands({
   index: currentIndex,
   may: mayCommand,
   mayMode: mayChangeMode,
-  answered: (body) => {
+  answered: (/** @type {CommandAnswer} */ body) => {
     if (live.state) showState({ ...live.state, name: body.name, reason: body.reason, allowed: body.allowed });
   },
   refreshState: () => refreshState(),
@@ -156,7 +201,8 @@ const commands = new Commands({
   loggedOut: () => loggedOut(true),
   forbidden,
 });
-$('colour-by').value = colourMode;
+const colourBy = $('colour-by', HTMLSelectElement);
+colourBy.value = colourMode;
 
 // ----- the animation frame: every change reaches the screen here, once per frame -----
 
@@ -166,6 +212,7 @@ function scheduleFrame() {
   requestAnimationFrame(frame);
 }
 
+/** @param {DOMHighResTimeStamp} now */
 function frame(now) {
   const started = performance.now();
   frameRequested = false;
@@ -230,7 +277,7 @@ function applyInbox() {
     noteProgress(event);
     const verdict = judge(event);
     if (verdict === 'apply') {
-      if (view.applyDelta(event.skeleton)) {
+      if (event.skeleton && view.applyDelta(event.skeleton)) { // (judge found the delta)
         live.done = event.index;
         applied.push(event);
         gridDirty = true;
@@ -245,12 +292,16 @@ function applyInbox() {
   return applied;
 }
 
-/** "apply", "ignore" or "refetch": what to do with an instruction event now. */
+/**
+ * "apply", "ignore" or "refetch": what to do with an instruction event now.
+ * @param {InstructionEvent} event
+ */
 function judge(event) {
   const delta = event.skeleton;
   if (!live.loaded || event.program_id !== live.programId) {
     // An event of a program older than the one shown is history; a newer one needs it all.
-    const older = live.loaded && event.program_id != null && event.program_id < live.programId;
+    const shown = live.programId;
+    const older = live.loaded && shown !== null && event.program_id !== undefined && event.program_id !== null && event.program_id < shown;
     return older ? 'ignore' : 'refetch';
   }
   if (!delta || typeof delta.since !== 'number') return 'refetch';
@@ -259,7 +310,10 @@ function judge(event) {
   return 'refetch'; // instructions were missed
 }
 
-/** The progress and next line an instruction event announces (shown at this frame). */
+/**
+ * The progress and next line an instruction event announces (shown at this frame).
+ * @param {InstructionEvent} event
+ */
 function noteProgress(event) {
   const state = live.state;
   if (!state || event.program_id !== state.program_id || event.index <= Math.max(live.eventIndex, state.index)) return;
@@ -305,6 +359,7 @@ async function fetchAll() {
     return;
   }
   if (!accept(skeletonAnswer)) return;
+  /** @type {Skeleton} */
   const skeleton = skeletonAnswer.body;
   showSkeleton(skeleton, skeleton.program_id ?? programId);
 }
@@ -333,7 +388,10 @@ function refreshStateNowAndThen() {
   refreshState();
 }
 
-/** True for an answer to show; a 401 logs out, other refusals are said. */
+/**
+ * True for an answer to show; a 401 logs out, other refusals are said.
+ * @param {Answer} answer
+ */
 function accept(answer) {
   heard();
   if (answer.ok) return true;
@@ -342,7 +400,10 @@ function accept(answer) {
   return false;
 }
 
-/** A refused answer from a panel: a 401 logs out (the panel shows the rest). */
+/**
+ * A refused answer from a panel: a 401 logs out (the panel shows the rest).
+ * @param {Answer} answer
+ */
 function answered(answer) {
   heard();
   if (answer.status === 401) loggedOut(true);
@@ -355,7 +416,10 @@ function heard() {
   connection.heard();
 }
 
-/** A request found no daemon (a network error or no answer in time). */
+/**
+ * A request found no daemon (a network error or no answer in time).
+ * @param {unknown} error
+ */
 function unreachable(error) {
   connection.unreachable(error);
 }
@@ -373,6 +437,7 @@ setInterval(() => {
 
 // ----- showing what was fetched -----
 
+/** @param {State} state */
 function showState(state) {
   const sameProgram = live.state && live.state.program_id === state.program_id;
   if (!sameProgram || state.index >= live.eventIndex || !RUNNING_STATES.has(state.name)) {
@@ -405,6 +470,10 @@ function showNoProgram() {
   scheduleFrame();
 }
 
+/**
+ * @param {Skeleton} skeleton
+ * @param {number} programId
+ */
 function showSkeleton(skeleton, programId) {
   const newProgram = !live.loaded || programId !== live.programId;
   view.load(skeleton);
@@ -442,10 +511,14 @@ function drawGrid() {
     const known = bus && online() !== false && bus.connected === true;
     grid.setMachine(known ? { differs: bus.differs ?? [], estop: Boolean(bus.estop), faulted: bus.faulted ?? [] } : null);
   }
-  if ($('next')) $('next').textContent = describeNext(live.state, next, currentIndex());
+  const line = optionalById('next');
+  if (line) line.textContent = describeNext(live.state, next, currentIndex());
 }
 
-/** The next instruction: from the newest of the state and the instruction events. */
+/**
+ * The next instruction: from the newest of the state and the instruction events.
+ * @returns {Next | null}
+ */
 function currentNext() {
   const state = live.state;
   if (!state) return null;
@@ -492,7 +565,7 @@ function drawButtons() {
   hooks.allowed = commands.drawButtons(live.state?.allowed, may);
   commands.drawMode(live.state, mayChangeMode());
   const state = live.state;
-  const loadable = Boolean(state) && LOADABLE.has(state.name) && !state.recovering;
+  const loadable = state !== null && LOADABLE.has(state.name) && !state.recovering;
   programs.setAllowed({
     check: may,
     load: may && loadable,
@@ -518,7 +591,7 @@ function drawCounts() {
 let legendFamilies = -1; // weft families in the legend shown
 
 function drawLegend() {
-  const legend = $('legend');
+  const legend = optionalById('legend');
   if (!legend) return;
   legendFamilies = palette.weftColours.size;
   if (palette.mode === 'yarn') {
@@ -538,6 +611,7 @@ function drawLegend() {
 
 // ----- events -----
 
+/** @param {DaemonEvent} event */
 function onEvent(event) {
   heard();
   switch (event.event) {
@@ -551,7 +625,7 @@ function onEvent(event) {
       refreshHistory();
       break;
     case 'instruction':
-      inbox.push(event);
+      inbox.push(/** @type {InstructionEvent} */ (event)); // its `event` says what it is
       flowingUntil = performance.now() + FLOW_MS;
       scheduleFrame();
       refreshStateNowAndThen(); // the bus health and the rest of the state, while it runs
@@ -575,6 +649,7 @@ function onEvent(event) {
   }
 }
 
+/** @param {boolean} up */
 function onLink(up) {
   connection.setLink(up);
   if (up || !link.wanted) return;
@@ -590,7 +665,11 @@ function refreshHistory() {
 
 // ----- session -----
 
-/** A 403: the role it names; say what is needed. */
+/**
+ * A 403: the role it names; say what is needed.
+ * @param {Answer} answer
+ * @param {string} what
+ */
 function forbidden(answer, what) {
   session.noteRefusal(answer);
   const needs = answer.body?.needs ? ` (needs ${answer.body.needs})` : '';
@@ -598,7 +677,10 @@ function forbidden(answer, what) {
   drawButtons();
 }
 
-/** Show the login form (the token was refused). */
+/**
+ * Show the login form (the token was refused).
+ * @param {boolean} refused
+ */
 function loggedOut(refused) {
   if (refused && getToken()) say('the token was refused: log in again', 'error');
   session.end();
@@ -621,7 +703,7 @@ function clearPicture() {
   job.clear();
   record.clear();
   programs.clear();
-  $('reason-input').value = '';
+  $('reason-input', HTMLInputElement).value = '';
   $('mode-message').textContent = '';
   Object.assign(hooks, { ready: false, done: 0, nodes: 0, yarns: 0, contacts: 0, state: null, allowed: [] });
   $('view-stats').textContent = '';
@@ -669,7 +751,11 @@ async function start() {
   link.start(); // its "hello" fetches the skeleton
 }
 
-/** Log in with `token` (from the form, or a link opened in this tab). */
+/**
+ * Log in with `token` (from the form, or a link opened in this tab).
+ * @param {string} token
+ * @param {boolean} remember
+ */
 function logIn(token, remember) {
   if (link.wanted || getToken()) clearPicture(); // another token: nothing of the old one stays
   link.stop();
@@ -686,7 +772,11 @@ function logOut() {
   start();
 }
 
-/** A program of the history: its text in the Program panel, to check or load again. */
+/**
+ * A program of the history: its text in the Program panel, to check or load again.
+ * @param {number} id
+ * @param {string} name
+ */
 async function openProgram(id, name) {
   try {
     const answer = await request(`api/v1/programs/${id}`);
@@ -699,8 +789,8 @@ async function openProgram(id, name) {
 
 // ----- view tools -----
 
-$('colour-by').addEventListener('change', (event) => {
-  const mode = COLOUR_MODES.includes(event.target.value) ? event.target.value : 'family';
+colourBy.addEventListener('change', () => {
+  const mode = COLOUR_MODES.includes(colourBy.value) ? colourBy.value : 'family';
   try {
     localStorage.setItem(COLOUR_KEY, mode);
   } catch {
@@ -711,7 +801,8 @@ $('colour-by').addEventListener('change', (event) => {
   drawLegend();
 });
 
-$('show-contacts').addEventListener('change', (event) => view.setContactsVisible(event.target.checked));
+const showContacts = $('show-contacts', HTMLInputElement);
+showContacts.addEventListener('change', () => view.setContactsVisible(showContacts.checked));
 $('fit').addEventListener('click', () => view.fit());
 
 // ----- go -----

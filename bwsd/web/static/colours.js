@@ -1,3 +1,4 @@
+// @ts-check
 // Yarn colours, shared by the 3D view, the section and the machine matrix so a case in the
 // grid has the colour of its yarn in the preform.
 //
@@ -21,6 +22,10 @@
 
 import { zoneOf } from './view-zones.js';
 
+/** @import { Cell, YarnData } from '../types/daemon' */
+/** @import { Section } from './view-zones.js' */
+
+/** @type {string[]} */
 export const COLOUR_MODES = ['yarn', 'family', 'zone', 'contacts'];
 export const WARP_COLOUR = 0x2c5282; // every warp, when colouring by family
 const WEFT_COLOURS = [0xc0392b, 0x1e8449, 0xb9770e, 0x7d3c98, 0x117a8b, 0xa04000, 0x5d6d7e, 0x9a1d5a];
@@ -40,19 +45,30 @@ const NO_SECTION_COLOUR = 0x64748b; // slate: warps of a program without a secti
 const SEQUENTIAL = [0x440154, 0x3b528b, 0x21918c, 0x5ec962, 0xb5de2b];
 const SEQUENTIAL_STEPS = 5; // legend entries of the contacts map
 
-/** The family of a yarn: "warp" or "weft-<angle>" (as the skeleton JSON spells it). */
+/**
+ * The family of a yarn: "warp" or "weft-<angle>" (as the skeleton JSON spells it).
+ * @param {Pick<YarnData, 'family' | 'kind' | 'angle'>} yarn
+ */
 export function familyOf(yarn) {
   if (yarn.family) return yarn.family;
   if (yarn.kind === 'warp') return 'warp';
   return `weft-${formatAngle(yarn.angle ?? 0)}`;
 }
 
-/** An angle in degrees as Python's "%g" writes it: 0, 90, 22.5, 33.3333. */
+/**
+ * An angle in degrees as Python's "%g" writes it: 0, 90, 22.5, 33.3333.
+ * @param {number} angle
+ */
 function formatAngle(angle) {
   return String(Number(angle.toPrecision(6)));
 }
 
-/** `a` moved towards `b` by `t` (0..1), channel by channel; 0xRRGGBB. */
+/**
+ * `a` moved towards `b` by `t` (0..1), channel by channel; 0xRRGGBB.
+ * @param {number} a
+ * @param {number} b
+ * @param {number} t
+ */
 export function mix(a, b, t) {
   let out = 0;
   for (const shift of [16, 8, 0]) {
@@ -63,12 +79,18 @@ export function mix(a, b, t) {
   return out;
 }
 
-/** 0xRRGGBB as CSS "#rrggbb". */
+/**
+ * 0xRRGGBB as CSS "#rrggbb".
+ * @param {number} colour
+ */
 export function css(colour) {
   return `#${colour.toString(16).padStart(6, '0')}`;
 }
 
-/** Dark text on light colours, white on dark ones (for the grid's yarn ids). */
+/**
+ * Dark text on light colours, white on dark ones (for the grid's yarn ids).
+ * @param {number} colour
+ */
 export function textOn(colour) {
   const r = (colour >> 16) & 255;
   const g = (colour >> 8) & 255;
@@ -76,7 +98,11 @@ export function textOn(colour) {
   return 0.299 * r + 0.587 * g + 0.114 * b > 150 ? '#111' : '#fff';
 }
 
-/** The colour of `value` in [0, top] on the sequential map. */
+/**
+ * The colour of `value` in [0, top] on the sequential map.
+ * @param {number} value
+ * @param {number} top
+ */
 export function sequential(value, top) {
   const t = top > 0 ? Math.min(Math.max(value / top, 0), 1) : 0;
   const at = t * (SEQUENTIAL.length - 1);
@@ -86,9 +112,32 @@ export function sequential(value, top) {
 
 /** The colour of every yarn, by the mode chosen (COLOUR_MODES). */
 export class Palette {
+  // What `clear` sets (and `add`, `noteContact`, `recolour`, `refresh` fill in).
+  /** @type {Map<number, string>} yarn id -> family */
+  families;
+  /** @type {Map<string, number>} weft family -> colour, in the order they appear */
+  weftColours;
+  /** @type {Map<number, Cell>} warp id -> [row, col] it was filled into */
+  cells;
+  /** @type {Map<number, Set<number>>} yarn id -> its neighbours' ids */
+  neighbours;
+  /** @type {Map<number, number>} yarn id -> index into YARN_COLOURS */
+  graphColour;
+  /** @type {number[]} yarns per colour index */
+  uses;
+  /** @type {Map<number, number>} yarn id -> contacts it is in, now */
+  contacts;
+  /** @type {Map<number, number>} the counts the colours show (taken at refresh) */
+  shownContacts;
+  /** @type {number} */
+  mostContacts;
+  /** @type {number} */
+  fewestContacts;
+
   constructor(mode = 'family') {
     this.mode = COLOUR_MODES.includes(mode) ? mode : 'family';
-    this.section = null; // the braided section (view-zones.js), for "zone"
+    /** @type {Section | null} the braided section (view-zones.js), for "zone" */
+    this.section = null;
     this.clear();
   }
 
@@ -106,12 +155,18 @@ export class Palette {
     this.fewestContacts = 0;
   }
 
-  /** Choose a colour mode (an unknown one is "family"). */
+  /**
+   * Choose a colour mode (an unknown one is "family").
+   * @param {string} mode
+   */
   setMode(mode) {
     this.mode = COLOUR_MODES.includes(mode) ? mode : 'family';
   }
 
-  /** Note a yarn (a warp with its fill `cell`); returns its family. */
+  /**
+   * Note a yarn (a warp with its fill `cell`); returns its family.
+   * @param {YarnData} yarn
+   */
   add(yarn) {
     const family = familyOf(yarn);
     this.families.set(yarn.id, family);
@@ -125,16 +180,24 @@ export class Palette {
     return family;
   }
 
-  /** A contact between yarns `a` and `b` (they become neighbours). */
+  /**
+   * A contact between yarns `a` and `b` (they become neighbours).
+   * @param {number} a
+   * @param {number} b
+   */
   noteContact(a, b) {
     for (const [one, other] of [[a, b], [b, a]]) {
       this.contacts.set(one, (this.contacts.get(one) ?? 0) + 1);
-      if (!this.neighbours.has(one)) this.neighbours.set(one, new Set());
-      this.neighbours.get(one).add(other);
+      const neighbours = this.neighbours.get(one);
+      if (neighbours) neighbours.add(other);
+      else this.neighbours.set(one, new Set([other]));
     }
   }
 
-  /** The braided section (or null): the zones of "zone". */
+  /**
+   * The braided section (or null): the zones of "zone".
+   * @param {Section | null} section
+   */
   setSection(section) {
     this.section = section;
   }
@@ -160,7 +223,7 @@ export class Palette {
     let changed = false;
     for (const id of [...this.families.keys()].sort((a, b) => a - b)) {
       const mine = this.graphColour.get(id);
-      const clash = [...this.neighbours.get(id)].some((n) => n < id && this.graphColour.get(n) === mine);
+      const clash = [...(this.neighbours.get(id) ?? [])].some((n) => n < id && this.graphColour.get(n) === mine);
       if (clash) {
         this.pick(id);
         changed = changed || this.graphColour.get(id) !== mine;
@@ -180,7 +243,10 @@ export class Palette {
     this.fewestContacts = Math.min(this.mostContacts, ...counts);
   }
 
-  /** A contact count's colour: the map spans the fewest to the most any yarn has. */
+  /**
+   * A contact count's colour: the map spans the fewest to the most any yarn has.
+   * @param {number} count
+   */
   countColour(count) {
     return sequential(count - this.fewestContacts, this.mostContacts - this.fewestContacts);
   }
@@ -188,9 +254,13 @@ export class Palette {
   /** Warps whose fill cells touch, or that face each other across empty cells of a row or column. */
   linkFill() {
     const at = new Map([...this.cells].map(([id, [r, c]]) => [`${r},${c}`, id]));
+    /**
+     * @param {number} a
+     * @param {number} b
+     */
     const link = (a, b) => {
-      this.neighbours.get(a).add(b);
-      this.neighbours.get(b).add(a);
+      this.neighbours.get(a)?.add(b);
+      this.neighbours.get(b)?.add(a);
     };
     for (const [id, [r, c]] of this.cells) {
       for (const [dr, dc] of [[0, 1], [1, -1], [1, 0], [1, 1]]) {
@@ -199,11 +269,13 @@ export class Palette {
       }
     }
     for (const axis of [0, 1]) {
-      const lines = new Map(); // row (or column) -> [[position, id]...]
+      /** @type {Map<number, [number, number][]>} row (or column) -> [[position, id]...] */
+      const lines = new Map();
       for (const [id, cell] of this.cells) {
         const key = cell[axis];
-        if (!lines.has(key)) lines.set(key, []);
-        lines.get(key).push([cell[1 - axis], id]);
+        const line = lines.get(key);
+        if (line) line.push([cell[1 - axis], id]);
+        else lines.set(key, [[cell[1 - axis], id]]);
       }
       for (const line of lines.values()) {
         line.sort((p, q) => p[0] - q[0]);
@@ -212,7 +284,10 @@ export class Palette {
     }
   }
 
-  /** Give yarn `id` the colour its coloured neighbours use least (see the top of the file). */
+  /**
+   * Give yarn `id` the colour its coloured neighbours use least (see the top of the file).
+   * @param {number} id
+   */
   pick(id) {
     const old = this.graphColour.get(id);
     if (old !== undefined) this.uses[old] -= 1;
@@ -222,6 +297,10 @@ export class Palette {
       if (k !== undefined && n !== id) taken[k] += 1;
     }
     // The least used of the free colours in [from, to); with `any`, the least clashing.
+    /**
+     * @param {number} from
+     * @param {number} to
+     */
     const least = (from, to, any = false) => {
       let best = -1;
       for (let k = from; k < to; k += 1) {
@@ -237,7 +316,10 @@ export class Palette {
     this.uses[best] += 1;
   }
 
-  /** The zone of a yarn: its fill cell's zone, "edge", "weft", or null without a section. */
+  /**
+   * The zone of a yarn: its fill cell's zone, "edge", "weft", or null without a section.
+   * @param {number} yarnId
+   */
   zone(yarnId) {
     if ((this.families.get(yarnId) ?? 'warp') !== 'warp') return 'weft';
     if (!this.section) return null;
@@ -245,46 +327,63 @@ export class Palette {
     return cell ? zoneOf(this.section, cell[0], cell[1]) ?? 'edge' : 'edge';
   }
 
-  /** The colour of the yarn with this id, 0xRRGGBB. */
+  /**
+   * The colour of the yarn with this id, 0xRRGGBB.
+   * @param {number} yarnId
+   * @returns {number}
+   */
   colour(yarnId) {
     if (this.mode === 'yarn') return YARN_COLOURS[this.graphColour.get(yarnId) ?? 0];
     if (this.mode === 'contacts') return this.countColour(this.shownContacts.get(yarnId) ?? 0);
     const family = this.families.get(yarnId) ?? 'warp';
     if (this.mode === 'zone') return this.zoneColour(this.zone(yarnId));
-    return family === 'warp' ? WARP_COLOUR : this.weftColours.get(family);
+    // (every weft family has its colour from `add`; an unknown yarn is a warp, as above)
+    return family === 'warp' ? WARP_COLOUR : this.weftColours.get(family) ?? WARP_COLOUR;
   }
 
+  /**
+   * @param {string | null} zone
+   * @returns {number}
+   */
   zoneColour(zone) {
     if (zone === null) return NO_SECTION_COLOUR;
     if (zone === 'edge') return EDGE_COLOUR;
     if (zone === 'weft') return ZONE_WEFT_COLOUR;
-    const names = this.section.zones.map(([name]) => name);
+    const names = (this.section?.zones ?? []).map(([name]) => name); // a zone: there is a section
     const junctions = names.filter((name) => name.includes('junction'));
     if (junctions.includes(zone)) return JUNCTION_COLOURS[junctions.indexOf(zone) % JUNCTION_COLOURS.length];
     const others = names.filter((name) => !name.includes('junction'));
     return ZONE_COLOURS[others.indexOf(zone) % ZONE_COLOURS.length];
   }
 
-  /** The legend of the mode: [[label, colour], ...]. */
+  /**
+   * The legend of the mode: [[label, colour], ...].
+   * @returns {[string, number][]}
+   */
   legend() {
     if (this.mode === 'yarn') return [];
     if (this.mode === 'contacts') return this.contactsLegend();
     if (this.mode === 'zone') return this.zoneLegend();
+    /** @type {[string, number][]} */
     const entries = [];
     if ([...this.families.values()].includes('warp')) entries.push(['warp', WARP_COLOUR]);
     for (const [family, colour] of this.weftColours) entries.push([family, colour]);
     return entries;
   }
 
+  /** @returns {[string, number][]} */
   contactsLegend() {
     const [low, high] = [this.fewestContacts, this.mostContacts];
+    /** @param {number} i */
     const at = (i) => Math.round(low + (i * (high - low)) / (SEQUENTIAL_STEPS - 1));
     const values = [...new Set(Array.from({ length: SEQUENTIAL_STEPS }, (_, i) => at(i)))];
     return values.map((v, i) => [`${v}${i === values.length - 1 ? ' contacts' : ''}`, this.countColour(v)]);
   }
 
+  /** @returns {[string, number][]} */
   zoneLegend() {
     const zones = new Set([...this.families.keys()].map((id) => this.zone(id)));
+    /** @type {[string, number][]} */
     const entries = this.section ? this.section.zones.map(([name]) => [name, this.zoneColour(name)]) : [['no section line', NO_SECTION_COLOUR]];
     if (zones.has('edge')) entries.push(['edge carrier', EDGE_COLOUR]);
     if (zones.has('weft')) entries.push(['weft', ZONE_WEFT_COLOUR]);

@@ -1,3 +1,4 @@
+// @ts-check
 // The PackML commands and the unit mode: buttons enabled only for what the daemon accepts
 // now, a question before Stop and Abort, the reason sent with Stop, Hold and Abort, and the
 // daemon's answer or refusal said as it is.
@@ -5,9 +6,26 @@
 import { errorText, request } from './api.js';
 import { confirmCommand } from './confirm.js';
 import { describeRun } from './describe.js';
-import { say } from './message.js';
+import { byId as $ } from './dom.js';
+import { messageOf, say } from './message.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { CommandAnswer, State } from '../types/daemon' */
+/** @import { Answer } from './api.js' */
+
+/**
+ * What the commands need of the page.
+ * @typedef {object} CommandsPage
+ * @property {() => State | null} state the last /state, or null
+ * @property {() => number} index instructions done, as shown
+ * @property {() => boolean} may the token may command and the daemon answers
+ * @property {() => boolean} mayMode the token may change the unit mode (admin)
+ * @property {(answer: CommandAnswer) => void} answered a command's answer, to show at once
+ * @property {() => Promise<void>} refreshState
+ * @property {() => void} heard
+ * @property {(error: unknown) => void} unreachable
+ * @property {() => void} loggedOut
+ * @property {(answer: Answer, what: string) => void} forbidden
+ */
 const WITH_REASON = new Set(['stop', 'hold', 'abort']); // commands that send the reason field
 const CONFIRMED = new Set(['stop', 'abort']); // commands asked about first
 // Where PackML takes a unit mode change (docs/packml.md): the switch is open only there.
@@ -21,37 +39,51 @@ export class Commands {
    *   `answered(answer)` (a command's answer, to show at once),
    *   `refreshState()`, `heard()`, `unreachable(error)`, `loggedOut()`,
    *   `forbidden(answer, what)`
+   * @param {CommandsPage} page
    */
   constructor(page) {
     this.page = page;
     this.modeBusy = false;
-    for (const button of document.querySelectorAll('button[data-command]')) {
-      button.addEventListener('click', () => this.ask(button.dataset.command));
+    for (const button of commandButtons()) {
+      button.addEventListener('click', () => this.ask(button.dataset.command ?? ''));
     }
-    $('mode-select').addEventListener('change', (event) => this.changeMode(event.target.value));
+    const select = $('mode-select', HTMLSelectElement);
+    select.addEventListener('change', () => this.changeMode(select.value));
   }
 
-  /** Enable the buttons of `allowed` (none when the page may not command); those enabled. */
+  /**
+   * Enable the buttons of `allowed` (none when the page may not command); those enabled.
+   * @param {string[] | undefined} allowed
+   * @param {boolean} may
+   */
   drawButtons(allowed, may) {
     const open = new Set(may ? allowed ?? [] : []);
     const enabled = [];
-    for (const button of document.querySelectorAll('button[data-command]')) {
-      button.disabled = !open.has(button.dataset.command);
-      if (!button.disabled) enabled.push(button.dataset.command);
+    for (const button of commandButtons()) {
+      const command = button.dataset.command ?? '';
+      button.disabled = !open.has(command);
+      if (!button.disabled) enabled.push(command);
     }
     return enabled;
   }
 
-  /** The mode in force; the switch open to an admin where PackML allows a change. */
+  /**
+   * The mode in force; the switch open to an admin where PackML allows a change.
+   * @param {State | null} state
+   * @param {boolean} may
+   */
   drawMode(state, may) {
-    const select = $('mode-select');
+    const select = $('mode-select', HTMLSelectElement);
     if (!this.modeBusy) select.value = String(state?.mode_name ?? 'production').toLowerCase();
     select.disabled = this.modeBusy || !may || !state || !MODE_STATES.has(state.name);
   }
 
-  /** A button was pressed: ask first for Stop and Abort, then send it if still accepted. */
+  /**
+   * A button was pressed: ask first for Stop and Abort, then send it if still accepted.
+   * @param {string} name
+   */
   async ask(name) {
-    let reason = $('reason-input').value.trim();
+    let reason = $('reason-input', HTMLInputElement).value.trim();
     if (CONFIRMED.has(name)) {
       const answer = await confirmCommand(name, describeRun(this.page.state(), this.page.index()), reason);
       if (!answer) {
@@ -68,6 +100,10 @@ export class Commands {
     await this.send(name, reason);
   }
 
+  /**
+   * @param {string} name
+   * @param {string} reason
+   */
   async send(name, reason) {
     const page = this.page;
     const body = WITH_REASON.has(name) && reason ? { reason } : {};
@@ -77,13 +113,13 @@ export class Commands {
       answer = await request(`api/v1/commands/${name}`, { method: 'POST', body, timeoutMs: 0 }); // a stop waits for the move
     } catch (error) {
       page.unreachable(error);
-      say(`${name}: the daemon cannot be reached (${error.message})`, 'error');
+      say(`${name}: the daemon cannot be reached (${messageOf(error)})`, 'error');
       return;
     }
     page.heard();
     if (answer.ok) {
       say(`${name}: now ${answer.body.name}`, 'ok');
-      if (WITH_REASON.has(name)) $('reason-input').value = '';
+      if (WITH_REASON.has(name)) $('reason-input', HTMLInputElement).value = '';
       page.answered(answer.body);
     } else if (answer.status === 401) {
       page.loggedOut();
@@ -97,7 +133,10 @@ export class Commands {
     page.refreshState();
   }
 
-  /** PUT the unit mode; say what the daemon answered, then show the mode it has. */
+  /**
+   * PUT the unit mode; say what the daemon answered, then show the mode it has.
+   * @param {string} mode
+   */
   async changeMode(mode) {
     const page = this.page;
     const message = $('mode-message');
@@ -118,7 +157,7 @@ export class Commands {
       }
     } catch (error) {
       page.unreachable(error);
-      message.textContent = `the daemon cannot be reached (${error.message})`;
+      message.textContent = `the daemon cannot be reached (${messageOf(error)})`;
       message.dataset.kind = 'error';
     } finally {
       this.modeBusy = false;
@@ -126,4 +165,10 @@ export class Commands {
       this.drawMode(page.state(), page.mayMode());
     }
   }
+}
+
+/** The PackML command buttons (`data-command` names the command). */
+function commandButtons() {
+  const found = [...document.querySelectorAll('button[data-command]')];
+  return found.filter((button) => button instanceof HTMLButtonElement);
 }

@@ -1,16 +1,18 @@
+// @ts-check
 // Whether the daemon answers: up while the event stream is open and the last request was
 // answered; `lastSeen` is when it last answered or sent an event (what the page shows as
 // "disconnected since").
 
-import { say, saysUnreachable } from './message.js';
+import { messageOf, say, saysUnreachable } from './message.js';
 
 export class Connection {
-  /** @param onChange called when the page must draw the link again */
+  /** @param {() => void} onChange called when the page must draw the link again */
   constructor(onChange) {
     this.onChange = onChange;
     this.linkUp = false; // the event WebSocket is open
     this.answering = true; // the last request was answered
-    this.lastSeen = null; // a Date
+    /** @type {Date | null} */
+    this.lastSeen = null;
   }
 
   /** The daemon answered or sent an event. */
@@ -22,23 +24,33 @@ export class Connection {
     this.onChange();
   }
 
-  /** A request found no daemon (a network error, or no answer in time). */
+  /**
+   * A request found no daemon (a network error, or no answer in time).
+   * @param {unknown} error
+   */
   unreachable(error) {
     if (this.answering) {
       this.answering = false;
-      say(`the daemon cannot be reached (${error?.message ?? error})`, 'error');
+      say(`the daemon cannot be reached (${messageOf(error)})`, 'error');
     }
     this.onChange();
   }
 
-  /** The event stream opened or closed. */
+  /**
+   * The event stream opened or closed.
+   * @param {boolean} up
+   */
   setLink(up) {
     this.linkUp = up;
     if (up) this.heard();
     this.onChange();
   }
 
-  /** True when the daemon answers; null when the page does not ask (`wanted` false). */
+  /**
+   * True when the daemon answers; null when the page does not ask (`wanted` false).
+   * @param {boolean} wanted
+   * @returns {boolean | null}
+   */
   online(wanted) {
     if (!wanted) return null;
     return this.linkUp && this.answering;

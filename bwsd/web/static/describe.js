@@ -1,8 +1,16 @@
+// @ts-check
 // Instructions and runs in words, as the program writes them.
 
 import { signed } from './grid.js';
 
-/** "next: line 12 — ROW 1:+1 2:-1", "next: line 14 — TAKEUP 3 mm". */
+/** @import { Instruction, Next, ShiftMove, State } from '../types/daemon' */
+
+/**
+ * "next: line 12 — ROW 1:+1 2:-1", "next: line 14 — TAKEUP 3 mm".
+ * @param {State | null} state
+ * @param {Next | null} next
+ * @param {number} index
+ */
 export function describeNext(state, next, index) {
   if (!state) return 'next: —';
   if (state.program_id === null || state.program_id === undefined) return 'next: — (no program loaded)';
@@ -11,11 +19,16 @@ export function describeNext(state, next, index) {
   return `next: ${where} — ${describeInstruction(next.instruction ?? {})}`;
 }
 
-/** "ROW 1:+1 3[0..3]:-1", "TAKEUP 3 mm", "WEFT at x=… mm, angle 0°, length 60 mm". */
+/**
+ * "ROW 1:+1 3[0..3]:-1", "TAKEUP 3 mm", "WEFT at x=… mm, angle 0°, length 60 mm".
+ * @param {Instruction | {kind?: undefined}} i the instruction ({} for none)
+ */
 export function describeInstruction(i) {
+  /** @param {unknown} value */
   const number = (value) => String(Number(Number(value).toFixed(3)));
   if (i.kind === 'shift') {
     // a move is [line, k], or [line, k, first, last] on a segment
+    /** @param {ShiftMove} move */
     const move = ([line, k, first, last]) => `${line}${first === undefined ? '' : `[${first}..${last}]`}:${signed(k)}`;
     return `${String(i.axis).toUpperCase()} ${i.moves.map(move).join(' ')}`;
   }
@@ -26,7 +39,11 @@ export function describeInstruction(i) {
   return String(i.kind ?? 'unknown');
 }
 
-/** "Execute: braid.bws (#3), 22 of 50 instructions done" */
+/**
+ * "Execute: braid.bws (#3), 22 of 50 instructions done"
+ * @param {State | null} state
+ * @param {number} index
+ */
 export function describeRun(state, index) {
   if (!state) return '';
   if (state.program_id === null || state.program_id === undefined) return state.name;

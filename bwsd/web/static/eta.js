@@ -1,3 +1,4 @@
+// @ts-check
 // The time left of a run, from the recent instruction rate.
 //
 // The window holds the daemon's time stamps (`at`, seconds) of the last WINDOW instructions
@@ -13,7 +14,8 @@ export const MIN_SAMPLES = 3;
 export class RateWindow {
   constructor(size = WINDOW) {
     this.size = size;
-    this.samples = []; // [{index, at}], oldest first
+    /** @type {{index: number, at: number}[]} oldest first */
+    this.samples = [];
   }
 
   /** Forget every stamp (the run paused or another program was loaded). */
@@ -21,7 +23,11 @@ export class RateWindow {
     this.samples = [];
   }
 
-  /** Instruction `index` was done at `at` (seconds); an older or repeated one is ignored. */
+  /**
+   * Instruction `index` was done at `at` (seconds); an older or repeated one is ignored.
+   * @param {number} index
+   * @param {number} at
+   */
   add(index, at) {
     const last = this.samples[this.samples.length - 1];
     if (last && (index <= last.index || at < last.at)) return;
@@ -38,7 +44,10 @@ export class RateWindow {
     return seconds > 0 ? (last.index - first.index) / seconds : null;
   }
 
-  /** `{seconds, rate, over}` for `left` instructions still to do, or null when unknown. */
+  /**
+   * `{seconds, rate, over}` for `left` instructions still to do, or null when unknown.
+   * @param {number} left
+   */
   estimate(left) {
     const rate = this.rate();
     if (rate === null || rate <= 0) return null;
@@ -46,7 +55,10 @@ export class RateWindow {
   }
 }
 
-/** "45 s", "3 min 05 s", "2 h 07 min". */
+/**
+ * "45 s", "3 min 05 s", "2 h 07 min".
+ * @param {number} seconds
+ */
 export function duration(seconds) {
   const s = Math.max(0, Math.round(seconds));
   if (s < 60) return `${s} s`;
@@ -54,8 +66,12 @@ export function duration(seconds) {
   return `${Math.floor(s / 3600)} h ${String(Math.floor((s % 3600) / 60)).padStart(2, '0')} min`;
 }
 
-/** A wall-clock time as HH:MM:SS (the browser's time zone). */
+/**
+ * A wall-clock time as HH:MM:SS (the browser's time zone).
+ * @param {Date} date
+ */
 export function clock(date) {
+  /** @param {number} n */
   const two = (n) => String(n).padStart(2, '0');
   return `${two(date.getHours())}:${two(date.getMinutes())}:${two(date.getSeconds())}`;
 }

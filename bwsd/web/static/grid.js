@@ -1,3 +1,4 @@
+// @ts-check
 // The machine matrix: rows × cols cells, row 0 at the top as in the program's FILL block,
 // each cell showing the id of the warp whose case is in it, in that yarn's colour. Over the
 // twin's picture: the lines the next shift moves (with an arrow and step each), the cells
@@ -13,6 +14,18 @@ import { ZoomPan } from './matrix-zoom.js';
 
 export { signed } from './matrix-draw.js';
 
+/** @import { Cell, Instruction, Machine, ShiftInstruction, WeftInstruction } from '../types/daemon' */
+/** @import { Palette } from './colours.js' */
+/** @import { LineMarks } from './matrix-draw.js' */
+/** @import { Span, WeftCells } from './matrix-geometry.js' */
+/** @import { MachineRead } from './matrix-panel.js' */
+
+/**
+ * A cell of the matrix: its SVG parts and the yarn shown in it (-1: none; null before the
+ * first occupancy).
+ * @typedef {{group: SVGElement, rect: SVGElement, text: SVGElement, title: SVGElement, yarn: number | null}} GridCell
+ */
+
 const FIT_CELL_PX = 44; // a small matrix stops growing at this cell size
 const TOP = 14; // px: the column numbers
 const BOTTOM = 28; // px: room under the matrix for the columns' arrows
@@ -23,36 +36,53 @@ let grids = 0; // numbers each grid's hatch patterns
 
 export class MatrixGrid {
   /**
-   * @param host the element to draw in (#grid)
-   * @param palette the yarn colours (colours.js)
+   * @param {HTMLElement} host the element to draw in (#grid)
+   * @param {Palette} palette the yarn colours (colours.js)
    */
   constructor(host, palette) {
     this.host = host;
     this.palette = palette;
     this.rows = 0;
     this.cols = 0;
-    this.cells = []; // [row][col] -> {group, rect, text, title, yarn}
-    this.shift = null; // the next shift instruction, or null
-    this.weft = null; // the next weft instruction, or null
-    this.geometry = null; // the skeleton JSON's `machine`: pitches and convergence
-    this.machine = null; // {differs, estop, faulted} as last read, or null
-    this.picked = null; // the highlighted yarn id, or null
-    this.onPick = null; // set by the page: (yarnId | null) => void
-    this.hover = null; // the pointer over the frame, px
+    /** @type {GridCell[][]} [row][col] */
+    this.cells = [];
+    /** @type {ShiftInstruction | null} the next shift instruction */
+    this.shift = null;
+    /** @type {WeftInstruction | null} the next weft instruction */
+    this.weft = null;
+    /** @type {WeftCells | null} where the next weft runs, in cells */
+    this.weftCells = null;
+    /** @type {Machine | null} the skeleton JSON's `machine`: pitches and convergence */
+    this.geometry = null;
+    /** @type {MachineRead | null} the machine as last read */
+    this.machine = null;
+    /** @type {number | null} the highlighted yarn id */
+    this.picked = null;
+    /** @type {((yarnId: number | null) => void) | null} set by the page */
+    this.onPick = null;
+    /** @type {{x: number, y: number} | null} the pointer over the frame, px */
+    this.hover = null;
     this.frameRequested = false;
-    this.moving = { rows: new Map(), cols: new Map() }; // line -> spans, of the next shift
-    this.faultedLines = { rows: new Map(), cols: new Map() }; // line -> axis name
-    this.differKeys = new Set(); // "r,c" of the cells whose sensor differs
+    /** @type {{rows: Map<number, Span[]>, cols: Map<number, Span[]>}} line -> spans, of the next shift */
+    this.moving = { rows: new Map(), cols: new Map() };
+    /** @type {LineMarks} line -> axis name */
+    this.faultedLines = { rows: new Map(), cols: new Map() };
+    /** @type {Set<string>} "r,c" of the cells whose sensor differs */
+    this.differKeys = new Set();
     this.prefix = `matrix${(grids += 1)}`;
-    this.construct();
-    this.showEmpty('no program loaded');
-  }
-
-  construct() {
     const parts = panel(this.host, this.prefix, {
       zoomOut: () => this.view.zoomBy(1 / 1.5), zoomIn: () => this.view.zoomBy(1.5), fit: () => this.view.fit(),
     });
-    Object.assign(this, parts); // buttons, frame, root, world, layers, screen, note, estop, label, status
+    this.buttons = parts.buttons;
+    this.frame = parts.frame;
+    this.root = parts.root;
+    this.world = parts.world;
+    this.layers = parts.layers;
+    this.screen = parts.screen;
+    this.note = parts.note;
+    this.estop = parts.estop;
+    this.label = parts.label;
+    this.status = parts.status;
     this.highlights = this.layers.highlights;
     this.view = new ZoomPan(this.frame, {
       cell: CELL, maxCellPx: FIT_CELL_PX, onChange: () => this.schedule(),
@@ -63,9 +93,13 @@ export class MatrixGrid {
     });
     new ResizeObserver(() => this.layout()).observe(this.frame);
     window.addEventListener('resize', () => this.layout()); // the tallest frame follows the window
+    this.showEmpty('no program loaded');
   }
 
-  /** No matrix to show: a line of text instead. */
+  /**
+   * No matrix to show: a line of text instead.
+   * @param {string} text
+   */
   showEmpty(text) {
     this.rows = this.cols = 0;
     this.cells = [];
@@ -79,7 +113,11 @@ export class MatrixGrid {
     this.drawStatus();
   }
 
-  /** Build the cells for a rows × cols matrix (only when the size changes). */
+  /**
+   * Build the cells for a rows × cols matrix (only when the size changes).
+   * @param {number} rows
+   * @param {number} cols
+   */
   build(rows, cols) {
     this.rows = rows;
     this.cols = cols;
@@ -91,6 +129,7 @@ export class MatrixGrid {
     const group = this.layers.cells;
     group.replaceChildren();
     for (let r = 0; r < rows; r += 1) {
+      /** @type {GridCell[]} */
       const row = [];
       for (let c = 0; c < cols; c += 1) {
         const cell = svg('g', { class: 'cell empty', 'data-row': r, 'data-col': c });
@@ -107,7 +146,10 @@ export class MatrixGrid {
     this.layout();
   }
 
-  /** Show `occupancy` (rows arrays of cols yarn ids, -1 empty); only changed cells are touched. */
+  /**
+   * Show `occupancy` (rows arrays of cols yarn ids, -1 empty); only changed cells are touched.
+   * @param {number[][]} occupancy
+   */
   setOccupancy(occupancy) {
     const rows = occupancy.length;
     const cols = rows ? occupancy[0].length : 0;
@@ -135,6 +177,11 @@ export class MatrixGrid {
     this.drawPicked();
   }
 
+  /**
+   * @param {GridCell} cell
+   * @param {number} r
+   * @param {number} c
+   */
   paint(cell, r, c) {
     const yarn = cell.yarn;
     const sensor = this.sensorNote(r, c);
@@ -148,7 +195,7 @@ export class MatrixGrid {
     }
     const colour = this.palette.colour(yarn);
     cell.group.setAttribute('class', yarn === this.picked ? 'cell picked' : 'cell');
-    cell.group.setAttribute('data-yarn', yarn);
+    cell.group.setAttribute('data-yarn', String(yarn));
     cell.rect.style.fill = css(colour);
     cell.text.style.fill = textOn(colour);
     cell.text.textContent = String(yarn);
@@ -166,6 +213,7 @@ export class MatrixGrid {
    * Show the next instruction: a shift ({kind: "shift", axis, moves: [[line, k], ...], a
    * move on a segment being [line, k, first, last]) highlights the cells it moves; a weft
    * shows its path as setNextWeft does; anything else, neither.
+   * @param {Instruction | null} instruction
    */
   setNext(instruction) {
     this.shift = instruction && instruction.kind === 'shift' ? instruction : null;
@@ -188,7 +236,10 @@ export class MatrixGrid {
     this.schedule();
   }
 
-  /** The next weft ({kind: "weft", x, y, z, angle, length}) drawn over the matrix, or null. */
+  /**
+   * The next weft ({kind: "weft", x, y, z, angle, length}) drawn over the matrix, or null.
+   * @param {Instruction | null} instruction
+   */
   setNextWeft(instruction) {
     const weft = instruction && instruction.kind === 'weft' ? instruction : null;
     if (JSON.stringify(weft) === JSON.stringify(this.weft)) return; // asked again every frame
@@ -196,7 +247,10 @@ export class MatrixGrid {
     this.drawWeft();
   }
 
-  /** The machine's geometry (the skeleton JSON's `machine`): the weft needs its pitches. */
+  /**
+   * The machine's geometry (the skeleton JSON's `machine`): the weft needs its pitches.
+   * @param {Machine | null | undefined} machine
+   */
   setGeometry(machine) {
     if (machine === this.geometry) return;
     this.geometry = machine ?? null;
@@ -207,7 +261,7 @@ export class MatrixGrid {
     const layer = this.layers.weft;
     layer.replaceChildren();
     this.weftCells = this.rows ? weftInCells(this.weft, this.geometry) : null;
-    if (this.weftCells) layer.append(weftPath(this.weftCells, describeWeft(this.weft, this.weftCells)));
+    if (this.weft && this.weftCells) layer.append(weftPath(this.weftCells, describeWeft(this.weft, this.weftCells)));
     this.drawStatus();
   }
 
@@ -217,6 +271,7 @@ export class MatrixGrid {
    * The machine as the controller last read it (`/state`'s `bus`): `differs` the cells
    * [row, col] where the occupancy sensors differ from the twin, `estop` pressed,
    * `faulted` the names of the axes reporting a fault; null when not known.
+   * @param {{differs?: Cell[], estop?: boolean, faulted?: string[]} | null} machine
    */
   setMachine(machine) {
     const next = machine ? { differs: machine.differs ?? [], estop: Boolean(machine.estop), faulted: machine.faulted ?? [] } : null;
@@ -237,7 +292,7 @@ export class MatrixGrid {
     if (machine && this.rows) {
       for (const key of this.differKeys) {
         const [r, c] = key.split(',').map(Number);
-        const twin = this.cells[r][c].yarn;
+        const twin = this.cells[r][c].yarn ?? -1;
         const sees = !(twin >= 0);
         differs.append(differMark(this.prefix, r, c, sees, `row ${r}, col ${c}: twin ${twin >= 0 ? `yarn ${twin}` : 'empty'}${this.sensorNote(r, c)}`));
       }
@@ -252,16 +307,23 @@ export class MatrixGrid {
     this.schedule();
   }
 
-  /** ", sensor: empty (the twin differs)" for a cell whose sensor disagrees; "" otherwise. */
+  /**
+   * ", sensor: empty (the twin differs)" for a cell whose sensor disagrees; "" otherwise.
+   * @param {number} r
+   * @param {number} c
+   */
   sensorNote(r, c) {
     if (!this.differKeys.has(`${r},${c}`)) return '';
-    const twin = this.cells[r]?.[c]?.yarn;
+    const twin = this.cells[r]?.[c]?.yarn ?? -1;
     return ` — sensor: ${twin >= 0 ? 'empty' : 'case'} (differs from the twin)`;
   }
 
   // ----- picking -----
 
-  /** Outline the cell of yarn `yarnId` and dim the rest; null: no highlight. */
+  /**
+   * Outline the cell of yarn `yarnId` and dim the rest; null: no highlight.
+   * @param {number | null} yarnId
+   */
   highlight(yarnId) {
     this.picked = yarnId ?? null;
     this.repaint();
@@ -279,6 +341,10 @@ export class MatrixGrid {
     return cell;
   }
 
+  /**
+   * @param {number} yarn
+   * @returns {{r: number, c: number} | null}
+   */
   cellOf(yarn) {
     for (let r = 0; r < this.rows; r += 1) {
       for (let c = 0; c < this.cols; c += 1) if (this.cells[r][c].yarn === yarn) return { r, c };
@@ -286,6 +352,10 @@ export class MatrixGrid {
     return null;
   }
 
+  /**
+   * @param {number} r
+   * @param {number} c
+   */
   bringIntoView(r, c) {
     const [x, y] = this.view.toPixels((c + 0.5) * CELL, (r + 0.5) * CELL);
     const { left, top, bottom } = this.view.insets;
@@ -293,7 +363,11 @@ export class MatrixGrid {
     this.view.panBy((left + this.view.width) / 2 - x, (top + this.view.height - bottom) / 2 - y);
   }
 
-  /** The cell under element pixels (x, y): {r, c}, or null outside the matrix. */
+  /**
+   * The cell under element pixels (x, y): {r, c}, or null outside the matrix.
+   * @param {number} x
+   * @param {number} y
+   */
   cellAt(x, y) {
     const { left, top } = this.view.insets;
     if (!this.rows || x < left || y < top) return null;
@@ -303,15 +377,23 @@ export class MatrixGrid {
     return r >= 0 && c >= 0 && r < this.rows && c < this.cols ? { r, c } : null;
   }
 
+  /**
+   * @param {number} x
+   * @param {number} y
+   */
   tap(x, y) {
     const cell = this.cellAt(x, y);
     if (!cell || !this.onPick) return;
-    const yarn = this.cells[cell.r][cell.c].yarn;
+    const yarn = this.cells[cell.r][cell.c].yarn ?? -1;
     this.onPick(yarn >= 0 ? yarn : null);
   }
 
+  /**
+   * @param {number | null} x
+   * @param {number} [y]
+   */
   pointAt(x, y) {
-    this.hover = x === null || x === undefined ? null : { x, y };
+    this.hover = x === null || x === undefined || y === undefined ? null : { x, y };
     this.schedule();
   }
 
@@ -362,12 +444,13 @@ export class MatrixGrid {
     }
     const sizes = view.insets;
     const arrows = svg('g', { class: 'arrows' });
-    for (const [line, spans] of this.moving.rows) arrows.append(...[arrow(view, true, line, spans, this.cols, sizes)].filter(Boolean));
-    for (const [line, spans] of this.moving.cols) arrows.append(...[arrow(view, false, line, spans, this.rows, sizes)].filter(Boolean));
+    for (const [line, spans] of this.moving.rows) arrows.append(...[arrow(view, true, line, spans, this.cols, sizes)].filter((a) => a !== null));
+    for (const [line, spans] of this.moving.cols) arrows.append(...[arrow(view, false, line, spans, this.rows, sizes)].filter((a) => a !== null));
     this.screen.append(arrows, rulers(view, this.rows, this.cols, sizes, marks));
     this.drawHover(cell);
   }
 
+  /** @param {{r: number, c: number} | null} cell */
   drawHover(cell) {
     const marks = this.layers.marks;
     marks.querySelector('.hover-edge')?.remove();
@@ -376,7 +459,7 @@ export class MatrixGrid {
       return;
     }
     marks.append(svg('rect', { x: cell.c * CELL, y: cell.r * CELL, width: CELL, height: CELL, class: 'hover-edge' }));
-    const yarn = this.cells[cell.r][cell.c].yarn;
+    const yarn = this.cells[cell.r][cell.c].yarn ?? -1;
     this.label.textContent = `row ${cell.r}, col ${cell.c}: ${yarn >= 0 ? `yarn ${yarn}` : 'empty'}${this.sensorNote(cell.r, cell.c)}`;
     this.label.hidden = false;
     const room = this.view.width - this.label.offsetWidth - 4;
@@ -388,6 +471,10 @@ export class MatrixGrid {
   /** The line under the matrix: e-stop, faulted axes, differing sensors, the weft, the pick. */
   drawStatus() {
     const cell = this.picked !== null && this.rows ? this.cellOf(this.picked) : null;
+    /**
+     * @param {number} r
+     * @param {number} c
+     */
     const twin = (r, c) => this.cells[r]?.[c]?.yarn;
     const { text, alarm } = statusLine(this.machine, twin, this.rows > 0, this.weft, this.weftCells, this.picked, cell);
     this.status.textContent = text;

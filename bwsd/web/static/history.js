@@ -1,16 +1,42 @@
+// @ts-check
 // The history: the programs loaded (newest first, paged back with `before`) and the journal's
 // PackML states and events (oldest first, paged on with `after_state` / `after_event`),
 // brought up to date whenever the daemon announces a change.
 
 import { request } from './api.js';
+import { byId as $ } from './dom.js';
 import { clock } from './eta.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { Answer } from './api.js' */
+
+/**
+ * A program of the history (`GET /api/v1/programs`).
+ * @typedef {object} ProgramRecord
+ * @property {number} id
+ * @property {string} name
+ * @property {string} outcome
+ * @property {number} done
+ * @property {number} instructions
+ * @property {number} created Unix time
+ * @property {number | null} [finished]
+ * @property {string | null} [reason]
+ */
+/**
+ * A line of the journal shown: a PackML state or an event.
+ * @typedef {{time: number, kind: 'state' | 'event', id: number, text: string, reason: string}} LogEntry
+ */
 const PROGRAM_PAGE = 10;
 const LOG_PAGE = 200; // entries of each kind per request
 const LOG_PAGES = 5; // pages read in a row before "more" is offered
 const LOG_KEPT = 500; // entries on screen (the oldest go)
 
+/**
+ * @template {keyof HTMLElementTagNameMap} K
+ * @param {K} tag
+ * @param {string} [className]
+ * @param {string} [text]
+ * @returns {HTMLElementTagNameMap[K]}
+ */
 function element(tag, className, text) {
   const node = document.createElement(tag);
   if (className) node.className = className;
@@ -18,16 +44,24 @@ function element(tag, className, text) {
   return node;
 }
 
-/** "12:01:02", or "2024-06-01 12:01:02" for another day. */
+/**
+ * "12:01:02", or "2024-06-01 12:01:02" for another day.
+ * @param {number} seconds Unix time
+ */
 export function when(seconds) {
   const date = new Date(seconds * 1000);
   const today = new Date();
   if (date.toDateString() === today.toDateString()) return clock(date);
+  /** @param {number} n */
   const two = (n) => String(n).padStart(2, '0');
   return `${date.getFullYear()}-${two(date.getMonth() + 1)}-${two(date.getDate())} ${clock(date)}`;
 }
 
-/** An event of the journal in words ("mode Production → Maintenance by alice"). */
+/**
+ * An event of the journal in words ("mode Production → Maintenance by alice").
+ * @param {string} kind
+ * @param {any} data the event's data, as the journal has it (JSON)
+ */
 function eventText(kind, data) {
   if (kind === 'mode' && data) return `mode ${data.from} → ${data.to}${data.by ? ` by ${data.by}` : ''}`;
   const detail = data && typeof data === 'object' ? JSON.stringify(data) : '';
@@ -35,17 +69,37 @@ function eventText(kind, data) {
 }
 
 export class HistoryPanel {
+  // What `clear` sets (the constructor calls it).
+  /** @type {number} answers to an older one are dropped */
+  generation;
+  /** @type {ProgramRecord[]} records shown, newest first */
+  programs;
+  /** @type {boolean} */
+  olderLeft;
+  /** @type {number} the last state id read */
+  afterState;
+  /** @type {number} the last event id read */
+  afterEvent;
+  /** @type {LogEntry[]} */
+  entries;
+
   /**
-   * @param onAnswer called with a refused answer (a 401 logs out)
-   * @param onUnreachable called when the daemon does not answer
-   * @param onOpen called with a program's id and name to edit its text again
+   * @param {object} callbacks
+   * @param {(answer: Answer) => void} callbacks.onAnswer called with a refused answer (a 401
+   *   logs out)
+   * @param {(error: unknown) => void} callbacks.onUnreachable called when the daemon does not answer
+   * @param {(id: number, name: string) => void} callbacks.onOpen called with a program's id
+   *   and name to edit its text again
    */
   constructor({ onAnswer, onUnreachable, onOpen }) {
     this.onAnswer = onAnswer;
     this.onUnreachable = onUnreachable;
     this.onOpen = onOpen;
+    /** @type {Promise<void> | null} the refresh under way */
     this.busy = null;
     this.again = false;
+    /** @type {ReturnType<typeof setTimeout> | undefined} */
+    this.timer = undefined;
     this.clear();
     $('history-older').addEventListener('click', () => this.olderPrograms());
     $('history-more').addEventListener('click', () => this.readLog(LOG_PAGES));
@@ -93,6 +147,11 @@ export class HistoryPanel {
     return this.busy;
   }
 
+  /**
+   * The body of a GET's answer; null when it was refused or the panel was cleared meanwhile.
+   * @param {string} path
+   * @returns {Promise<any>}
+   */
   async get(path) {
     const asked = this.generation;
     const answer = await request(path);
@@ -104,10 +163,16 @@ export class HistoryPanel {
     return answer.body;
   }
 
-  /** Programs older than `before` (null: the newest); `replace` the list with them. */
+  /**
+   * Programs older than `before` (null: the newest); `replace` the list with them.
+   * @param {number} limit
+   * @param {number | null} before
+   * @param {boolean} replace
+   */
   async readPrograms(limit, before, replace) {
     const query = new URLSearchParams({ limit: String(Math.min(limit, 1000)) });
     if (before !== null) query.set('before', String(before));
+    /** @type {ProgramRecord[] | null} */
     const page = await this.get(`api/v1/programs?${query}`);
     if (!page) return;
     this.programs = replace ? page : this.programs.concat(page);
@@ -135,6 +200,7 @@ export class HistoryPanel {
     $('history-older').hidden = !this.olderLeft;
   }
 
+  /** @param {ProgramRecord} record */
   programItem(record) {
     const item = element('li', 'record');
     item.dataset.program = String(record.id);
@@ -152,11 +218,20 @@ export class HistoryPanel {
     return item;
   }
 
-  /** Read the journal on from the last ids seen, up to `pages` pages of each kind. */
+  /**
+   * Read the journal on from the last ids seen, up to `pages` pages of each kind.
+   * @param {number} pages
+   */
   async readLog(pages) {
     let full = false;
     for (let page = 0; page < pages; page += 1) {
       const query = new URLSearchParams({ after_state: String(this.afterState), after_event: String(this.afterEvent), limit: String(LOG_PAGE) });
+      /**
+       * @type {{
+       *   states: {id: number, time: number, name: string, reason: string}[],
+       *   events: {id: number, time: number, kind: string, data: unknown}[],
+       * } | null}
+       */
       const body = await this.get(`api/v1/history?${query}`);
       if (!body) return;
       for (const s of body.states) this.entries.push({ time: s.time, kind: 'state', id: s.id, text: s.name, reason: s.reason });
@@ -171,6 +246,7 @@ export class HistoryPanel {
     this.drawLog(full);
   }
 
+  /** @param {boolean} more */
   drawLog(more) {
     const list = $('history-log');
     if (this.entries.length === 0) {

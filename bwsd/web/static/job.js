@@ -1,3 +1,4 @@
+// @ts-check
 // The job: the loaded program's text with the line that runs next marked, how far the run
 // is with the time left, and the skeleton's exports as downloads.
 //
@@ -5,13 +6,21 @@
 // null once all is done or the run has ended (Stop, Abort), and then no line is marked.
 
 import { download, errorText, request } from './api.js';
+import { byId as $ } from './dom.js';
 import { RateWindow, clock, duration } from './eta.js';
+import { messageOf } from './message.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { InstructionEvent, Next, State } from '../types/daemon' */
+/** @import { Answer } from './api.js' */
+
 const RUNNING = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspending']);
+/** @type {Record<string, string>} */
 const EXTENSIONS = { json: 'json', tg3: 'tg3', vtp: 'vtp' };
 
-/** "braid-2x2" of "braid-2x2.bws": a file name's stem, safe for a download's name. */
+/**
+ * "braid-2x2" of "braid-2x2.bws": a file name's stem, safe for a download's name.
+ * @param {string | null} name
+ */
 function stem(name) {
   const base = String(name ?? 'skeleton').replace(/\.[^.]*$/, '');
   return base.replace(/[^A-Za-z0-9._-]+/g, '_').slice(0, 80) || 'skeleton';
@@ -19,20 +28,31 @@ function stem(name) {
 
 export class JobPanel {
   /**
-   * @param onAnswer called with every refused answer (a 401 logs out)
-   * @param onUnreachable called when the daemon does not answer
+   * @param {object} callbacks
+   * @param {(answer: Answer) => void} callbacks.onAnswer called with every refused answer (a
+   *   401 logs out)
+   * @param {(error: unknown) => void} callbacks.onUnreachable called when the daemon does not answer
    */
   constructor({ onAnswer, onUnreachable }) {
     this.onAnswer = onAnswer;
     this.onUnreachable = onUnreachable;
     this.rate = new RateWindow();
-    this.programId = null; // the program whose text is shown
+    /** @type {number | null} the program whose text is shown */
+    this.programId = null;
+    /** @type {string | null} */
     this.programName = null;
-    this.lines = []; // the text's line elements, 0-based
-    this.current = null; // the marked line element
+    /** @type {HTMLElement[]} the text's line elements, 0-based */
+    this.lines = [];
+    /** @type {HTMLElement | null} the marked line element */
+    this.current = null;
+    /** @type {State | null} */
     this.state = null;
-    for (const button of document.querySelectorAll('button[data-format]')) {
-      button.addEventListener('click', () => this.save(button.dataset.format));
+    /** @type {number | null} the line marked (1-based) */
+    this.markedLine = null;
+    /** @type {number | undefined} instructions done, as last drawn */
+    this.index = undefined;
+    for (const button of formatButtons()) {
+      button.addEventListener('click', () => this.save(button.dataset.format ?? ''));
     }
   }
 
@@ -49,15 +69,18 @@ export class JobPanel {
   }
 
   drawEmpty() {
-    $('progress').max = 1;
-    $('progress').value = 0;
+    $('progress', HTMLProgressElement).max = 1;
+    $('progress', HTMLProgressElement).value = 0;
     $('progress-text').textContent = '0 / 0';
     $('job-note').textContent = 'no program loaded';
     $('eta').textContent = '';
-    for (const button of document.querySelectorAll('button[data-format]')) button.disabled = true;
+    for (const button of formatButtons()) button.disabled = true;
   }
 
-  /** An instruction event of the program shown: a sample of the run's rate. */
+  /**
+   * An instruction event of the program shown: a sample of the run's rate.
+   * @param {InstructionEvent} event
+   */
   noteInstruction(event) {
     if (event.program_id === this.programId && typeof event.at === 'number') this.rate.add(event.index, event.at);
   }
@@ -65,6 +88,10 @@ export class JobPanel {
   /**
    * Draw the job as `/state` (with the instruction events after it) says: `index` done,
    * `next` the instruction to run next (or null); `online`: the daemon answers.
+   * @param {State | null} state
+   * @param {number} index
+   * @param {Next | null} next
+   * @param {boolean} online
    */
   draw(state, index, next, online) {
     if (!state || state.program_id === null || state.program_id === undefined) {
@@ -73,21 +100,26 @@ export class JobPanel {
       this.drawEmpty();
       return;
     }
-    if (state.program_id !== this.programId) this.loadText(state.program_id, state.program_name);
+    if (state.program_id !== this.programId) this.loadText(state.program_id, state.program_name ?? null);
     if (!RUNNING.has(state.name) || (this.state && this.state.program_id !== state.program_id)) this.rate.clear();
     this.state = state;
     this.index = index;
     const count = state.count;
-    $('progress').max = Math.max(count, 1);
-    $('progress').value = Math.min(index, count);
+    $('progress', HTMLProgressElement).max = Math.max(count, 1);
+    $('progress', HTMLProgressElement).value = Math.min(index, count);
     $('progress-text').textContent = `${index} / ${count}`;
     $('job-note').textContent = this.note(state, index, next);
     $('eta').textContent = this.eta(state, index);
     this.mark(next?.line ?? null);
-    for (const button of document.querySelectorAll('button[data-format]')) button.disabled = !online;
+    for (const button of formatButtons()) button.disabled = !online;
   }
 
-  /** Where the run is, in words. */
+  /**
+   * Where the run is, in words.
+   * @param {State} state
+   * @param {number} index
+   * @param {Next | null} next
+   */
   note(state, index, next) {
     const count = state.count;
     const at = next ? `instruction ${next.index}, line ${next.line}` : '';
@@ -98,7 +130,11 @@ export class JobPanel {
     return `${at} runs next`;
   }
 
-  /** The time left, from the recent rate (eta.js), while the machine runs. */
+  /**
+   * The time left, from the recent rate (eta.js), while the machine runs.
+   * @param {State} state
+   * @param {number} index
+   */
   eta(state, index) {
     if (!RUNNING.has(state.name) || index >= state.count) return '';
     const estimate = this.rate.estimate(state.count - index);
@@ -109,7 +145,11 @@ export class JobPanel {
       `(${rate} instructions/s over the last ${estimate.over})`;
   }
 
-  /** Fetch and show a program's text (the lines numbered as the program's errors are). */
+  /**
+   * Fetch and show a program's text (the lines numbered as the program's errors are).
+   * @param {number} id
+   * @param {string | null} name
+   */
   async loadText(id, name) {
     this.programId = id;
     this.programName = name;
@@ -135,6 +175,7 @@ export class JobPanel {
     if (this.state) this.mark(this.markedLine ?? null, true);
   }
 
+  /** @param {string} text */
   showText(text) {
     const lines = text.split('\n');
     if (lines.length > 1 && lines[lines.length - 1] === '') lines.pop();
@@ -157,7 +198,10 @@ export class JobPanel {
     $('job-text').replaceChildren(fragment);
   }
 
-  /** Mark line `line` (1-based; null: none) and scroll the listing to it. */
+  /**
+   * Mark line `line` (1-based; null: none) and scroll the listing to it.
+   * @param {number | null} line
+   */
   mark(line, force = false) {
     if (line === this.markedLine && !force) return;
     this.markedLine = line;
@@ -176,7 +220,10 @@ export class JobPanel {
     box.scrollTop = Math.max(0, row.offsetTop - box.offsetTop - box.clientHeight / 3);
   }
 
-  /** Download the skeleton as `format`, with the token, named after the program. */
+  /**
+   * Download the skeleton as `format`, with the token, named after the program.
+   * @param {string} format
+   */
   async save(format) {
     const message = $('download-message');
     const name = `${stem(this.programName)}-${this.index ?? 0}.${EXTENSIONS[format]}`;
@@ -188,9 +235,15 @@ export class JobPanel {
       message.dataset.kind = got.ok ? 'ok' : 'error';
       if (!got.ok) this.onAnswer({ status: got.status, ok: false, body: { error: got.error } });
     } catch (error) {
-      message.textContent = `${format}: the daemon cannot be reached (${error.message})`;
+      message.textContent = `${format}: the daemon cannot be reached (${messageOf(error)})`;
       message.dataset.kind = 'error';
       this.onUnreachable(error);
     }
   }
+}
+
+/** The download buttons (`data-format` names the export). */
+function formatButtons() {
+  const found = [...document.querySelectorAll('button[data-format]')];
+  return found.filter((button) => button instanceof HTMLButtonElement);
 }

@@ -1,28 +1,48 @@
+// @ts-check
 // The matrix's marks as SVG: the cells' overlays in the drawing's units (CELL per cell,
 // row 0 at the top), and the rulers and move arrows in the element's pixels, laid out
 // again whenever the view zooms or pans.
+
+/** @import { AxisCells, Span, WeftCells } from './matrix-geometry.js' */
+/** @import { ZoomPan } from './matrix-zoom.js' */
+
+/** @typedef {{rows: Map<number, string>, cols: Map<number, string>}} LineMarks line -> class */
 
 // The SVG namespace, as the HTML parser gives it (so no address appears in the page's files).
 export const SVG_NS = (() => {
   const holder = document.createElement('div');
   holder.innerHTML = '<svg></svg>';
-  return holder.firstChild.namespaceURI;
+  return holder.firstElementChild?.namespaceURI ?? null;
 })();
 export const CELL = 24; // drawing units per cell
 
+/**
+ * An SVG element with these attributes and text.
+ * @param {string} tag
+ * @param {Record<string, string | number>} [attributes]
+ * @param {string} [text]
+ * @returns {SVGElement}
+ */
 export function svg(tag, attributes = {}, text) {
-  const element = document.createElementNS(SVG_NS, tag);
-  for (const [name, value] of Object.entries(attributes)) element.setAttribute(name, value);
+  // An element of SVG_NS, the SVG namespace, is an SVGElement.
+  const element = /** @type {SVGElement} */ (document.createElementNS(SVG_NS, tag));
+  for (const [name, value] of Object.entries(attributes)) element.setAttribute(name, String(value));
   if (text !== undefined) element.textContent = text;
   return element;
 }
 
-/** A step with its sign, as the program writes it: +1, -2. */
+/**
+ * A step with its sign, as the program writes it: +1, -2.
+ * @param {number} k
+ */
 export function signed(k) {
   return k > 0 ? `+${k}` : String(k);
 }
 
-/** The hatches the marks fill with (ids made unique per grid: a page may hold two). */
+/**
+ * The hatches the marks fill with (ids made unique per grid: a page may hold two).
+ * @param {string} prefix
+ */
 export function patterns(prefix) {
   const defs = svg('defs');
   for (const [name, colour] of [['differs', '#c53030'], ['faulted', '#9b2c2c']]) {
@@ -33,7 +53,13 @@ export function patterns(prefix) {
   return defs;
 }
 
-/** The rectangle, in units, over cells first..last of a row or column. */
+/**
+ * The rectangle, in units, over cells first..last of a row or column.
+ * @param {boolean} row
+ * @param {number} line
+ * @param {number} first
+ * @param {number} last
+ */
 export function span(row, line, first, last, inset = 0) {
   const from = first * CELL + inset;
   const length = (last - first + 1) * CELL - 2 * inset;
@@ -42,13 +68,23 @@ export function span(row, line, first, last, inset = 0) {
   return row ? { x: from, y: across, width: length, height: breadth } : { x: across, y: from, width: breadth, height: length };
 }
 
-/** The highlight of a line's cells first..last that move next (two segments: two bands). */
+/**
+ * The highlight of a line's cells first..last that move next (two segments: two bands).
+ * @param {boolean} row
+ * @param {number} line
+ * @param {number} first
+ * @param {number} last
+ */
 export function band(row, line, first, last) {
   return svg('rect', { ...span(row, line, first, last, 1.5), class: 'moving', 'data-line': line, 'data-first': first, 'data-last': last });
 }
 
 /** A faulted shift axis over the cells it drives ({axis, line, first, last} of axisCells);
- * `prefix` names the grid's hatch patterns. */
+ * `prefix` names the grid's hatch patterns.
+ * @param {string} prefix
+ * @param {string} name
+ * @param {AxisCells} cells
+ */
 export function faultMark(prefix, name, cells) {
   const group = svg('g', { class: 'faulted', 'data-axis': name, 'data-line': cells.line, 'data-first': cells.first, 'data-last': cells.last });
   const place = span(cells.axis === 'row', cells.line, cells.first, cells.last, 1);
@@ -60,6 +96,11 @@ export function faultMark(prefix, name, cells) {
 /**
  * A cell whose sensor differs from the twin: hatched, outlined, and a badge in its corner,
  * a red disc where the sensor sees a case the twin does not have, a ring where it sees none.
+ * @param {string} prefix
+ * @param {number} r
+ * @param {number} c
+ * @param {boolean} sensorSeesCase
+ * @param {string} title
  */
 export function differMark(prefix, r, c, sensorSeesCase, title) {
   const group = svg('g', { class: 'differs', 'data-row': r, 'data-col': c, 'data-sensor': sensorSeesCase ? 'case' : 'empty' });
@@ -70,12 +111,18 @@ export function differMark(prefix, r, c, sensorSeesCase, title) {
   return group;
 }
 
-/** The next weft's path over the matrix, from weftInCells (cells -> units at their centres). */
+/**
+ * The next weft's path over the matrix, from weftInCells (cells -> units at their centres).
+ * @param {WeftCells} cells
+ * @param {string} title
+ */
 export function weftPath(cells, title) {
+  /** @param {number[]} cell [col, row] */
   const point = ([col, row]) => [(col + 0.5) * CELL, (row + 0.5) * CELL];
   const [x1, y1] = point(cells.from);
   const [x2, y2] = point(cells.to);
   const [cx, cy] = point(cells.centre);
+  /** @param {number} value */
   const fmt = (value) => String(Number(value.toFixed(3)));
   const group = svg('g', { class: 'weft-path', 'data-from': cells.from.map(fmt).join(','), 'data-to': cells.to.map(fmt).join(',') });
   const line = { x1, y1, x2, y2 };
@@ -89,7 +136,11 @@ export function weftPath(cells, title) {
 
 const NICE = [1, 2, 5, 10, 20, 50, 100, 200, 500];
 
-/** Every how many lines a ruler can number when lines are `px` apart. */
+/**
+ * Every how many lines a ruler can number when lines are `px` apart.
+ * @param {number} px
+ * @param {number} room
+ */
 function every(px, room) {
   return NICE.find((n) => n * px >= room) ?? NICE[NICE.length - 1];
 }
@@ -98,6 +149,11 @@ function every(px, room) {
  * The line numbers along the top (columns) and down the left (rows), where the view puts
  * them; `marks` names lines to show whatever the spacing: {rows: Map, cols: Map} of line ->
  * class ("line-moving", "line-faulted", "line-hover").
+ * @param {ZoomPan} view
+ * @param {number} rows
+ * @param {number} cols
+ * @param {ZoomPan['insets']} sizes
+ * @param {LineMarks} marks
  */
 export function rulers(view, rows, cols, sizes, marks) {
   const { left, top } = sizes;
@@ -109,6 +165,12 @@ export function rulers(view, rows, cols, sizes, marks) {
   if (y0 <= top + 1) group.append(svg('rect', { x: 0, y: 0, width: view.width, height: top, class: 'ruler-bg' }));
   if (x0 <= left + 1) group.append(svg('rect', { x: 0, y: 0, width: left, height: view.height, class: 'ruler-bg' }));
   const px = view.cellPx;
+  /**
+   * @param {number} count
+   * @param {number} step
+   * @param {Map<number, string>} marked
+   * @param {(i: number) => Record<string, number> | null} place
+   */
   const put = (count, step, marked, place) => {
     for (let i = 0; i < count; i += 1) {
       const mark = marked.get(i);
@@ -135,6 +197,12 @@ export function rulers(view, rows, cols, sizes, marks) {
  * under a column (↓ for +k, towards higher rows, ↑ for -k), inside the view's edge when
  * the matrix fills it. Segments of one line moving opposite ways share a ⇄ or ⇅; the
  * highlights show which cells go. Null when the line is out of view.
+ * @param {ZoomPan} view
+ * @param {boolean} row
+ * @param {number} line
+ * @param {Span[]} spans
+ * @param {number} along
+ * @param {ZoomPan['insets']} sizes
  */
 export function arrow(view, row, line, spans, along, sizes) {
   const steps = [...new Set(spans.map((each) => each.k))];

@@ -1,18 +1,32 @@
+// @ts-check
 // What the matrix draws, worked out without the page: which cells a shift moves, which
 // line a faulted axis drives, and where the next weft runs in the matrix's coordinates.
 // Every result is in cells: column c, row r is the cell's centre (c + 0.5, r + 0.5) on screen.
 
+/** @import { Cell, Machine, ShiftMove, WeftInstruction } from '../types/daemon' */
+
+/** @typedef {{k: number, first: number, last: number}} Span the cells first..last a move carries by k */
+/** @typedef {{axis: string, line: number, first: number, last: number}} AxisCells */
+/**
+ * A weft's ends and centre in cells ([col, row]) and how far the yarns fan there.
+ * @typedef {{from: number[], to: number[], centre: number[], fan: number}} WeftCells
+ */
+
 /**
  * A shift's moves by line, in the order given: line -> [{k, first, last}], the cells each
  * move carries (a whole line is cells 0..along-1; a segment's span is clipped to the matrix).
+ * @param {ShiftMove[]} moves
+ * @param {number} along
  */
 export function movesByLine(moves, along) {
+  /** @type {Map<number, Span[]>} */
   const lines = new Map();
   for (const [line, k, first = 0, last = along - 1] of moves) {
     const span = { k, first: Math.max(0, first), last: Math.min(along - 1, last) };
     if (span.first > span.last) continue;
-    if (!lines.has(line)) lines.set(line, []);
-    lines.get(line).push(span);
+    const spans = lines.get(line);
+    if (spans) spans.push(span);
+    else lines.set(line, [span]);
   }
   return lines;
 }
@@ -23,6 +37,10 @@ const SHIFT_AXIS = /^(row|col)(\d+)(?:\[(\d+)\.\.(\d+)\])?$/;
  * The cells a shift axis drives, from its bus name: `row3` -> {axis: "row", line: 3,
  * first: 0, last: along - 1}, `col2[1..3]` -> its segment's span; null for an axis that
  * drives no line (`weft_angle`, `weft_insert`, `takeup`) or a line outside the matrix.
+ * @param {string} name
+ * @param {number} rows
+ * @param {number} cols
+ * @returns {AxisCells | null}
  */
 export function axisCells(name, rows, cols) {
   const match = SHIFT_AXIS.exec(String(name));
@@ -40,6 +58,8 @@ export function axisCells(name, rows, cols) {
 /**
  * How far apart the yarns are at height z above the fell, as a fraction of their spacing
  * at the guides: c_mat at the fell, 1 at the matrix (d_mat above it), straight between.
+ * @param {number} z
+ * @param {Machine} machine
  */
 export function fanAt(z, machine) {
   return machine.c_mat + ((1 - machine.c_mat) * z) / machine.d_mat;
@@ -51,6 +71,9 @@ export function fanAt(z, machine) {
  * on a machine {rows, cols, pitch_x, pitch_y, c_mat, d_mat} gives {from: [col, row],
  * to: [col, row], centre: [col, row], fan}, guide (r, c) at [c, r]; null when the
  * instruction or the machine lacks what it takes.
+ * @param {WeftInstruction | null} weft
+ * @param {Machine | null} machine
+ * @returns {WeftCells | null}
  */
 export function weftInCells(weft, machine) {
   if (!weft || weft.kind !== 'weft' || !machine) return null;
@@ -63,6 +86,10 @@ export function weftInCells(weft, machine) {
   const oy = ((machine.rows - 1) / 2) * machine.pitch_y;
   const radians = (weft.angle * Math.PI) / 180;
   const half = weft.length / 2;
+  /**
+   * @param {number} x
+   * @param {number} y
+   */
   const cells = (x, y) => [(ox + (x - ox) / fan) / machine.pitch_x, (oy + (y - oy) / fan) / machine.pitch_y];
   return {
     from: cells(weft.x - half * Math.cos(radians), weft.y - half * Math.sin(radians)),
@@ -72,8 +99,14 @@ export function weftInCells(weft, machine) {
   };
 }
 
-/** The cells where the sensors differ, as a set of "r,c" keys (cells outside the matrix left out). */
+/**
+ * The cells where the sensors differ, as a set of "r,c" keys (cells outside the matrix left out).
+ * @param {Cell[] | undefined} differs
+ * @param {number} rows
+ * @param {number} cols
+ */
 export function differingCells(differs, rows, cols) {
+  /** @type {Set<string>} */
   const keys = new Set();
   for (const cell of differs ?? []) {
     const [r, c] = cell;

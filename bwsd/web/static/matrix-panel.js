@@ -1,18 +1,34 @@
+// @ts-check
 // The matrix panel around the drawing: the zoom buttons, the frame the matrix is drawn in
 // (with the e-stop sign and the hover label), the line saying what the machine reports, and
 // the legend of the marks.
 
 import { patterns, svg } from './matrix-draw.js';
 
-const LAYERS = ['cells', 'faults', 'differs', 'highlights', 'marks', 'weft']; // bottom to top
+/** @import { Cell, WeftInstruction } from '../types/daemon' */
+/** @import { WeftCells } from './matrix-geometry.js' */
+
+const LAYERS = /** @type {const} */ (['cells', 'faults', 'differs', 'highlights', 'marks', 'weft']); // bottom to top
+
+/** @typedef {Record<typeof LAYERS[number], SVGElement>} Layers the drawing's layers, by name */
+/** @typedef {{differs: Cell[], estop: boolean, faulted: string[]}} MachineRead the machine as read */
 
 /**
  * Build the panel in `host`; `actions` {zoomOut, zoomIn, fit} for the buttons. Returns its
  * parts: buttons, frame, root (the SVG), world (its zoomed group), layers (by name), screen
  * (its group in pixels), note, estop, label (the hover's), status.
+ * @param {HTMLElement} host
+ * @param {string} prefix
+ * @param {{zoomOut: () => void, zoomIn: () => void, fit: () => void}} actions
  */
 export function panel(host, prefix, actions) {
   const tools = element('div', 'matrix-tools');
+  /**
+   * @param {string} label
+   * @param {string} title
+   * @param {() => void} action
+   * @param {string} [className]
+   */
   const button = (label, title, action, className) => {
     const made = element('button', className ?? '', label);
     made.type = 'button';
@@ -28,11 +44,8 @@ export function panel(host, prefix, actions) {
   frame.tabIndex = 0;
   const root = svg('svg', { class: 'matrix-svg', role: 'img' });
   const world = svg('g', { class: 'world' });
-  const layers = {};
-  for (const name of LAYERS) {
-    layers[name] = svg('g', { class: `layer-${name}` });
-    world.append(layers[name]);
-  }
+  const layers = /** @type {Layers} */ (Object.fromEntries(LAYERS.map((name) => [name, svg('g', { class: `layer-${name}` })])));
+  for (const name of LAYERS) world.append(layers[name]);
   const screen = svg('g', { class: 'screen' });
   root.append(patterns(prefix), world, screen);
   const note = element('p', 'grid-empty');
@@ -48,6 +61,13 @@ export function panel(host, prefix, actions) {
   return { buttons, frame, root, world, layers, screen, note, estop, label, status };
 }
 
+/**
+ * @template {keyof HTMLElementTagNameMap} K
+ * @param {K} tag
+ * @param {string} className
+ * @param {string} [text]
+ * @returns {HTMLElementTagNameMap[K]}
+ */
 function element(tag, className, text) {
   const made = document.createElement(tag);
   if (className) made.className = className;
@@ -77,6 +97,13 @@ function legend() {
  * The line under the matrix, and whether it is an alarm: the e-stop, the faulted axes,
  * where the sensors differ (`twin(r, c)`: the twin's yarn in a cell), the next weft, the
  * picked yarn and its cell ({r, c} or null).
+ * @param {MachineRead | null} machine
+ * @param {(r: number, c: number) => number | null | undefined} twin the yarn id, -1 for none
+ * @param {boolean} shown
+ * @param {WeftInstruction | null} weft
+ * @param {WeftCells | null} weftCells
+ * @param {number | null} picked
+ * @param {{r: number, c: number} | null} cell
  */
 export function statusLine(machine, twin, shown, weft, weftCells, picked, cell) {
   const parts = [];
@@ -94,17 +121,27 @@ export function statusLine(machine, twin, shown, weft, weftCells, picked, cell) 
   return { text: parts.filter(Boolean).join(' · '), alarm };
 }
 
-/** "sensors differ from the twin at (1, 2) case, (0, 0) empty": what each sensor reads. */
+/**
+ * "sensors differ from the twin at (1, 2) case, (0, 0) empty": what each sensor reads.
+ * @param {Cell[]} differs
+ * @param {(r: number, c: number) => number | null | undefined} twin the yarn id, -1 for none
+ * @param {boolean} shown
+ */
 function describeDiffers(differs, twin, shown) {
   if (!differs.length) return shown ? 'sensors agree with the twin' : '';
   if (differs.some(([r, c]) => r < 0 || c < 0)) return "the sensors' matrix is not the twin's size";
-  const listed = differs.slice(0, 6).map(([r, c]) => `(${r}, ${c}) ${twin(r, c) >= 0 ? 'empty' : 'case'}`);
+  const listed = differs.slice(0, 6).map(([r, c]) => `(${r}, ${c}) ${(twin(r, c) ?? -1) >= 0 ? 'empty' : 'case'}`);
   const more = differs.length > 6 ? ` and ${differs.length - 6} more` : '';
   return `sensors differ from the twin at ${listed.join(', ')}${more}`;
 }
 
-/** "next weft: 0°, 60.775 mm, 10.5 mm above the fell (drawn ×1.81, at the guides' scale)". */
+/**
+ * "next weft: 0°, 60.775 mm, 10.5 mm above the fell (drawn ×1.81, at the guides' scale)".
+ * @param {WeftInstruction} weft
+ * @param {WeftCells} cells
+ */
 export function describeWeft(weft, cells) {
+  /** @param {unknown} value */
   const number = (value, places = 3) => String(Number(Number(value).toFixed(places)));
   return `next weft: ${number(weft.angle)}°, ${number(weft.length)} mm, ${number(weft.z)} mm above the fell ` +
     `(drawn ×${number(1 / cells.fan, 2)}, at the guides' scale)`;

@@ -1,3 +1,4 @@
+// @ts-check
 // Zoom and pan of the matrix: a scale and an offset from the drawing's units to the
 // element's pixels, driven by the wheel, a drag, a two-finger pinch and the keyboard. A
 // press that does not move is a tap (a pick); the pointer over the element is reported
@@ -9,11 +10,18 @@ const KEY_PAN = 40; // px per arrow key
 const KEY_ZOOM = 1.25;
 const MAX_CELL_PX = 120; // the closest zoom
 
+/** @typedef {{x: number, y: number}} Point element pixels */
+
 export class ZoomPan {
   /**
-   * @param element the element that takes the pointer (the drawing fills it)
-   * @param options {cell: units per cell, maxCellPx: the largest cell at fit, onChange(),
-   *   onTap(x, y), onHover(x, y) or onHover(null): element pixels}
+   * @param {HTMLElement} element the element that takes the pointer (the drawing fills it)
+   * @param {object} options
+   * @param {number} options.cell units per cell
+   * @param {number} options.maxCellPx the largest cell at fit
+   * @param {() => void} options.onChange
+   * @param {(x: number, y: number) => void} options.onTap element pixels
+   * @param {(x: number | null, y?: number) => void} options.onHover element pixels, or
+   *   onHover(null) when the pointer left
    */
   constructor(element, options) {
     this.element = element;
@@ -30,18 +38,29 @@ export class ZoomPan {
     this.content = { width: 0, height: 0 }; // the drawing, units
     this.insets = { left: 0, top: 0, right: 0, bottom: 0 }; // px kept for rulers
     this.fitted = true; // follows resizes until the operator zooms or pans
-    this.pointers = new Map(); // pointer id -> {x, y}
+    /** @type {Map<number, Point>} pointer id -> where it is */
+    this.pointers = new Map();
+    /** @type {{start: Point, moved: boolean} | null} */
     this.gesture = null;
     this.listen();
   }
 
-  /** The drawing's size in units, and the pixels at its edges kept for rulers. */
+  /**
+   * The drawing's size in units, and the pixels at its edges kept for rulers.
+   * @param {number} width
+   * @param {number} height
+   * @param {Partial<ZoomPan['insets']>} insets
+   */
   setContent(width, height, insets) {
     this.content = { width, height };
     this.insets = { ...this.insets, ...insets };
   }
 
-  /** The element's size in px; refits while the operator has not moved the view. */
+  /**
+   * The element's size in px; refits while the operator has not moved the view.
+   * @param {number} width
+   * @param {number} height
+   */
   resize(width, height) {
     this.width = width;
     this.height = height;
@@ -68,7 +87,12 @@ export class ZoomPan {
     this.onChange();
   }
 
-  /** Zoom by `factor` keeping the point (x, y) of the element where it is. */
+  /**
+   * Zoom by `factor` keeping the point (x, y) of the element where it is.
+   * @param {number} factor
+   * @param {number} x
+   * @param {number} y
+   */
   zoomAt(factor, x, y) {
     const fit = this.fitScale();
     const lowest = fit / 2;
@@ -81,12 +105,19 @@ export class ZoomPan {
     this.moved();
   }
 
-  /** Zoom about the middle of the room the drawing has. */
+  /**
+   * Zoom about the middle of the room the drawing has.
+   * @param {number} factor
+   */
   zoomBy(factor) {
     const { left, top, right, bottom } = this.insets;
     this.zoomAt(factor, (left + this.width - right) / 2, (top + this.height - bottom) / 2);
   }
 
+  /**
+   * @param {number} dx
+   * @param {number} dy
+   */
   panBy(dx, dy) {
     this.tx += dx;
     this.ty += dy;
@@ -110,12 +141,22 @@ export class ZoomPan {
     this.ty = Math.min(this.height - bottom - keepY, Math.max(top + keepY - h, this.ty));
   }
 
-  /** Element pixels -> drawing units. */
+  /**
+   * Element pixels -> drawing units.
+   * @param {number} x
+   * @param {number} y
+   * @returns {[number, number]}
+   */
   toUnits(x, y) {
     return [(x - this.tx) / this.scale, (y - this.ty) / this.scale];
   }
 
-  /** Drawing units -> element pixels. */
+  /**
+   * Drawing units -> element pixels.
+   * @param {number} u
+   * @param {number} v
+   * @returns {[number, number]}
+   */
   toPixels(u, v) {
     return [this.tx + u * this.scale, this.ty + v * this.scale];
   }
@@ -140,11 +181,16 @@ export class ZoomPan {
     element.addEventListener('keydown', (event) => this.key(event));
   }
 
+  /**
+   * @param {MouseEvent} event
+   * @returns {Point}
+   */
   at(event) {
     const box = this.element.getBoundingClientRect();
     return { x: event.clientX - box.left, y: event.clientY - box.top };
   }
 
+  /** @param {WheelEvent} event */
   wheel(event) {
     event.preventDefault(); // the wheel zooms the matrix, not the page
     const { x, y } = this.at(event);
@@ -153,6 +199,7 @@ export class ZoomPan {
     this.zoomAt(Math.exp(-event.deltaY * lines * rate), x, y);
   }
 
+  /** @param {PointerEvent} event */
   down(event) {
     if (event.pointerType === 'mouse' && event.button !== 0) return;
     try {
@@ -167,6 +214,7 @@ export class ZoomPan {
     this.onHover(null);
   }
 
+  /** @param {PointerEvent} event */
   move(event) {
     const point = this.at(event);
     const before = this.pointers.get(event.pointerId);
@@ -174,20 +222,25 @@ export class ZoomPan {
       this.onHover(point.x, point.y);
       return;
     }
-    if (this.pointers.size === 1) {
-      const { start } = this.gesture;
-      if (!this.gesture.moved && Math.hypot(point.x - start.x, point.y - start.y) > TAP_SLOP) this.gesture.moved = true;
+    const gesture = this.gesture;
+    if (this.pointers.size === 1 && gesture) {
+      const { start } = gesture;
+      if (!gesture.moved && Math.hypot(point.x - start.x, point.y - start.y) > TAP_SLOP) gesture.moved = true;
       this.pointers.set(event.pointerId, point);
-      if (this.gesture.moved) this.panBy(point.x - before.x, point.y - before.y);
+      if (gesture.moved) this.panBy(point.x - before.x, point.y - before.y);
       return;
     }
-    const from = pair(...this.pointers.values()); // the first two pointers pinch
+    const from = pair([...this.pointers.values()]); // the first two pointers pinch
     this.pointers.set(event.pointerId, point);
-    const now = pair(...this.pointers.values());
+    const now = pair([...this.pointers.values()]);
     if (from.span > 0) this.zoomAt(now.span / from.span, now.x, now.y);
     this.panBy(now.x - from.x, now.y - from.y);
   }
 
+  /**
+   * @param {PointerEvent} event
+   * @param {boolean} released
+   */
   up(event, released) {
     if (!this.pointers.has(event.pointerId)) return;
     this.pointers.delete(event.pointerId);
@@ -201,7 +254,9 @@ export class ZoomPan {
     }
   }
 
+  /** @param {KeyboardEvent} event */
   key(event) {
+    /** @type {Record<string, [number, number]>} */
     const pans = { ArrowLeft: [KEY_PAN, 0], ArrowRight: [-KEY_PAN, 0], ArrowUp: [0, KEY_PAN], ArrowDown: [0, -KEY_PAN] };
     if (event.key in pans) this.panBy(...pans[event.key]);
     else if (event.key === '+' || event.key === '=') this.zoomBy(KEY_ZOOM);
@@ -212,7 +267,10 @@ export class ZoomPan {
   }
 }
 
-/** The middle of two pointers and their distance. */
-function pair(a, b) {
+/**
+ * The middle of two pointers and their distance.
+ * @param {Point[]} pointers the first two pinch
+ */
+function pair([a, b]) {
   return { x: (a.x + b.x) / 2, y: (a.y + b.y) / 2, span: Math.hypot(a.x - b.x, a.y - b.y) };
 }

@@ -1,3 +1,4 @@
+// @ts-check
 // The program panel: pick a .bws file (or type it), check it with a dry run, load it.
 //
 // A dry run answers the totals the twin predicts (instructions, contacts, yarns, nodes,
@@ -5,9 +6,24 @@
 // under the offending line of the text with a caret at the column.
 
 import { errorText, request } from './api.js';
+import { byId as $ } from './dom.js';
+import { messageOf } from './message.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { Answer } from './api.js' */
 
+/**
+ * The totals the twin predicts for a program (a dry run's or a load's answer; a load's has
+ * the program's id and name).
+ * @typedef {{id?: number, name?: string, instructions: number, contacts: number, yarns: number, nodes: number, takeup: number}} Totals
+ */
+
+/**
+ * @template {keyof HTMLElementTagNameMap} K
+ * @param {K} tag
+ * @param {string} [className]
+ * @param {string} [text]
+ * @returns {HTMLElementTagNameMap[K]}
+ */
 function element(tag, className, text) {
   const node = document.createElement(tag);
   if (className) node.className = className;
@@ -15,26 +31,32 @@ function element(tag, className, text) {
   return node;
 }
 
-/** Millimetres for a person: 3, 22.5, 0.125. */
+/**
+ * Millimetres for a person: 3, 22.5, 0.125.
+ * @param {unknown} value
+ */
 function mm(value) {
   return `${Number(Number(value).toFixed(3))} mm`;
 }
 
 export class ProgramPanel {
   /**
-   * @param onLoaded called after a program was loaded (the page refetches everything)
-   * @param onUnauthorized called on a 401 (the page shows the login form)
-   * @param onForbidden called with the answer of a 403 (a token whose role is too low)
+   * @param {object} callbacks
+   * @param {(totals: Totals) => void} callbacks.onLoaded called after a program was loaded
+   *   (the page refetches everything)
+   * @param {() => void} callbacks.onUnauthorized called on a 401 (the page shows the login form)
+   * @param {(answer: Answer) => void} callbacks.onForbidden called with the answer of a 403
+   *   (a token whose role is too low)
    */
   constructor({ onLoaded, onUnauthorized, onForbidden }) {
     this.onLoaded = onLoaded;
     this.onUnauthorized = onUnauthorized;
     this.onForbidden = onForbidden;
-    this.file = $('program-file');
-    this.text = $('program-text');
-    this.name = $('program-name');
-    this.checkButton = $('check');
-    this.loadButton = $('load');
+    this.file = $('program-file', HTMLInputElement);
+    this.text = $('program-text', HTMLTextAreaElement);
+    this.name = $('program-name', HTMLInputElement);
+    this.checkButton = $('check', HTMLButtonElement);
+    this.loadButton = $('load', HTMLButtonElement);
     this.result = $('dry-run');
     this.busy = false;
     this.checkAllowed = false;
@@ -50,6 +72,7 @@ export class ProgramPanel {
    * Which of Check and Load the page offers: `check` (a dry run, in any state) and `load`
    * (only where the daemon takes a program), each for a token that may change things;
    * `loadWhy` says why Load is not offered.
+   * @param {{check: boolean, load: boolean, loadWhy?: string}} allowed
    */
   setAllowed({ check, load, loadWhy = '' }) {
     this.checkAllowed = check;
@@ -64,7 +87,11 @@ export class ProgramPanel {
     this.loadButton.disabled = !(usable && this.loadAllowed);
   }
 
-  /** Put a program's text in the panel (from the history), to check or load it again. */
+  /**
+   * Put a program's text in the panel (from the history), to check or load it again.
+   * @param {string} name
+   * @param {string} text
+   */
   open(name, text) {
     this.text.value = text;
     this.name.value = name;
@@ -93,7 +120,10 @@ export class ProgramPanel {
     return name || 'program.bws';
   }
 
-  /** POST the program: a dry run (`check`) or a load. */
+  /**
+   * POST the program: a dry run (`check`) or a load.
+   * @param {boolean} dryRun
+   */
   async submit(dryRun) {
     const text = this.text.value;
     const name = this.programName();
@@ -119,19 +149,24 @@ export class ProgramPanel {
         this.result.replaceChildren(element('p', 'error', errorText(answer)));
       }
     } catch (error) {
-      this.result.replaceChildren(element('p', 'error', `the daemon cannot be reached (${error.message})`));
+      this.result.replaceChildren(element('p', 'error', `the daemon cannot be reached (${messageOf(error)})`));
     } finally {
       this.busy = false;
       this.update();
     }
   }
 
-  /** What the twin predicts for the program (and its id once loaded). */
+  /**
+   * What the twin predicts for the program (and its id once loaded).
+   * @param {Totals} totals
+   * @param {boolean} dryRun
+   */
   showTotals(totals, dryRun) {
     const head = dryRun
       ? 'check passed: the twin runs it to the end'
       : `loaded as program ${totals.id}: ${totals.name}`;
     const list = element('dl', 'totals');
+    /** @type {[string, number | string][]} */
     const rows = [
       ['instructions', totals.instructions],
       ['contacts', totals.contacts],
@@ -143,7 +178,11 @@ export class ProgramPanel {
     this.result.replaceChildren(element('p', 'ok', head), list);
   }
 
-  /** A refused program: "line N, column M: error" and the line quoted with a caret. */
+  /**
+   * A refused program: "line N, column M: error" and the line quoted with a caret.
+   * @param {{error: string, line: number, column: number}} refusal
+   * @param {string} text
+   */
   showProgramError({ error, line, column }, text) {
     const box = element('div', 'program-error');
     box.setAttribute('role', 'alert');
@@ -173,7 +212,12 @@ export class ProgramPanel {
     this.result.replaceChildren(box);
   }
 
-  /** Select the character at line, column (1-based) of the text area, scrolled into view. */
+  /**
+   * Select the character at line, column (1-based) of the text area, scrolled into view.
+   * @param {string} text
+   * @param {number} line
+   * @param {number} column
+   */
   select(text, line, column) {
     const lines = text.split(/\r\n|\r|\n/);
     if (this.text.value !== text) return; // edited since: the place is no longer known
@@ -186,7 +230,10 @@ export class ProgramPanel {
     this.text.scrollTop = Math.max(0, (line - 3) * lineHeight);
   }
 
-  /** A malformed request (e.g. an empty name): the validator's words. */
+  /**
+   * A malformed request (e.g. an empty name): the validator's words.
+   * @param {{error: string, details: {loc?: unknown, msg?: string}[]}} refusal
+   */
   showInvalid({ error, details }) {
     const box = element('div', 'program-error');
     box.setAttribute('role', 'alert');

@@ -1,3 +1,4 @@
+// @ts-check
 // The cross-section at a height z of the preform frame, by the rules of `bwsd slice`
 // (pure: numbers in, numbers out; the drawing is view-section.js).
 //
@@ -8,17 +9,34 @@
 // bwsd/export/slice.py: a horizontal segment within half a diameter of the plane cuts it in
 // a strip.
 
+/** @import { Machine } from '../types/daemon' */
+
+/**
+ * A yarn as the view holds it: x y z per node in `xyz`, `count` nodes.
+ * @typedef {{id: number, kind: string, family: string, xyz: Float64Array, count: number}} SectionYarn
+ */
+/**
+ * Where a yarn crosses the plane: `segment` is the index i of the segment (node i to i + 1)
+ * the point lies on, for a node the segment ending there (0 for the first); `free` marks a
+ * warp's free segment (last fixed node to guide).
+ * @typedef {{yarn: number, family: string, segment: number, x: number, y: number, free: boolean}} Crossing
+ */
+/**
+ * A horizontal segment cut by the plane: a strip of `halfWidth` along start-end ([x, y]).
+ * @typedef {{yarn: number, family: string, start: number[], end: number[], halfWidth: number}} Band
+ */
+
 /**
  * Where one yarn's centreline meets the plane z = `z`, in order along the yarn.
  *
- * @param yarn {id, kind, family, xyz (Float64Array, x y z per node), count}
- * @returns [{yarn, family, segment, x, y, free}]: `segment` is the index i of the segment
- *   (node i to i + 1) the point lies on, for a node the segment ending there (0 for the
- *   first); `free` marks a warp's free segment (last fixed node to guide).
+ * @param {SectionYarn} yarn
+ * @param {number} z
+ * @returns {Crossing[]}
  */
 export function yarnCrossings(yarn, z) {
   const { xyz, count } = yarn;
   const freeFrom = yarn.kind === 'warp' ? count - 2 : count;
+  /** @param {number} i */
   const dz = (i) => xyz[3 * i + 2] - z;
   const out = [];
   for (let i = 0; i < count; i += 1) {
@@ -36,11 +54,23 @@ export function yarnCrossings(yarn, z) {
   return out;
 }
 
+/**
+ * @param {SectionYarn} yarn
+ * @param {number} segment
+ * @param {number} x
+ * @param {number} y
+ * @param {boolean} free
+ * @returns {Crossing}
+ */
 function crossing(yarn, segment, x, y, free) {
   return { yarn: yarn.id, family: yarn.family, segment, x, y, free };
 }
 
-/** Every crossing of the plane z = `z`: yarns in id order, then along each yarn. */
+/**
+ * Every crossing of the plane z = `z`: yarns in id order, then along each yarn.
+ * @param {Iterable<SectionYarn>} yarns
+ * @param {number} z
+ */
 export function crossings(yarns, z) {
   const out = [];
   for (const yarn of yarns) {
@@ -53,9 +83,13 @@ export function crossings(yarns, z) {
  * Horizontal segments (wefts) whose round section of `diameter` reaches the plane z = `z`:
  * [{yarn, family, start: [x, y], end: [x, y], halfWidth}] (a strip of that half-width
  * along the segment; never a crossing).
+ * @param {Iterable<SectionYarn>} yarns
+ * @param {number} z
+ * @param {number} diameter
  */
 export function bands(yarns, z, diameter) {
   const radius = diameter / 2;
+  /** @type {Band[]} */
   const out = [];
   for (const yarn of yarns) {
     const { xyz, count } = yarn;
@@ -75,7 +109,10 @@ export function bands(yarns, z, diameter) {
   return out;
 }
 
-/** The four corners of a band's strip, as `bwsd slice` draws it. */
+/**
+ * The four corners of a band's strip, as `bwsd slice` draws it.
+ * @param {Band} band
+ */
 export function bandCorners(band) {
   const [x0, y0] = band.start;
   const [x1, y1] = band.end;
@@ -88,6 +125,10 @@ export function bandCorners(band) {
 /**
  * The square region `bwsd slice` shows: everything cut (crossings, strips' ends) or, when
  * nothing is, the matrix's footprint at the fell; padded by max(d, 1 mm). [cx, cy, half].
+ * @param {Crossing[]} found
+ * @param {Band[]} strips
+ * @param {Machine | null} machine
+ * @param {number} diameter
  */
 export function sliceLimits(found, strips, machine, diameter) {
   const pad = Math.max(diameter, 1);
@@ -105,7 +146,12 @@ export function sliceLimits(found, strips, machine, diameter) {
   return [(xMax + xMin) / 2, (yMax + yMin) / 2, half];
 }
 
-/** Where the twin maps guide (row, col) at the fell: O + c_mat (guide - O). */
+/**
+ * Where the twin maps guide (row, col) at the fell: O + c_mat (guide - O).
+ * @param {Machine} machine
+ * @param {number} row
+ * @param {number} col
+ */
 export function fellXY(machine, row, col) {
   const ox = ((machine.cols - 1) / 2) * machine.pitch_x;
   const oy = ((machine.rows - 1) / 2) * machine.pitch_y;

@@ -1,27 +1,34 @@
+// @ts-check
 // Who is logged in: the token (api.js keeps it), its holder and role as `/whoami` names
 // them, the login form with "remember me", log out, and a `#token=` link opened in a tab
 // that shows the page already.
 
 import { getToken, request, setToken, takeTokenFromFragment, tokenRemembered } from './api.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { Answer } from './api.js' */
+
+import { byId as $ } from './dom.js';
 const COMMANDING_ROLES = new Set(['operator', 'admin']);
 
 export class Session {
   /**
-   * @param onLogIn called with a token to log in with, and whether to remember it
-   * @param onLogOut called when the operator logs out
+   * @param {object} callbacks
+   * @param {(token: string, remember: boolean) => void} callbacks.onLogIn called with a token
+   *   to log in with, and whether to remember it
+   * @param {() => void} callbacks.onLogOut called when the operator logs out
    */
   constructor({ onLogIn, onLogOut }) {
-    this.name = null; // the token's holder, from /whoami
-    this.role = null; // its role (null: not known yet)
+    /** @type {string | null} the token's holder, from /whoami */
+    this.name = null;
+    /** @type {string | null} its role (null: not known yet) */
+    this.role = null;
     $('login').addEventListener('submit', (event) => {
       event.preventDefault();
-      const input = $('token-input');
+      const input = $('token-input', HTMLInputElement);
       const token = input.value.trim();
       if (!token) return;
       input.value = '';
-      onLogIn(token, $('remember').checked);
+      onLogIn(token, $('remember', HTMLInputElement).checked);
     });
     $('logout').addEventListener('click', () => onLogOut());
     window.addEventListener('hashchange', () => {
@@ -32,7 +39,7 @@ export class Session {
 
   /** The token's role may command the machine and load programs. */
   mayCommand() {
-    return Boolean(getToken()) && COMMANDING_ROLES.has(this.role);
+    return Boolean(getToken()) && this.role !== null && COMMANDING_ROLES.has(this.role);
   }
 
   /** The token's role may change the unit mode (admin, as on every door of the daemon). */
@@ -40,7 +47,11 @@ export class Session {
     return Boolean(getToken()) && this.role === 'admin';
   }
 
-  /** Keep `token` (for the session, or beyond with `remember`); its role is not known yet. */
+  /**
+   * Keep `token` (for the session, or beyond with `remember`); its role is not known yet.
+   * @param {string} token
+   * @param {boolean} remember
+   */
   keep(token, remember) {
     setToken(token, remember);
     this.name = this.role = null;
@@ -62,7 +73,10 @@ export class Session {
     return answer;
   }
 
-  /** A 403 names the role the token holds. */
+  /**
+   * A 403 names the role the token holds.
+   * @param {Answer} answer
+   */
   noteRefusal(answer) {
     if (typeof answer.body?.role === 'string') this.role = answer.body.role;
   }
@@ -72,7 +86,7 @@ export class Session {
     const token = getToken();
     $('login').hidden = Boolean(token);
     $('session').hidden = !token;
-    $('remember').checked = tokenRemembered();
+    $('remember', HTMLInputElement).checked = tokenRemembered();
     const who = this.name ? `${this.name}, ` : '';
     $('session-role').textContent = this.role ? `logged in (${who}${this.role})` : 'logged in';
     const readOnly = $('read-only');

@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view of the predicted preform: the twin's skeleton as yarn polylines.
 //
 // Coordinates are the skeleton's preform frame (mm): z is up, z = 0 is the fell at the
@@ -35,6 +36,9 @@ import { MachineMarks } from './view-machine.js';
 import { ViewTools } from './view-tools.js';
 import { Yarn } from './view-yarn.js';
 
+/** @import { ContactData, Machine, Skeleton, SkeletonDelta, XYZ, YarnData } from '../types/daemon' */
+/** @import { Palette } from './colours.js' */
+
 // Unlit lines: every colour goes to the screen exactly as given (and the settled image
 // stores exactly what the screen shows).
 THREE.ColorManagement.enabled = false;
@@ -63,10 +67,36 @@ export function softwareWebGL() {
 
 /** The canvas, its camera and controls, and everything drawn in it. */
 export class PreformView {
+  // The model, as `clear` sets it (the constructor calls it) and `load` and `applyDelta` fill it.
+  /** @type {Map<number, Yarn>} yarn id -> Yarn */
+  yarns;
+  /** @type {NodeTable} every node's position, by id */
+  nodes;
+  /** @type {number} */
+  nodeCount;
+  /** @type {Map<number, number>} yarn id -> contacts it is in */
+  contactsOf;
+  /** @type {THREE.Box3} what the model spans */
+  bounds;
+  /** @type {Machine | null} */
+  machine;
+  /** @type {number} the yarn diameter, mm (0: centrelines only) */
+  diameter;
+  /** @type {number} the take-up, mm */
+  takeup;
+  /** @type {number[][] | null} the twin's cases: rows of yarn ids, -1 empty */
+  occupancy;
+  /** @type {boolean} the machine's marks must be drawn again */
+  machineDirty;
+  /** @type {number | undefined} the canvas's size in CSS pixels, once laid out */
+  width;
+  /** @type {number | undefined} */
+  height;
+
   /**
-   * @param canvas the <canvas> to draw in
-   * @param palette the yarn colours (colours.js)
-   * @param requestFrame called when the view wants a frame drawn
+   * @param {HTMLCanvasElement} canvas the <canvas> to draw in
+   * @param {Palette} palette the yarn colours (colours.js)
+   * @param {() => void} requestFrame called when the view wants a frame drawn
    */
   constructor(canvas, palette, requestFrame) {
     this.canvas = canvas;
@@ -99,26 +129,32 @@ export class PreformView {
     this.machineMarks = new MachineMarks();
     for (const object of this.machineMarks.objects) liveScene.add(object);
     const host = canvas.parentElement;
-    this.axes = new Axes(host.querySelector('.view-labels') ?? document.createElement('div'));
+    if (!host) throw new Error("the view's canvas is not in the page");
+    this.host = host;
+    this.axes = new Axes(part(host, '.view-labels'));
     liveScene.add(this.axes.lines);
-    this.scaleBar = new ScaleBar(host.querySelector('.view-scale') ?? document.createElement('div'));
+    this.scaleBar = new ScaleBar(part(host, '.view-scale'));
 
     // Contacts: node pairs always kept; their points built when first shown.
     this.contactNodes = new Int32Array(2 * 1024); // [moving node, hit node] per contact
     this.contactCount = 0;
     this.contactMaterial = mmPointsMaterial({ color: CONTACT_COLOUR, map: discTexture(false) });
+    /** @type {ContactPoints | null} */
     this.contactPoints = null;
     this.showContacts = false;
 
-    this.highlighted = null; // the yarn that stands out, the others dimmed
+    /** @type {number | null} the yarn that stands out, the others dimmed */
+    this.highlighted = null;
 
     this.tools = new ViewTools(this);
     // Called with a yarn's id when the operator clicks on it (in 3D or in the section), null
     // on empty space; the page may set its own (and call `highlight` in it to keep this).
+    /** @type {(id: number | null) => void} */
     this.onPick = (id) => this.highlight(id);
     // Called when the colours changed on their own (not by `setColourMode`): the zones of a
     // program's section line arrived, or a pause refreshed the colours; the page repaints
     // what shares the palette (the matrix, the legend).
+    /** @type {(() => void) | null} */
     this.onColoursChanged = null;
     this.clear();
     new ResizeObserver(() => this.resize()).observe(host);
@@ -137,7 +173,7 @@ export class PreformView {
   }
 
   resize() {
-    const { clientWidth: width, clientHeight: height } = this.canvas.parentElement;
+    const { clientWidth: width, clientHeight: height } = this.host;
     if (width === 0 || height === 0) return;
     this.width = width;
     this.height = height;
@@ -171,7 +207,10 @@ export class PreformView {
     this.changed(true);
   }
 
-  /** Build the view of a whole skeleton (its JSON document). */
+  /**
+   * Build the view of a whole skeleton (its JSON document).
+   * @param {Skeleton} skeleton
+   */
   load(skeleton) {
     const highlighted = this.highlighted;
     this.clear();
@@ -197,6 +236,7 @@ export class PreformView {
     this.invalidate(split);
   }
 
+  /** @param {YarnData} data */
   addYarn(data) {
     const yarn = new Yarn(data, this.palette.add(data));
     this.yarns.set(yarn.id, yarn);
@@ -205,11 +245,16 @@ export class PreformView {
     this.layers.liveNodes += yarn.count; // a new yarn is live until the next split
   }
 
+  /**
+   * @param {number} id
+   * @param {XYZ} xyz
+   */
   noteNode(id, xyz) {
     this.nodes.set(id, xyz);
     this.bounds.expandByPoint({ x: xyz[0], y: xyz[1], z: xyz[2] });
   }
 
+  /** @param {ContactData} contact */
   addContact(contact) {
     if (2 * this.contactCount + 2 > this.contactNodes.length) {
       const bigger = new Int32Array(this.contactNodes.length * 2);
@@ -218,8 +263,8 @@ export class PreformView {
     }
     this.contactNodes.set(contact.nodes, 2 * this.contactCount);
     this.contactCount += 1;
-    const [a, b] = contact.yarns ?? [];
-    if (a === undefined) return;
+    if (!contact.yarns) return;
+    const [a, b] = contact.yarns;
     for (const id of [a, b]) this.contactsOf.set(id, (this.contactsOf.get(id) ?? 0) + 1);
     this.palette.noteContact(a, b);
   }
@@ -239,6 +284,7 @@ export class PreformView {
    * Apply one skeleton delta (the "skeleton" of an instruction event) to the model; the
    * GPU gets it at the next frame. False when the delta does not fit what is shown (a
    * node it names is unknown): the caller then fetches the whole skeleton.
+   * @param {SkeletonDelta} delta
    */
   applyDelta(delta) {
     for (const data of delta.new_yarns ?? []) {
@@ -247,7 +293,8 @@ export class PreformView {
     }
     for (const { yarn: id, node, after, xyz } of delta.inserted ?? []) {
       const yarn = this.yarns.get(id);
-      const at = yarn ? yarn.insertAfter(after, node, xyz) : -1;
+      if (!yarn) return false;
+      const at = yarn.insertAfter(after, node, xyz);
       if (at < 0) return false;
       this.layers.touched(yarn, at);
       this.noteNode(node, xyz);
@@ -256,7 +303,8 @@ export class PreformView {
     }
     for (const { yarn: id, node, xyz } of delta.moved ?? []) {
       const yarn = this.yarns.get(id);
-      const at = yarn ? yarn.move(node, xyz) : -1;
+      if (!yarn) return false;
+      const at = yarn.move(node, xyz);
       if (at < 0) return false;
       this.layers.touched(yarn, at, true);
       this.noteNode(node, xyz);
@@ -286,19 +334,26 @@ export class PreformView {
 
   // ----- colours, contacts, highlight -----
 
-  /** Colour by a mode of colours.js (COLOUR_MODES: "yarn", "family", "zone", "contacts"). */
+  /**
+   * Colour by a mode of colours.js (COLOUR_MODES: "yarn", "family", "zone", "contacts").
+   * @param {string} mode
+   */
   setColourMode(mode) {
     this.palette.setMode(mode);
     this.changed(true);
   }
 
-  /** The colour yarn `id` is drawn in now (dimmed while another yarn is highlighted). */
+  /**
+   * The colour yarn `id` is drawn in now (dimmed while another yarn is highlighted).
+   * @param {number} id
+   */
   shownColour(id) {
     const colour = this.palette.colour(id);
     if (this.highlighted === null || id === this.highlighted) return colour;
     return dim(colour);
   }
 
+  /** @param {boolean} visible */
   setContactsVisible(visible) {
     this.showContacts = visible;
     if (!visible) this.dropContactPoints(); // built at the next frame when shown
@@ -313,7 +368,10 @@ export class PreformView {
     this.contactPoints = null;
   }
 
-  /** Make yarn `id` stand out, the others dimmed (null: none). */
+  /**
+   * Make yarn `id` stand out, the others dimmed (null: none).
+   * @param {number | null | undefined} id
+   */
   highlight(id) {
     const next = id === null || id === undefined || !this.yarns.has(id) ? null : id;
     if (next === this.highlighted) return;
@@ -321,7 +379,10 @@ export class PreformView {
     this.changed(true);
   }
 
-  /** {id, kind, family, contacts, length (mm along the polyline)}, or null for an unknown id. */
+  /**
+   * {id, kind, family, contacts, length (mm along the polyline)}, or null for an unknown id.
+   * @param {number} id
+   */
   yarnInfo(id) {
     const yarn = this.yarns.get(id);
     if (!yarn) return null;
@@ -379,55 +440,79 @@ export class PreformView {
     else this.fit();
   }
 
-  /** Look along a preset view ("3d", "top", "front", "side"; view-camera.js) in its default projection. */
+  /**
+   * Look along a preset view ("3d", "top", "front", "side"; view-camera.js) in its default projection.
+   * @param {string | undefined} preset
+   */
   setView(preset) {
-    const chosen = PRESETS[preset] ? preset : '3d';
+    const chosen = preset !== undefined && PRESETS[preset] ? preset : '3d';
     this.rig.preset = chosen;
     this.tools.presetChosen(chosen);
     this.fit(PRESETS[chosen].orthographic);
     this.tools.syncControls();
   }
 
-  /** The orthographic projection (true) or perspective (false), keeping the view. */
+  /**
+   * The orthographic projection (true) or perspective (false), keeping the view.
+   * @param {boolean} on
+   */
   setOrthographic(on) {
     this.rig.setOrthographic(on);
     this.invalidate(true);
     this.tools.syncControls();
   }
 
+  /** @param {boolean} visible */
   setAxesVisible(visible) {
     this.axes.setVisible(visible);
     this.invalidate();
   }
 
-  /** Where points [[x, y, z], ...] of the preform frame fall on the canvas, CSS pixels from its top left. */
+  /**
+   * Where points [[x, y, z], ...] of the preform frame fall on the canvas, CSS pixels from its
+   * top left (NaN before the canvas is laid out).
+   * @param {XYZ[]} points
+   */
   project(points) {
     const v = new THREE.Vector3();
+    const [width, height] = [this.width ?? NaN, this.height ?? NaN];
     this.camera.updateMatrixWorld();
     return points.map(([x, y, z]) => {
       v.set(x, y, z).project(this.camera);
-      return [((v.x + 1) / 2) * this.width, ((1 - v.y) / 2) * this.height];
+      return [((v.x + 1) / 2) * width, ((1 - v.y) / 2) * height];
     });
   }
 
   // ----- the section (view-tools.js) -----
 
-  /** Show the section (its plane and crossings in 3D, and the 2D view beside). */
+  /**
+   * Show the section (its plane and crossings in 3D, and the 2D view beside).
+   * @param {boolean} shown
+   */
   setSectionShown(shown) {
     this.tools.setShown(shown);
   }
 
-  /** The section's height z, mm in the preform frame. */
+  /**
+   * The section's height z, mm in the preform frame.
+   * @param {number | string} z
+   */
   setSectionHeight(z) {
     this.tools.setHeight(z);
   }
 
-  /** Hide everything above the section (true) or not. */
+  /**
+   * Hide everything above the section (true) or not.
+   * @param {boolean} cut
+   */
   setSectionCut(cut) {
     this.tools.setCut(cut);
   }
 
-  /** The crossings of the plane z = `z`, as `bwsd slice` finds them: [{yarn, x, y, free}]. */
+  /**
+   * The crossings of the plane z = `z`, as `bwsd slice` finds them: [{yarn, x, y, free}].
+   * @param {number | string} z
+   */
   section(z) {
     return this.tools.crossingsAt(z);
   }
@@ -436,6 +521,7 @@ export class PreformView {
    * The braided section for colouring by zone: a written section (`L:2x6:4x2`), or a
    * program's text whose "# section: SPEC" line names one; null for none. Until this is
    * called, the view reads the loaded program's text from the daemon itself.
+   * @param {string | null} text
    */
   setSection(text) {
     this.tools.setSection(text, true);
@@ -482,7 +568,21 @@ export class PreformView {
   }
 }
 
-/** A colour faded towards the background: a yarn that is not the highlighted one. */
+/**
+ * A colour faded towards the background: a yarn that is not the highlighted one.
+ * @param {number} colour
+ */
 function dim(colour) {
   return mix(colour, BACKGROUND, 0.8);
+}
+
+/**
+ * The element `selector` in `host` (the view's labels, its scale), or a detached one when
+ * the page has none.
+ * @param {HTMLElement} host
+ * @param {string} selector
+ */
+function part(host, selector) {
+  const found = host.querySelector(selector);
+  return found instanceof HTMLElement ? found : document.createElement('div');
 }

@@ -1,3 +1,4 @@
+// @ts-check
 // What the daemon says about the machine, drawn as it says it: the header's state badge and
 // e-stop badge, the e-stop and disconnected banners, and the Status panel (machine health,
 // bus, why it stopped, recovery, unit mode).
@@ -8,11 +9,15 @@
 // last heard from.
 
 import { request } from './api.js';
+import { byId as $ } from './dom.js';
 import { clock } from './eta.js';
 
-const $ = (id) => document.getElementById(id);
+/** @import { Bus, Cell, State } from '../types/daemon' */
 
-/** Why the machine stopped, as an operator says it (`stop_cause` in docs/api.md). */
+/**
+ * Why the machine stopped, as an operator says it (`stop_cause` in docs/api.md).
+ * @type {Record<string, string>}
+ */
 export const CAUSES = {
   refused_move: 'refused move (the twin or a limit)',
   drive_fault: 'drive fault',
@@ -28,12 +33,19 @@ export const CAUSES = {
 const STANDING = new Set(['Stopping', 'Stopped', 'Aborting', 'Aborted', 'Holding', 'Held',
   'Suspending', 'Suspended', 'Clearing']);
 
-/** "(0, 1), (2, 3)" */
+/**
+ * "(0, 1), (2, 3)"
+ * @param {Cell[]} list
+ */
 function cells(list) {
   return list.map(([r, c]) => `(${r}, ${c})`).join(', ');
 }
 
-/** `{text, key}` of the machine's health: e-stop, faulted axes, sensors, or ok. */
+/**
+ * `{text, key}` of the machine's health: e-stop, faulted axes, sensors, or ok.
+ * @param {Bus} bus
+ * @param {Record<string, string>} [faultNames] axis -> the name of its fault
+ */
 export function machineHealth(bus, faultNames) {
   if (bus.connected !== true || bus.estop === null || bus.estop === undefined) {
     return { text: bus.connected === false ? 'unknown (the bus is lost)' : 'not seen yet', key: 'unknown' };
@@ -54,6 +66,7 @@ export function machineHealth(bus, faultNames) {
 /**
  * The bus as the daemon last saw it. An error is the bus's only while it is lost: an
  * axis fault or the e-stop answered over a working bus is the machine's (shown there).
+ * @param {Bus} bus
  */
 export function busHealth(bus) {
   if (bus.connected === true) return { text: 'connected', key: 'up', error: '' };
@@ -61,10 +74,13 @@ export function busHealth(bus) {
   return { text: 'not seen yet', key: 'unknown', error: '' };
 }
 
-/** "operator: yarn break", "drive fault: axis row1: stall"; '' when it is not current. */
+/**
+ * "operator: yarn break", "drive fault: axis row1: stall"; '' when it is not current.
+ * @param {State} state
+ */
 export function stopText(state) {
   if (!STANDING.has(state.name)) return '';
-  const cause = CAUSES[state.stop_cause] ?? '';
+  const cause = CAUSES[state.stop_cause ?? ''] ?? '';
   const reason = state.reason ?? '';
   if (cause && reason) return `${cause}: ${reason}`;
   return cause || reason;
@@ -72,7 +88,8 @@ export function stopText(state) {
 
 export class StatusPanel {
   constructor() {
-    this.faultNames = {}; // axis -> fault name, from /machine (while axes report faults)
+    /** @type {Record<string, string>} axis -> fault name, from /machine (while axes report faults) */
+    this.faultNames = {};
     this.faultedAsked = ''; // the faulted axes the names were asked for
   }
 
@@ -80,6 +97,9 @@ export class StatusPanel {
    * Draw `state` (the last /state answer, or null); `online`: the daemon answers and the
    * event link is up (null: the page does not ask, logged out); `lastSeen`: when the
    * daemon was last heard from (a Date, or null).
+   * @param {State | null} state
+   * @param {boolean | null} online
+   * @param {Date | null} lastSeen
    */
   draw(state, online, lastSeen) {
     document.body.dataset.online = String(online !== false);
@@ -94,6 +114,7 @@ export class StatusPanel {
     badge.textContent = state.name;
     badge.dataset.state = state.name;
     badge.title = online !== false ? '' : `as last heard from the daemon, at ${lastSeen ? clock(lastSeen) : '?'}`;
+    /** @type {Bus} */
     const bus = state.bus ?? {};
     const estop = online !== false && bus.estop === true;
     $('estop-badge').hidden = !estop;
@@ -110,6 +131,10 @@ export class StatusPanel {
     $('recovering').hidden = $('recovering-label').hidden = !state.recovering;
   }
 
+  /**
+   * @param {boolean | null} online
+   * @param {Date | null} lastSeen
+   */
   drawLink(online, lastSeen) {
     const box = $('link');
     if (online === null) {
@@ -145,6 +170,8 @@ export class StatusPanel {
   /**
    * The fault names (stall, jam...) of the `faulted` axes, read from `/machine` once per
    * change of the list; `onRead` is called when they are in.
+   * @param {string[]} faulted
+   * @param {() => void} onRead
    */
   async readFaultNames(faulted, onRead) {
     const key = faulted.join(',');

@@ -1,3 +1,4 @@
+// @ts-check
 // Says so on the page when three.js is not installed beside it (`npm ci` was not run before
 // bwsd was built or installed, docs/preview.md): without it the page's scripts cannot load,
 // and the page would stay blank. It imports nothing, so it runs whatever is missing.
@@ -13,6 +14,7 @@ async function checkThree() {
   }
   if (answer.status !== 404) return;
   const banner = document.getElementById('page-banner');
+  if (!banner) return;
   banner.textContent =
     'three.js is missing from this installation of bwsd, so the page cannot draw the preform ' +
     'or run. Install it where bwsd was built (npm ci --prefix bwsd/web) and reinstall bwsd, ' +

@@ -1,14 +1,20 @@
+// @ts-check
 // What the 3D view hands the GPU: yarn polylines batched into few draw calls, node
 // positions by id, and contact points. Buffers grow by doubling and are uploaded in the
 // parts that changed only.
 
 import * as THREE from 'three';
 
+/** @import { ViewCamera } from './view-camera.js' */
+
 const FIRST_CAPACITY = 8;
 const RESTART = 0xffffffff; // ends a line strip in an index buffer (WebGL 2 primitive restart)
 export const MIN_POINT_PX = 3; // a point never shrinks below this (a centreline-only model)
 
-/** Smallest power of two ≥ n (and ≥ 8). */
+/**
+ * Smallest power of two ≥ n (and ≥ 8).
+ * @param {number} n
+ */
 export function capacityFor(n) {
   let capacity = FIRST_CAPACITY;
   while (capacity < n) capacity *= 2;
@@ -22,13 +28,35 @@ export function capacityFor(n) {
  * was added since `mark` (the indices then), `drawAll()` undoes it.
  */
 export class StripBatch {
+  // What `allocate` and `begin` set (the constructor calls both).
+  /** @type {Float32Array} xyz per vertex */
+  positions;
+  /** @type {Uint8Array} rgb per vertex */
+  colours;
+  /** @type {Uint32Array} the strips' vertices, each strip ended by RESTART */
+  index;
+  /** @type {boolean} the buffers were made anew: `end` hands the GPU new ones */
+  regrown;
+  /** @type {number} vertices in the batch */
+  vertices;
+  /** @type {number} indices in the batch */
+  indices;
+  /** @type {number} */
+  uploadedVertices;
+  /** @type {number} */
+  uploadedIndices;
+
+  /** @param {THREE.LineBasicMaterial} material */
   constructor(material) {
     this.line = new THREE.Line(new THREE.BufferGeometry(), material);
     this.line.frustumCulled = false; // its bounds change all the time
+    /** @type {THREE.BufferAttribute[]} position, colour and index: what `end` uploads */
+    this.attributes = [];
     this.allocate(1024);
     this.begin();
   }
 
+  /** @param {number} vertices */
   allocate(vertices) {
     const old = this.vertices ? { positions: this.positions, colours: this.colours, index: this.index } : null;
     this.positions = new Float32Array(3 * vertices);
@@ -49,7 +77,13 @@ export class StripBatch {
     this.uploadedIndices = 0;
   }
 
-  /** Nodes [from, to) of `xyz` (a yarn's coordinates) as one strip of colour 0xRRGGBB. */
+  /**
+   * Nodes [from, to) of `xyz` (a yarn's coordinates) as one strip of colour 0xRRGGBB.
+   * @param {Float64Array} xyz
+   * @param {number} from
+   * @param {number} to
+   * @param {number} colour
+   */
   add(xyz, from, to, colour) {
     const n = to - from;
     if (n < 2) return;
@@ -76,18 +110,25 @@ export class StripBatch {
     if (this.regrown) {
       geometry.dispose();
       geometry = new THREE.BufferGeometry();
-      geometry.setAttribute('position', new THREE.BufferAttribute(this.positions, 3).setUsage(THREE.DynamicDrawUsage));
-      geometry.setAttribute('color', new THREE.BufferAttribute(this.colours, 3, true).setUsage(THREE.DynamicDrawUsage));
-      geometry.setIndex(new THREE.BufferAttribute(this.index, 1).setUsage(THREE.DynamicDrawUsage));
+      const position = new THREE.BufferAttribute(this.positions, 3).setUsage(THREE.DynamicDrawUsage);
+      const colour = new THREE.BufferAttribute(this.colours, 3, true).setUsage(THREE.DynamicDrawUsage);
+      const index = new THREE.BufferAttribute(this.index, 1).setUsage(THREE.DynamicDrawUsage);
+      geometry.setAttribute('position', position);
+      geometry.setAttribute('color', colour);
+      geometry.setIndex(index);
+      this.attributes = [position, colour, index];
       this.line.geometry = geometry;
       this.regrown = false;
     } else {
       const [v0, i0] = [this.uploadedVertices, this.uploadedIndices];
-      for (const [attribute, from, to] of [
-        [geometry.getAttribute('position'), 3 * v0, 3 * this.vertices],
-        [geometry.getAttribute('color'), 3 * v0, 3 * this.vertices],
-        [geometry.getIndex(), i0, this.indices],
-      ]) {
+      const [position, colour, index] = this.attributes;
+      /** @type {[THREE.BufferAttribute, number, number][]} */
+      const parts = [
+        [position, 3 * v0, 3 * this.vertices],
+        [colour, 3 * v0, 3 * this.vertices],
+        [index, i0, this.indices],
+      ];
+      for (const [attribute, from, to] of parts) {
         if (to <= from) continue;
         attribute.addUpdateRange(from, to - from);
         attribute.needsUpdate = true;
@@ -103,6 +144,7 @@ export class StripBatch {
     return this.indices;
   }
 
+  /** @param {number} mark */
   drawFrom(mark) {
     this.line.geometry.setDrawRange(mark, this.indices - mark);
   }
@@ -122,6 +164,10 @@ export class NodeTable {
     this.xyz = new Float32Array(3 * 1024);
   }
 
+  /**
+   * @param {number} id
+   * @param {ArrayLike<number>} xyz
+   */
   set(id, xyz) {
     if (3 * id + 3 > this.xyz.length) {
       let size = this.xyz.length;
@@ -140,6 +186,7 @@ export function discTexture(ring = false) {
   const canvas = document.createElement('canvas');
   canvas.width = canvas.height = size;
   const g = canvas.getContext('2d');
+  if (!g) throw new Error('no 2D canvas context');
   g.beginPath();
   g.arc(size / 2, size / 2, size / 2 - 2, 0, 2 * Math.PI);
   if (!ring) {
@@ -154,7 +201,10 @@ export function discTexture(ring = false) {
   return texture;
 }
 
-/** Round points of a size in mm (`diameter`), whatever the camera. */
+/**
+ * Round points of a size in mm (`diameter`), whatever the camera.
+ * @param {THREE.PointsMaterialParameters} [options]
+ */
 export function mmPointsMaterial(options = {}) {
   const material = new THREE.PointsMaterial({ size: 1, sizeAttenuation: true, alphaTest: 0.5, ...options });
   material.userData.diameter = 0;
@@ -165,10 +215,13 @@ export function mmPointsMaterial(options = {}) {
  * Set a material's point size so that a point covers its diameter in mm on screen
  * (three.js scales a perspective point by half the viewport height over its depth; an
  * orthographic one not at all). Never below MIN_POINT_PX.
+ * @param {THREE.PointsMaterial} material
+ * @param {ViewCamera} camera
+ * @param {number} viewportHeight
  */
 export function sizePoints(material, camera, viewportHeight, scale = 1) {
   const d = material.userData.diameter * scale;
-  if (camera.isPerspectiveCamera) {
+  if (camera instanceof THREE.PerspectiveCamera) {
     const perDepth = 1 / Math.tan(THREE.MathUtils.degToRad(camera.fov / 2));
     const distance = camera.position.distanceTo(camera.userData.target ?? new THREE.Vector3());
     // the floor, as a size at the target's depth
@@ -182,6 +235,10 @@ export function sizePoints(material, camera, viewportHeight, scale = 1) {
 
 /** Contact points: one per contact, midway between its two nodes; settled and live parts. */
 export class ContactPoints {
+  /** @type {THREE.BufferAttribute} the points' positions (set by `makeGeometries`) */
+  attribute;
+
+  /** @param {THREE.PointsMaterial} material */
   constructor(material) {
     this.settledPoints = new THREE.Points(undefined, material);
     this.livePoints = new THREE.Points(undefined, material);
@@ -201,7 +258,12 @@ export class ContactPoints {
     }
   }
 
-  /** Append contacts [shown, count) of `nodes` (pairs of node ids) at `table` positions. */
+  /**
+   * Append contacts [shown, count) of `nodes` (pairs of node ids) at `table` positions.
+   * @param {Int32Array} nodes
+   * @param {number} count
+   * @param {NodeTable} table
+   */
   extend(nodes, count, table) {
     if (count === this.shown) return;
     const from = this.shown;

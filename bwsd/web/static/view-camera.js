@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view's camera: a perspective and an orthographic one sharing one orbit control,
 // and the preset views of a textile drawing.
 //
@@ -10,8 +11,12 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
+/** @typedef {THREE.PerspectiveCamera | THREE.OrthographicCamera} ViewCamera */
+/** @typedef {{s: number, tx: number, ty: number}} Soft a scale and shift of the picture (NDC) */
+
 const FOV = 35; // degrees, vertical, of the perspective camera
 const TILT = 1e-4; // the top view's tilt off the vertical, for a defined "up" (y) on screen
+/** @type {Record<string, {direction: THREE.Vector3, orthographic: boolean}>} */
 export const PRESETS = {
   '3d': { direction: new THREE.Vector3(1.0, -1.5, 0.8).normalize(), orthographic: false },
   top: { direction: new THREE.Vector3(0, -TILT, 1).normalize(), orthographic: true },
@@ -20,7 +25,10 @@ export const PRESETS = {
 };
 
 export class CameraRig {
-  /** @param onChange called when the camera moved (by the operator or by a call here) */
+  /**
+   * @param {HTMLCanvasElement} canvas
+   * @param {() => void} onChange called when the camera moved (by the operator or by a call here)
+   */
   constructor(canvas, onChange) {
     this.perspective = new THREE.PerspectiveCamera(FOV, 1, 0.1, 10000);
     this.orthographic = new THREE.OrthographicCamera(-1, 1, 1, -1, 0.1, 10000);
@@ -29,13 +37,16 @@ export class CameraRig {
       camera.userData.target = new THREE.Vector3();
     }
     this.perspective.position.set(100, -150, 80);
+    /** @type {ViewCamera} */
     this.camera = this.perspective;
     // A scale s and shift (tx, ty) of the picture, after the camera's own projection (NDC):
     // how the view follows a growing preform while updates flow without moving the camera,
     // so that the settled image stays valid, moved and scaled like the picture.
+    /** @type {Soft} */
     this.soft = { s: 1, tx: 0, ty: 0 };
     this.aspect = 1;
     this.preset = '3d';
+    /** @type {OrbitControls<ViewCamera>} */
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.addEventListener('change', () => {
       this.camera.userData.target.copy(this.controls.target);
@@ -48,6 +59,7 @@ export class CameraRig {
     return this.camera === this.orthographic;
   }
 
+  /** @param {number} aspect */
   setAspect(aspect) {
     this.aspect = aspect;
     this.perspective.aspect = aspect;
@@ -64,7 +76,10 @@ export class CameraRig {
     return this.soft.s !== 1 || this.soft.tx !== 0 || this.soft.ty !== 0;
   }
 
-  /** The camera's projection followed by `soft` (default: the rig's), on the active camera. */
+  /**
+   * The camera's projection followed by `soft` (default: the rig's), on the active camera.
+   * @param {Soft} [soft]
+   */
   applySoft(soft = this.soft) {
     const camera = this.camera;
     camera.updateProjectionMatrix();
@@ -77,6 +92,7 @@ export class CameraRig {
   /**
    * Frame `box` by scaling and shifting the picture only (the camera stays): false when that
    * cannot show it (a part behind a perspective camera), then the caller fits for real.
+   * @param {THREE.Box3} box
    */
   softFit(box) {
     const camera = this.camera;
@@ -88,7 +104,7 @@ export class CameraRig {
       for (const y of [box.min.y, box.max.y]) {
         for (const z of [box.min.z, box.max.z]) {
           v.set(x, y, z).applyMatrix4(camera.matrixWorldInverse);
-          if (camera.isPerspectiveCamera && v.z > -camera.near) {
+          if (camera instanceof THREE.PerspectiveCamera && v.z > -camera.near) {
             this.applySoft();
             return false;
           }
@@ -108,7 +124,10 @@ export class CameraRig {
     this.applySoft();
   }
 
-  /** Switch projection, keeping the direction, the target and the scale at the target. */
+  /**
+   * Switch projection, keeping the direction, the target and the scale at the target.
+   * @param {boolean} on
+   */
   setOrthographic(on) {
     if (on === this.isOrthographic) return;
     const target = this.controls.target.clone();
@@ -127,6 +146,7 @@ export class CameraRig {
     this.use(on ? this.orthographic : this.perspective);
   }
 
+  /** @param {ViewCamera} camera */
   use(camera) {
     this.soft = { s: 1, tx: 0, ty: 0 }; // a real fit or a switch ends any soft framing
     this.camera = camera;
@@ -135,13 +155,20 @@ export class CameraRig {
     this.onChange();
   }
 
-  /** Place `camera` at target + offset, showing `half` mm above and below the target. */
+  /**
+   * Place `camera` at target + offset, showing `half` mm above and below the target.
+   * @param {ViewCamera} camera
+   * @param {THREE.Vector3} target
+   * @param {THREE.Vector3} offset
+   * @param {number} half
+   * @param {number} depth
+   */
   frame(camera, target, offset, half, depth) {
     camera.position.copy(target).add(offset);
     camera.userData.target.copy(target);
     camera.near = depth / 100;
     camera.far = depth * 10;
-    if (camera.isOrthographicCamera) {
+    if (camera instanceof THREE.OrthographicCamera) {
       camera.zoom = 1;
       camera.top = half;
       camera.bottom = -half;
@@ -154,13 +181,20 @@ export class CameraRig {
     camera.updateProjectionMatrix();
   }
 
-  /** Look along a preset (`PRESETS`) in its projection, framing `box`. */
+  /**
+   * Look along a preset (`PRESETS`) in its projection, framing `box`.
+   * @param {string} preset
+   * @param {THREE.Box3} box
+   */
   view(preset, box) {
     this.preset = PRESETS[preset] ? preset : '3d';
     this.fit(box, PRESETS[this.preset].orthographic);
   }
 
-  /** Frame `box` along the current preset's direction (`orthographic`: which camera). */
+  /**
+   * Frame `box` along the current preset's direction (`orthographic`: which camera).
+   * @param {THREE.Box3} box
+   */
   fit(box, orthographic = this.isOrthographic) {
     const direction = PRESETS[this.preset].direction;
     const centre = box.getCenter(new THREE.Vector3());
@@ -179,7 +213,12 @@ export class CameraRig {
     this.use(camera);
   }
 
-  /** Half the height an orthographic view along `direction` needs to show all of `box`. */
+  /**
+   * Half the height an orthographic view along `direction` needs to show all of `box`.
+   * @param {THREE.Box3} box
+   * @param {THREE.Vector3} centre
+   * @param {THREE.Vector3} direction
+   */
   halfExtent(box, centre, direction) {
     const probe = new THREE.Object3D();
     probe.up.set(0, 0, 1);
@@ -201,10 +240,13 @@ export class CameraRig {
     return Math.max(along, across / this.aspect, 1);
   }
 
-  /** Millimetres per CSS pixel at the target (orthographic: everywhere). */
+  /**
+   * Millimetres per CSS pixel at the target (orthographic: everywhere).
+   * @param {number} heightPx
+   */
   mmPerPixel(heightPx) {
     const camera = this.camera;
-    if (camera.isOrthographicCamera) return (camera.top - camera.bottom) / camera.zoom / heightPx / this.soft.s;
+    if (camera instanceof THREE.OrthographicCamera) return (camera.top - camera.bottom) / camera.zoom / heightPx / this.soft.s;
     const distance = camera.position.distanceTo(this.controls.target);
     return (2 * distance * Math.tan(THREE.MathUtils.degToRad(FOV / 2))) / heightPx / this.soft.s;
   }

@@ -1,3 +1,4 @@
+// @ts-check
 // The two layers that keep a big preform smooth while it grows (see skeleton.js): the
 // settled part of every yarn, drawn into an off-screen image, and the live tails, drawn
 // every frame over it. The split advances by drawing only what newly settled into the
@@ -8,11 +9,15 @@ import * as THREE from 'three';
 
 import { StripBatch } from './view-batches.js';
 
+/** @import { PreformView } from './skeleton.js' */
+/** @import { ViewCamera } from './view-camera.js' */
+/** @import { Yarn } from './view-yarn.js' */
+
 const TAIL = 8; // nodes at a yarn's free end kept live
 const LAYERS_FROM = 10000; // nodes and contacts: a smaller preform is drawn whole every frame
 
 export class Layers {
-  /** @param view the PreformView: its yarns, colours, contacts, camera rig and renderer */
+  /** @param {PreformView} view the PreformView: its yarns, colours, contacts, camera rig and renderer */
   constructor(view) {
     this.view = view;
     this.settledScene = new THREE.Scene();
@@ -38,10 +43,12 @@ export class Layers {
     this.imageDirty = true; // the image must be drawn whole again (camera, size, new split)
     this.splitDirty = true; // the split between settled and live must be made from scratch
     this.advanceDirty = false; // the split should advance (long tails, a pause)
-    this.increment = null; // what the last advance added, to draw into the image
+    /** @type {{yarns: number, contacts: number} | null} what the last advance added, to draw into the image */
+    this.increment = null;
     this.liveDirty = true; // the live batch must be rebuilt
     this.liveNodes = 0; // nodes drawn live, all yarns together
     // For diagnostics (bench/page.py): how often the costly steps ran, and when (ms).
+    /** @type {{splits: number, images: number[], increments: number}} */
     this.stats = { splits: 0, images: [], increments: 0 };
     // The settled image is shown by one screen-filling quad, scaled and shifted with the
     // picture while the view follows the preform without moving the camera.
@@ -55,7 +62,11 @@ export class Layers {
     this.imageSoft = view.rig.soft; // the picture's scale and shift when the image was drawn
   }
 
-  /** The drawing buffer's size in pixels. */
+  /**
+   * The drawing buffer's size in pixels.
+   * @param {number} width
+   * @param {number} height
+   */
   setSize(width, height) {
     this.settledImage.setSize(width, height);
   }
@@ -65,7 +76,11 @@ export class Layers {
     return this.layered && this.liveNodes > 2 * TAIL * Math.max(1, this.view.yarns.size);
   }
 
-  /** A yarn's node went in at index `at`, or moved there (`moved`): does it reach the settled part? */
+  /**
+   * A yarn's node went in at index `at`, or moved there (`moved`): does it reach the settled part?
+   * @param {Yarn} yarn
+   * @param {number} at
+   */
   touched(yarn, at, moved = false) {
     if (at < yarn.settled - (moved ? 0 : 1)) this.splitDirty = true;
   }
@@ -84,13 +99,17 @@ export class Layers {
     if (this.liveDirty) this.buildLive();
   }
 
-  /** Draw the frame: the settled image (drawn again or added to first), then the live scene. */
+  /**
+   * Draw the frame: the settled image (drawn again or added to first), then the live scene.
+   * @param {THREE.WebGLRenderer} renderer
+   * @param {ViewCamera} camera
+   */
   draw(renderer, camera) {
     renderer.setRenderTarget(null);
     renderer.clear();
     if (this.layered) {
       if (this.imageDirty) this.drawImage(renderer, camera);
-      else if (this.increment) this.drawIncrement(renderer, camera);
+      else if (this.increment) this.drawIncrement(renderer, camera, this.increment);
       this.placeImage();
       renderer.render(this.imageScene, this.imageCamera);
     }
@@ -159,14 +178,18 @@ export class Layers {
       batch.add(yarn.xyz, yarn.settled - 1, yarn.count, view.shownColour(yarn.id));
     }
     batch.end();
-    const picked = view.yarns.get(view.highlighted);
+    const picked = view.highlighted === null ? undefined : view.yarns.get(view.highlighted);
     this.highlightYarn.begin();
     if (picked) this.highlightYarn.add(picked.xyz, 0, picked.count, view.palette.colour(picked.id));
     this.highlightYarn.end();
     this.liveDirty = false;
   }
 
-  /** Draw the settled layer into its image (the costly part of a big preform). */
+  /**
+   * Draw the settled layer into its image (the costly part of a big preform).
+   * @param {THREE.WebGLRenderer} renderer
+   * @param {ViewCamera} camera
+   */
   drawImage(renderer, camera) {
     this.stats.images.push(Math.round(performance.now()));
     this.imageSoft = this.view.rig.soft;
@@ -185,11 +208,16 @@ export class Layers {
     this.imageQuad.position.set(now.tx - r * then.tx, now.ty - r * then.ty, 0);
   }
 
-  /** Draw what the last advance settled into the image, over what it holds. */
-  drawIncrement(renderer, camera) {
+  /**
+   * Draw what the last advance settled into the image (`increment`), over what it holds.
+   * @param {THREE.WebGLRenderer} renderer
+   * @param {ViewCamera} camera
+   * @param {{yarns: number, contacts: number}} increment
+   */
+  drawIncrement(renderer, camera, increment) {
     const { rig, contactPoints } = this.view;
     this.stats.increments += 1;
-    const { yarns, contacts } = this.increment;
+    const { yarns, contacts } = increment;
     this.settledYarns.drawFrom(yarns);
     contactPoints?.setRanges(contacts);
     rig.applySoft(this.imageSoft); // drawn as the image was

@@ -1,14 +1,24 @@
+// @ts-check
 // The machine in the 3D view: the converged matrix at the fell (outlined and lightly
 // filled), the outline of the guide matrix and its guides, occupied ones in their yarn's
 // colour. Drawn on top of the yarns, the same whether those are settled or live.
 
 import * as THREE from 'three';
 
+/** @import { Machine } from '../types/daemon' */
+
 const FELL_COLOUR = 0xb7791f; // amber: the fell plane
 const MATRIX_COLOUR = 0xa0aec0;
 const EMPTY_GUIDE_COLOUR = 0xb8bec8;
 
-/** A closed rectangle centred on (ox, oy) at height z, half sizes hx × hy. */
+/**
+ * A closed rectangle centred on (ox, oy) at height z, half sizes hx × hy.
+ * @param {number} ox
+ * @param {number} oy
+ * @param {number} hx
+ * @param {number} hy
+ * @param {number} z
+ */
 export function rectangle(ox, oy, hx, hy, z) {
   const points = [
     ox - hx, oy - hy, z,
@@ -44,12 +54,18 @@ export class MachineMarks {
     return [this.matrixOutline.material, this.guides.material];
   }
 
-  /** Redraw for `machine` (or hide: null), the take-up and the occupancy; cheap (rows × cols points). */
+  /**
+   * Redraw for `machine` (or hide: null), the take-up and the occupancy; cheap (rows × cols points).
+   * @param {Machine | null} machine
+   * @param {number} takeup
+   * @param {number[][] | null} occupancy
+   * @param {(yarnId: number) => number} colourOf
+   */
   draw(machine, takeup, occupancy, colourOf) {
     const shown = Boolean(machine);
     for (const object of this.objects) object.visible = shown;
     this.fellPlane.visible = shown && this.fillFell;
-    if (!shown) return;
+    if (!machine) return;
     const { rows, cols, c_mat: cMat, d_mat: dMat, pitch_x: px, pitch_y: py } = machine;
     const [xMax, yMax] = [(cols - 1) * px, (rows - 1) * py];
     const [ox, oy] = [xMax / 2, yMax / 2]; // O, the centre of the matrix

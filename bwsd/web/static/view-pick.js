@@ -1,3 +1,4 @@
+// @ts-check
 // Picking a yarn in the 3D view: the yarn whose drawn polyline passes nearest a clicked
 // pixel, within a few pixels. Every segment is projected with the camera (a few ms for a
 // hundred thousand nodes, and only on a click); a segment above the section cut, when the
@@ -5,10 +6,21 @@
 
 import * as THREE from 'three';
 
+/** @import { ViewCamera } from './view-camera.js' */
+
 export const PICK_PX = 6; // how near a click must fall to a yarn
 const CLICK_PX = 4; // a pointer that moved further was a drag (orbit), not a click
 
-/** Screen position in CSS pixels of each node of `yarn`, and its depth (NDC z), or null. */
+/**
+ * Screen position in CSS pixels of node `i` of `xyz` and its depth (NDC z), in `out`; false
+ * when it lies behind the camera.
+ * @param {THREE.Matrix4} matrix
+ * @param {Float64Array} xyz
+ * @param {number} i
+ * @param {number} width
+ * @param {number} height
+ * @param {number[]} out
+ */
 function project(matrix, xyz, i, width, height, out) {
   const [x, y, z] = [xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]];
   const e = matrix.elements;
@@ -20,7 +32,13 @@ function project(matrix, xyz, i, width, height, out) {
   return true;
 }
 
-/** Distance from (px, py) to segment a-b (2D), and where along it (0..1). */
+/**
+ * Distance from (px, py) to segment a-b (2D), and where along it (0..1).
+ * @param {number} px
+ * @param {number} py
+ * @param {number[]} a
+ * @param {number[]} b
+ */
 function toSegment(px, py, a, b) {
   const [dx, dy] = [b[0] - a[0], b[1] - a[1]];
   const length2 = dx * dx + dy * dy;
@@ -30,12 +48,19 @@ function toSegment(px, py, a, b) {
 
 /**
  * The id of the yarn drawn nearest (px, py) within PICK_PX, or null.
- * @param yarns iterable of {id, xyz, count}
- * @param cutZ nothing above this height is drawn (Infinity: no cut)
+ * @param {Iterable<{id: number, xyz: Float64Array, count: number}>} yarns
+ * @param {ViewCamera} camera
+ * @param {number} width
+ * @param {number} height
+ * @param {number} px
+ * @param {number} py
+ * @param {number} [cutZ] nothing above this height is drawn (Infinity: no cut)
+ * @returns {number | null}
  */
 export function pickYarn(yarns, camera, width, height, px, py, cutZ = Infinity) {
   camera.updateMatrixWorld();
   const matrix = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse);
+  /** @type {number | null} */
   let best = null;
   let bestDistance = PICK_PX;
   let bestDepth = Infinity;
@@ -66,8 +91,11 @@ export function pickYarn(yarns, camera, width, height, px, py, cutZ = Infinity) 
 /**
  * Calls `onClick(x, y)` (CSS pixels in `element`) for a press and release that did not
  * move (an orbit drag is no click).
+ * @param {HTMLElement} element
+ * @param {(x: number, y: number) => void} onClick
  */
 export function listenForClicks(element, onClick) {
+  /** @type {number[] | null} */
   let down = null;
   element.addEventListener('pointerdown', (event) => {
     down = event.button === 0 ? [event.clientX, event.clientY] : null;

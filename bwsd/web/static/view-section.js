@@ -1,3 +1,4 @@
+// @ts-check
 // The cross-section at a height z, drawn as `bwsd slice` draws it: a 2D view with x and y
 // in mm at equal scale (y up, as in the top view), every crossing a circle of the yarn
 // diameter, filled with a dark rim where the yarn is laid (a fixed segment), open where it
@@ -13,6 +14,25 @@ import { bandCorners, fellXY, sliceLimits } from './section.js';
 import { niceStep } from './view-axes.js';
 import { discTexture, mmPointsMaterial } from './view-batches.js';
 
+/** @import { Machine } from '../types/daemon' */
+/** @import { Band, Crossing } from './section.js' */
+
+/**
+ * What the section view draws: the crossings and strips, the machine, the diameter, the
+ * height and the take-up, the colours, and the nominal section's cells and spec (or none).
+ * @typedef {object} SectionShown
+ * @property {Crossing[]} found
+ * @property {Band[]} strips
+ * @property {Machine | null} machine
+ * @property {number} diameter
+ * @property {number} z
+ * @property {number} takeup
+ * @property {(yarnId: number) => number} colour
+ * @property {number[][] | null} cells [row, col] of each cell of the section
+ * @property {string | undefined} spec
+ */
+/** @typedef {(mm: number) => number} ToScreen x or y in mm -> CSS pixels */
+
 const MARGIN = { left: 52, right: 14, top: 30, bottom: 78 }; // CSS px around the plot
 const INK = '#1a202c';
 const GRID = '#dde2e8';
@@ -22,17 +42,25 @@ const MIN_RADIUS_PX = 2.5; // a yarn never drawn smaller (a thin yarn in a wide 
 
 /** The 2D section in its own canvas. */
 export class SectionView {
+  /** @param {HTMLCanvasElement} canvas */
   constructor(canvas) {
     this.canvas = canvas;
-    this.g = canvas.getContext('2d');
-    this.shown = null; // what was last drawn: {z, found, strips, ...}
+    const g = canvas.getContext('2d');
+    const host = canvas.parentElement;
+    if (!g || !host) throw new Error('the section view needs a 2D canvas in the page');
+    this.g = g;
+    this.host = host;
+    /** @type {SectionShown | null} what was last drawn */
+    this.shown = null;
+    /** @type {{sx: ToScreen, sy: ToScreen, scale: number, found: Crossing[]} | null} */
     this.toScreen = null;
-    new ResizeObserver(() => this.redraw()).observe(canvas.parentElement);
+    new ResizeObserver(() => this.redraw()).observe(host);
   }
 
   /**
    * Draw the section: `found` crossings and `strips` (section.js), `colour(yarnId)`, the
    * machine and diameter, `z` and the take-up, and the nominal section's cells (or null).
+   * @param {SectionShown} shown
    */
   draw(shown) {
     this.shown = shown;
@@ -41,7 +69,7 @@ export class SectionView {
 
   redraw() {
     const shown = this.shown;
-    const { clientWidth: width, clientHeight: height } = this.canvas.parentElement;
+    const { clientWidth: width, clientHeight: height } = this.host;
     if (!shown || width === 0 || height === 0) return;
     const ratio = window.devicePixelRatio || 1;
     this.canvas.width = Math.round(width * ratio);
@@ -55,7 +83,9 @@ export class SectionView {
     const scale = side / (2 * half); // px per mm
     const left = MARGIN.left + (width - MARGIN.left - MARGIN.right - side) / 2;
     const top = MARGIN.top + Math.max(0, (height - MARGIN.top - MARGIN.bottom - side) / 3);
+    /** @type {ToScreen} */
     const sx = (x) => left + (x - (cx - half)) * scale;
+    /** @type {ToScreen} */
     const sy = (y) => top + side - (y - (cy - half)) * scale;
     this.toScreen = { sx, sy, scale, found };
     g.save();
@@ -63,8 +93,8 @@ export class SectionView {
     g.rect(left, top, side, side);
     g.clip();
     this.drawGrid(left, top, side, cx, cy, half, sx, sy);
-    this.drawCells(shown, sx, sy, scale);
-    this.drawStrips(strips, shown.colour, sx, sy, scale);
+    this.drawCells(shown, sx, sy);
+    this.drawStrips(strips, shown.colour, sx, sy);
     this.drawCrossings(found, shown.colour, diameter, sx, sy, scale);
     g.restore();
     g.strokeStyle = INK;
@@ -80,6 +110,16 @@ export class SectionView {
     this.drawKey(shown, left, top + side + 44, free);
   }
 
+  /**
+   * @param {number} left
+   * @param {number} top
+   * @param {number} side
+   * @param {number} cx
+   * @param {number} cy
+   * @param {number} half
+   * @param {ToScreen} sx
+   * @param {ToScreen} sy
+   */
   drawGrid(left, top, side, cx, cy, half, sx, sy) {
     const g = this.g;
     const step = niceStep(2 * half);
@@ -97,6 +137,16 @@ export class SectionView {
     g.stroke();
   }
 
+  /**
+   * @param {number} left
+   * @param {number} top
+   * @param {number} side
+   * @param {number} cx
+   * @param {number} cy
+   * @param {number} half
+   * @param {ToScreen} sx
+   * @param {ToScreen} sy
+   */
   drawTicks(left, top, side, cx, cy, half, sx, sy) {
     const g = this.g;
     const step = niceStep(2 * half);
@@ -120,7 +170,13 @@ export class SectionView {
     g.restore();
   }
 
-  /** What the marks mean, under the plot. */
+  /**
+   * What the marks mean, under the plot.
+   * @param {SectionShown} shown
+   * @param {number} left
+   * @param {number} y
+   * @param {number} free the free crossings
+   */
   drawKey({ cells, spec, diameter }, left, y, free) {
     const g = this.g;
     g.font = '11px system-ui, sans-serif';
@@ -133,7 +189,12 @@ export class SectionView {
     lines.forEach((text, i) => g.fillText(text, left, y + 15 * i));
   }
 
-  /** The nominal section: each body cell a tile of c_mat pitch at the fell. */
+  /**
+   * The nominal section: each body cell a tile of c_mat pitch at the fell.
+   * @param {SectionShown} shown
+   * @param {ToScreen} sx
+   * @param {ToScreen} sy
+   */
   drawCells({ cells, machine }, sx, sy) {
     if (!cells || !machine) return;
     const [hx, hy] = [(machine.c_mat * machine.pitch_x) / 2, (machine.c_mat * machine.pitch_y) / 2];
@@ -144,6 +205,12 @@ export class SectionView {
     }
   }
 
+  /**
+   * @param {Band[]} strips
+   * @param {(yarnId: number) => number} colour
+   * @param {ToScreen} sx
+   * @param {ToScreen} sy
+   */
   drawStrips(strips, colour, sx, sy) {
     const g = this.g;
     g.globalAlpha = 0.6;
@@ -158,6 +225,14 @@ export class SectionView {
     g.globalAlpha = 1;
   }
 
+  /**
+   * @param {Crossing[]} found
+   * @param {(yarnId: number) => number} colour
+   * @param {number} diameter
+   * @param {ToScreen} sx
+   * @param {ToScreen} sy
+   * @param {number} scale px per mm
+   */
   drawCrossings(found, colour, diameter, sx, sy, scale) {
     const g = this.g;
     const r = diameter > 0 ? Math.max((diameter / 2) * scale, MIN_RADIUS_PX) : 0;
@@ -192,11 +267,16 @@ export class SectionView {
     }
   }
 
-  /** The yarn whose crossing is under (x, y) CSS pixels of the canvas, or null. */
+  /**
+   * The yarn whose crossing is under (x, y) CSS pixels of the canvas, or null.
+   * @param {number} x
+   * @param {number} y
+   */
   yarnAt(x, y) {
-    if (!this.toScreen) return null;
+    if (!this.toScreen || !this.shown) return null;
     const { sx, sy, scale, found } = this.toScreen;
     const reach = Math.max(((this.shown.diameter / 2) * scale), 4);
+    /** @type {number | null} */
     let best = null;
     let bestDistance = reach;
     for (const c of found) {
@@ -207,7 +287,10 @@ export class SectionView {
   }
 }
 
-/** A number without float noise, at most 3 decimals. */
+/**
+ * A number without float noise, at most 3 decimals.
+ * @param {number} value
+ */
 function num(value) {
   return String(Number(value.toFixed(3)));
 }
@@ -230,7 +313,14 @@ export class SectionMarks {
     }
   }
 
-  /** Show the plane over [x0, x1] x [y0, y1] at `z`, and `found` crossings in `colour`. */
+  /**
+   * Show the plane over [x0, x1] x [y0, y1] at `z`, and `found` crossings in `colour`.
+   * @param {Crossing[]} found
+   * @param {(yarnId: number) => number} colour
+   * @param {number} diameter
+   * @param {number[]} extent [x0, y0, x1, y1]
+   * @param {number} z
+   */
   update(found, colour, diameter, [x0, y0, x1, y1], z) {
     const corners = [x0, y0, z, x1, y0, z, x1, y1, z, x0, y1, z];
     const quad = new THREE.BufferGeometry();
@@ -239,7 +329,9 @@ export class SectionMarks {
     this.outline.geometry = quad;
     this.plane.geometry.dispose();
     this.plane.geometry = quad.clone().setIndex([0, 1, 2, 0, 2, 3]);
-    for (const [points, free] of [[this.fixed, false], [this.free, true]]) {
+    /** @type {[THREE.Points<THREE.BufferGeometry, THREE.PointsMaterial>, boolean][]} */
+    const kinds = [[this.fixed, false], [this.free, true]];
+    for (const [points, free] of kinds) {
       const mine = found.filter((c) => c.free === free);
       const positions = new Float32Array(3 * mine.length);
       const colours = new Float32Array(3 * mine.length);
@@ -258,6 +350,7 @@ export class SectionMarks {
     }
   }
 
+  /** @param {boolean} visible */
   setVisible(visible) {
     for (const object of this.objects) object.visible = visible;
   }

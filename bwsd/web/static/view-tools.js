@@ -1,3 +1,4 @@
+// @ts-check
 // The 3D view's tools beyond drawing the yarns: the section (its height, the plane and
 // crossings in 3D, the cut above it, the 2D view beside), the braided section's zones for
 // colouring, picking a yarn with the mouse, the view's controls in the page and its test
@@ -10,15 +11,19 @@
 import * as THREE from 'three';
 
 import { request } from './api.js';
+import { optionalById } from './dom.js';
 import { bands, crossings, fellXY } from './section.js';
 import { listenForClicks, pickYarn } from './view-pick.js';
 import { SectionMarks, SectionView } from './view-section.js';
 import { sectionFrom } from './view-zones.js';
 
+/** @import { PreformView } from './skeleton.js' */
+/** @import { Band, Crossing } from './section.js' */
+
 const SECTION_EVERY_MS = 250;
-const $ = (id) => document.getElementById(id);
 
 export class ViewTools {
+  /** @param {PreformView} view */
   constructor(view) {
     this.view = view;
     this.shown = false;
@@ -28,23 +33,29 @@ export class ViewTools {
     this.cutPlane = new THREE.Plane(new THREE.Vector3(0, 0, -1), 0); // keeps z <= constant
     this.dirty = true;
     this.lastAt = 0;
+    /** @type {ReturnType<typeof setTimeout> | null} */
     this.timer = null;
+    /** @type {Crossing[]} */
     this.found = [];
+    /** @type {Band[]} */
     this.strips = [];
     this.marks = new SectionMarks();
     for (const object of this.marks.objects) view.layers.liveScene.add(object);
-    const canvas = $('section-view');
-    this.sectionView = canvas ? new SectionView(canvas) : null;
+    const canvas = optionalById('section-view', HTMLCanvasElement);
+    const sectionView = canvas ? new SectionView(canvas) : null;
+    this.sectionView = sectionView;
     this.sectionGiven = false; // setSection was called: no fetching of the program's text
     this.loads = 0;
-    this.programText = null; // {id, text} of the last program read
+    /** @type {{id: number, text: string} | null} the last program read */
+    this.programText = null;
+    /** @type {string | null} */
     this.sectionError = null;
     listenForClicks(view.canvas, (x, y) => this.pickAt(x, y));
-    if (canvas) listenForClicks(canvas, (x, y) => view.onPick?.(this.sectionView.yarnAt(x, y)));
+    if (canvas && sectionView) listenForClicks(canvas, (x, y) => view.onPick?.(sectionView.yarnAt(x, y)));
     this.wire();
     // Not enumerable: `{...window.bwsd}` copies the page's numbers, not the whole view.
     const hooks = window.bwsd ?? (window.bwsd = {});
-    Object.defineProperty(hooks, 'section', { value: (z) => view.section(z), configurable: true });
+    Object.defineProperty(hooks, 'section', { value: (/** @type {number} */ z) => view.section(z), configurable: true });
     Object.defineProperty(hooks, 'view', { value: view, configurable: true });
   }
 
@@ -96,10 +107,11 @@ export class ViewTools {
 
   // ----- the section -----
 
+  /** @param {boolean} shown */
   setShown(shown) {
     this.shown = Boolean(shown);
     this.marks.setVisible(this.shown);
-    const pane = $('section-pane');
+    const pane = optionalById('section-pane');
     if (pane) pane.hidden = !this.shown;
     this.view.resize(); // the 3D view shares its row with the section: its size now, not after layout
     this.view.machineMarks.fillFell = !this.shown;
@@ -110,6 +122,7 @@ export class ViewTools {
     this.view.invalidate();
   }
 
+  /** @param {number | string} z */
   setHeight(z) {
     const value = Number(z);
     if (!Number.isFinite(value)) return;
@@ -120,6 +133,7 @@ export class ViewTools {
     this.syncControls();
   }
 
+  /** @param {boolean} cut */
   setCut(cut) {
     this.cut = Boolean(cut) && this.shown;
     this.applyCut();
@@ -137,6 +151,7 @@ export class ViewTools {
     view.invalidate(true);
   }
 
+  /** @param {number | string} z */
   crossingsAt(z) {
     return crossings(this.view.yarnsInOrder(), Number(z)).map(({ yarn, x, y, free }) => ({ yarn, x, y, free }));
   }
@@ -163,6 +178,7 @@ export class ViewTools {
     const yarns = view.yarnsInOrder();
     this.found = crossings(yarns, this.z);
     this.strips = bands(yarns, this.z, view.diameter);
+    /** @param {number} id */
     const colour = (id) => view.shownColour(id);
     const m = view.machine;
     const extent = m ? [-0.5 * m.pitch_x, -0.5 * m.pitch_y, (m.cols - 0.5) * m.pitch_x, (m.rows - 0.5) * m.pitch_y] : [-50, -50, 50, 50];
@@ -176,12 +192,15 @@ export class ViewTools {
     this.syncRange();
   }
 
-  /** The region the top view frames when the section is cut: the preform below the cut. */
+  /**
+   * The region the top view frames when the section is cut: the preform below the cut.
+   * @param {boolean} fresh recompute the section first if it is out of date
+   */
   focusBox(fresh) {
     const view = this.view;
-    if (!(this.shown && this.cut && view.rig.preset === 'top' && view.machine)) return null;
-    if (fresh && this.dirty) this.compute();
     const m = view.machine;
+    if (!(this.shown && this.cut && view.rig.preset === 'top' && m)) return null;
+    if (fresh && this.dirty) this.compute();
     const [x0, y0] = fellXY(m, 0, 0);
     const [x1, y1] = fellXY(m, m.rows - 1, m.cols - 1);
     const xs = [x0, x1, ...this.found.map((c) => c.x), ...this.strips.flatMap((b) => [b.start[0], b.end[0]])];
@@ -193,7 +212,10 @@ export class ViewTools {
     );
   }
 
-  /** A preset was chosen: the top view shows the section, cut, to read the preform's shape. */
+  /**
+   * A preset was chosen: the top view shows the section, cut, to read the preform's shape.
+   * @param {string} preset
+   */
   presetChosen(preset) {
     if (preset !== 'top') return;
     if (!this.shown) this.setShown(true);
@@ -202,7 +224,10 @@ export class ViewTools {
 
   // ----- zones -----
 
-  /** The braided section from a spec or a program's text (`given`: by the page, not fetched here). */
+  /**
+   * The braided section from a spec or a program's text (`given`: by the page, not fetched here).
+   * @param {string | null} text
+   */
   setSection(text, given = false) {
     if (given) this.sectionGiven = true;
     const { section, error } = sectionFrom(text);
@@ -213,18 +238,24 @@ export class ViewTools {
     this.view.onColoursChanged?.();
   }
 
-  /** Read the loaded program's text from the daemon, for its "# section:" line. */
+  /**
+   * Read the loaded program's text from the daemon, for its "# section:" line.
+   * @param {number} load the load it is for (a later one makes it moot)
+   */
   async fetchSection(load) {
     try {
       const state = await request('api/v1/state');
+      /** @type {number | null | undefined} */
       const id = state.ok ? state.body?.program_id : null;
       if (id === null || id === undefined) return;
-      if (this.programText?.id !== id) {
+      let program = this.programText;
+      if (program?.id !== id) {
         const answer = await request(`api/v1/programs/${id}`);
         if (!answer.ok || typeof answer.body?.text !== 'string') return;
-        this.programText = { id, text: answer.body.text };
+        program = { id, text: answer.body.text };
+        this.programText = program;
       }
-      if (load === this.loads && !this.sectionGiven) this.setSection(this.programText.text);
+      if (load === this.loads && !this.sectionGiven) this.setSection(program.text);
     } catch {
       // the daemon cannot be reached: no zones until the next load
     }
@@ -232,10 +263,14 @@ export class ViewTools {
 
   // ----- picking -----
 
+  /**
+   * @param {number} x
+   * @param {number} y
+   */
   pickAt(x, y) {
     const view = this.view;
     const cutZ = this.cut ? this.z : Infinity;
-    const id = pickYarn(view.yarnsInOrder(), view.camera, view.width, view.height, x, y, cutZ);
+    const id = pickYarn(view.yarnsInOrder(), view.camera, view.width ?? NaN, view.height ?? NaN, x, y, cutZ);
     view.onPick?.(id);
   }
 
@@ -244,15 +279,25 @@ export class ViewTools {
   wire() {
     const view = this.view;
     for (const button of document.querySelectorAll('[data-view]')) {
-      button.addEventListener('click', () => view.setView(button.dataset.view));
+      if (button instanceof HTMLElement) button.addEventListener('click', () => view.setView(button.dataset.view));
     }
-    $('ortho')?.addEventListener('change', (event) => view.setOrthographic(event.target.checked));
-    $('show-axes')?.addEventListener('change', (event) => view.setAxesVisible(event.target.checked));
-    $('show-section')?.addEventListener('change', (event) => view.setSectionShown(event.target.checked));
-    $('section-cut')?.addEventListener('change', (event) => view.setSectionCut(event.target.checked));
+    /**
+     * Call `onChange(checked)` when the check box `#id` (if the page has it) changes.
+     * @param {string} id
+     * @param {(checked: boolean) => void} onChange
+     */
+    const toggle = (id, onChange) => {
+      const box = optionalById(id, HTMLInputElement);
+      box?.addEventListener('change', () => onChange(box.checked));
+    };
+    toggle('ortho', (on) => view.setOrthographic(on));
+    toggle('show-axes', (on) => view.setAxesVisible(on));
+    toggle('show-section', (on) => view.setSectionShown(on));
+    toggle('section-cut', (on) => view.setSectionCut(on));
     for (const id of ['section-z', 'section-z-value']) {
-      $(id)?.addEventListener('input', (event) => {
-        if (event.target.value !== '') view.setSectionHeight(event.target.value);
+      const input = optionalById(id, HTMLInputElement);
+      input?.addEventListener('input', () => {
+        if (input.value !== '') view.setSectionHeight(input.value);
       });
     }
   }
@@ -261,10 +306,15 @@ export class ViewTools {
   syncControls() {
     const view = this.view;
     for (const button of document.querySelectorAll('[data-view]')) {
-      button.setAttribute('aria-pressed', String(button.dataset.view === view.rig.preset));
+      if (button instanceof HTMLElement) button.setAttribute('aria-pressed', String(button.dataset.view === view.rig.preset));
     }
+    /**
+     * @param {string} id
+     * @param {'checked' | 'disabled'} property
+     * @param {boolean} value
+     */
     const set = (id, property, value) => {
-      const element = $(id);
+      const element = optionalById(id, HTMLInputElement);
       if (element && element[property] !== value) element[property] = value;
     };
     set('ortho', 'checked', view.rig.isOrthographic);
@@ -276,8 +326,8 @@ export class ViewTools {
   }
 
   syncRange() {
-    const slider = $('section-z');
-    const field = $('section-z-value');
+    const slider = optionalById('section-z', HTMLInputElement);
+    const field = optionalById('section-z-value', HTMLInputElement);
     const top = String(Number(this.top().toFixed(1)));
     if (slider && slider.max !== top) slider.max = top;
     const value = String(this.z);

@@ -1,7 +1,14 @@
+// @ts-check
 // One yarn of the 3D view: its node ids and exact coordinates, in a buffer grown by doubling.
+
+/** @import { XYZ, YarnData } from '../types/daemon' */
 
 /** One yarn: its node ids and coordinates (exactly as the daemon sent them). */
 export class Yarn {
+  /**
+   * @param {YarnData} data
+   * @param {string} family
+   */
   constructor(data, family) {
     this.id = data.id;
     this.kind = data.kind;
@@ -16,12 +23,20 @@ export class Yarn {
     this.settled = 1; // nodes [0, settled) are in the settled layer, [settled - 1, count) live
   }
 
-  /** Where node `nodeId` is along the yarn (searched from the free end, where changes are). */
+  /**
+   * Where node `nodeId` is along the yarn (searched from the free end, where changes are).
+   * @param {number} nodeId
+   */
   indexOf(nodeId) {
     return this.nodeIds.lastIndexOf(nodeId);
   }
 
-  /** Insert node `nodeId` at `xyz` after node `after` (-1: at the start); its index, -1 if unknown. */
+  /**
+   * Insert node `nodeId` at `xyz` after node `after` (-1: at the start); its index, -1 if unknown.
+   * @param {number} after
+   * @param {number} nodeId
+   * @param {XYZ} xyz
+   */
   insertAfter(after, nodeId, xyz) {
     let at = 0;
     if (after !== -1) {
@@ -41,7 +56,11 @@ export class Yarn {
     return at;
   }
 
-  /** Node `nodeId` moved to `xyz`; its index, -1 if the yarn has no such node. */
+  /**
+   * Node `nodeId` moved to `xyz`; its index, -1 if the yarn has no such node.
+   * @param {number} nodeId
+   * @param {XYZ} xyz
+   */
   move(nodeId, xyz) {
     const i = this.indexOf(nodeId);
     if (i >= 0) this.xyz.set(xyz, 3 * i);

@@ -1,3 +1,4 @@
+// @ts-check
 // Braided sections and their zones, as bwsd/program/sections.py defines them (pure), and
 // the program's "# section: SPEC" line, as bwsd/export/mixing.py reads it.
 //
@@ -8,17 +9,39 @@
 // "bottom-junction", "bottom-right". The body starts at row 1, column 1 unless "@ROW,COL"
 // follows. Zones are kept in this order.
 
+import { messageOf } from './message.js';
+
+/**
+ * A braided section: its shape and written form, its zones in order (each a set of "row,col"
+ * cells), and the zones a program of it must fill.
+ * @typedef {{shape: string, spec: string, zones: [string, Set<string>][], required: string[]}} Section
+ */
+/** @typedef {[number, number]} Size rows, cols */
+
 const MARGIN = 1;
 const SPEC = /^(rect|L|T|I):(\d{1,4})x(\d{1,4})(?::(\d{1,4})x(\d{1,4}))?(?:@(\d{1,4}),(\d{1,4}))?$/;
 // A whole-line comment "# section: SPEC [remark]".
 const HEADER = /^[ \t]*#[ \t]*section[ \t]*:[ \t]*(\S*)/i;
 
-/** A section: {shape, spec, zones: [[name, Set of "row,col"]...], required: [names]}. */
+/**
+ * A section: {shape, spec, zones: [[name, Set of "row,col"]...], required: [names]}.
+ * @param {string} shape
+ * @param {string} spec
+ * @param {Record<string, Set<string>>} zones
+ * @param {string[]} required
+ * @returns {Section}
+ */
 function section(shape, spec, zones, required) {
   return { shape, spec, zones: Object.entries(zones), required };
 }
 
+/**
+ * @param {number} row
+ * @param {number} col
+ * @param {Size} size
+ */
 function block(row, col, [rows, cols]) {
+  /** @type {Set<string>} */
   const cells = new Set();
   for (let r = 0; r < rows; r += 1) {
     for (let c = 0; c < cols; c += 1) cells.add(`${row + r},${col + c}`);
@@ -26,10 +49,23 @@ function block(row, col, [rows, cols]) {
   return cells;
 }
 
+/**
+ * @param {Set<string>} a
+ * @param {Set<string>} b
+ */
 function minus(a, b) {
   return new Set([...a].filter((cell) => !b.has(cell)));
 }
 
+/**
+ * @param {string} prefix
+ * @param {number} row
+ * @param {number} col
+ * @param {Size} flange
+ * @param {number} wing
+ * @param {number} webCols
+ * @returns {Record<string, Set<string>>}
+ */
 function flangeZones(prefix, row, col, [rows], wing, webCols) {
   return {
     [`${prefix}left`]: block(row, col, [rows, wing]),
@@ -38,6 +74,12 @@ function flangeZones(prefix, row, col, [rows], wing, webCols) {
   };
 }
 
+/**
+ * @param {string} shape
+ * @param {Size} flange
+ * @param {Size} web
+ * @param {[number, number]} at
+ */
 function shaped(shape, flange, web, [r0, c0]) {
   const [[fr, fc], [wr, wc]] = [flange, web];
   const spec = `${shape}:${fr}x${fc}:${wr}x${wc}`;
@@ -62,11 +104,16 @@ function shaped(shape, flange, web, [r0, c0]) {
   return section('I', spec, zones, ['top-left', 'top-right', 'web', 'bottom-left', 'bottom-right']);
 }
 
-/** A section from its written form (`rect:3x4`, `L:2x6:4x2`, `T:2x8:4x2@1,1`); throws if malformed. */
+/**
+ * A section from its written form (`rect:3x4`, `L:2x6:4x2`, `T:2x8:4x2@1,1`); throws if malformed.
+ * @param {string} text
+ */
 export function parseSection(text) {
   const m = SPEC.exec(text.trim());
   if (!m || (m[1] === 'rect') !== (m[4] === undefined)) throw new Error(`not a section: ${JSON.stringify(text.slice(0, 40))}`);
+  /** @type {[number, number]} */
   const at = m[6] !== undefined ? [Number(m[6]), Number(m[7])] : [MARGIN, MARGIN];
+  /** @type {Size} */
   const first = [Number(m[2]), Number(m[3])];
   for (const [r, c] of [first, m[4] === undefined ? [1, 1] : [Number(m[4]), Number(m[5])]]) {
     if (r < 1 || c < 1) throw new Error('blocks must be at least 1 x 1');
@@ -75,7 +122,10 @@ export function parseSection(text) {
   return shaped(m[1], first, [Number(m[4]), Number(m[5])], at);
 }
 
-/** The SPEC of a program's "# section: SPEC" line, or null without one (two lines: the first). */
+/**
+ * The SPEC of a program's "# section: SPEC" line, or null without one (two lines: the first).
+ * @param {string} programText
+ */
 export function sectionLine(programText) {
   for (const line of programText.split('\n')) {
     const m = HEADER.exec(line);
@@ -87,6 +137,8 @@ export function sectionLine(programText) {
 /**
  * The section named by `text`: a written section, or a program whose "# section:" line
  * names one; null for none (or for a malformed one: then `error` says why).
+ * @param {string | null | undefined} text
+ * @returns {{section: Section | null, error: string | null}}
  */
 export function sectionFrom(text) {
   if (text === null || text === undefined) return { section: null, error: null };
@@ -95,11 +147,16 @@ export function sectionFrom(text) {
   try {
     return { section: parseSection(spec), error: null };
   } catch (error) {
-    return { section: null, error: error.message };
+    return { section: null, error: messageOf(error) };
   }
 }
 
-/** The zone of cell (row, col) in `sec`, or null (an edge or empty cell). */
+/**
+ * The zone of cell (row, col) in `sec`, or null (an edge or empty cell).
+ * @param {Section} sec
+ * @param {number} row
+ * @param {number} col
+ */
 export function zoneOf(sec, row, col) {
   const key = `${row},${col}`;
   for (const [name, cells] of sec.zones) {
