@@ -112,7 +112,7 @@ async def measure(
     """
     base = str(served.http.base_url).rstrip("/")
     token = served.http.headers["Authorization"].split()[1]
-    ws_url = base.replace("http", "ws", 1) + f"/events?token={token}"
+    ws_url = base.replace("http", "ws", 1) + "/events"
     out: dict[str, list[float]] = {"state": [], "idle": []}
     spawn = multiprocessing.get_context("spawn")
     results, listening = spawn.Queue(), spawn.Event()
@@ -123,7 +123,7 @@ async def measure(
         quiet = asyncio.Event()
         asyncio.get_running_loop().call_later(idle_s, quiet.set)
         await load.run(rate, out["idle"], quiet)
-        reader = spawn.Process(target=read_events, args=(ws_url, results, listening))
+        reader = spawn.Process(target=read_events, args=(ws_url, token, results, listening))
         reader.start()
         while not listening.is_set():
             await asyncio.sleep(0.01)
@@ -142,12 +142,13 @@ async def measure(
     return out
 
 
-def read_events(ws_url: str, results: Any, listening: Any) -> None:
+def read_events(ws_url: str, token: str, results: Any, listening: Any) -> None:
     """The event reader's process: lags and the instructions' timings, until the run ends."""
     out: dict[str, list[float]] = {k: [] for k in ("lag", "overhead", "predict", "bus", "commit")}
 
     async def main() -> None:
-        async with websockets.connect(ws_url, max_size=None) as ws:
+        headers = {"Authorization": f"Bearer {token}"}  # never in the URL: logs print URLs
+        async with websockets.connect(ws_url, additional_headers=headers, max_size=None) as ws:
             await ws.recv()  # hello
             since = time.time()
             listening.set()

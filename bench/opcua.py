@@ -69,9 +69,10 @@ def read_changes(
             self.into.append(now - data.monitored_item.Value.SourceTimestamp.timestamp())
 
     async def main() -> None:
-        ws_url = urls["api"].replace("http", "ws", 1) + f"/api/v1/events?token={token}"
+        ws_url = urls["api"].replace("http", "ws", 1) + "/api/v1/events"
+        headers = {"Authorization": f"Bearer {token}"}  # never in the URL: logs print URLs
         async with (
-            websockets.connect(ws_url, max_size=None) as ws,
+            websockets.connect(ws_url, additional_headers=headers, max_size=None) as ws,
             session(urls["opcua"], cert, "bench", token) as client,
         ):
             await ws.recv()  # hello

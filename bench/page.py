@@ -51,9 +51,10 @@ from tests.web.conftest import ARGS, CHROMIUM  # noqa: E402
 class Listener(threading.Thread):
     """A plain WebSocket client: when each instruction event arrives, and its size."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, token: str) -> None:
         super().__init__(daemon=True)
         self.url = url
+        self.headers = {"Authorization": f"Bearer {token}"}  # never in the URL: logs print URLs
         self.lag: list[float] = []  # ms, receipt - event time
         self.sizes: list[int] = []  # bytes of each instruction event
         self.connected = threading.Event()
@@ -69,7 +70,9 @@ class Listener(threading.Thread):
             self.finished.set()
 
     async def _listen(self) -> None:
-        async with websockets.connect(self.url, max_size=None) as ws:
+        async with websockets.connect(
+            self.url, additional_headers=self.headers, max_size=None
+        ) as ws:
             self.connected.set()
             async for text in ws:
                 now = time.time()
@@ -133,7 +136,7 @@ def tenths(values: list[Any]) -> tuple[list[Any], list[Any]]:
 def run(served: Served, program: str, shot: Path | None) -> dict[str, Any]:
     base = str(served.http.base_url).rstrip("/").removesuffix("/api/v1")
     token = served.http.headers["Authorization"].split()[1]
-    listener = Listener(base.replace("http", "ws", 1) + f"/api/v1/events?token={token}")
+    listener = Listener(base.replace("http", "ws", 1) + "/api/v1/events", token)
     listener.start()
     listener.connected.wait(30)
     with sync_playwright() as p:

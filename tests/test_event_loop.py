@@ -84,10 +84,10 @@ def client(base: str, token: str, program: str, errors: Any, warm: Any) -> None:
     """
     headers = {"Authorization": f"Bearer {token}"}
     try:
-        events = base.replace("http", "ws") + f"/api/v1/events?token={token}"
+        events = base.replace("http", "ws") + "/api/v1/events"
         with (
             httpx.Client(base_url=base + "/api/v1", headers=headers, timeout=60) as http,
-            connect(events) as ws,
+            connect(events, additional_headers=headers) as ws,
         ):
             http.post("/programs", json={"name": "b.bws", "text": program}).raise_for_status()
             http.post("/commands/reset", json={}).raise_for_status()

@@ -36,10 +36,11 @@ def test_garbage_on_the_plc_port_and_refused_logins_are_summarised(rig):
                 sock.settimeout(0.2)
                 with contextlib.suppress(TimeoutError):
                     sock.recv(64)
-        ws = urls["api"].replace("http://", "ws://") + "/api/v1/events?token=" + "x" * 43
+        ws = urls["api"].replace("http://", "ws://") + "/api/v1/events"
+        wrong = {"Authorization": "Bearer " + "x" * 43}
         for _ in range(20):
             with contextlib.suppress(InvalidStatus):
-                connect(ws, open_timeout=5).close()
+                connect(ws, additional_headers=wrong, open_timeout=5).close()
         time.sleep(scaled(0.5))  # the refusals' lines are written
         state_now = served.state()  # the daemon is fine
         assert state_now["name"] == "Stopped"

@@ -6,39 +6,37 @@ fan-out share that loop), e.g. with ``server(app, host, port).serve()``.
 
 from __future__ import annotations
 
-import asyncio
-import json
 import logging
 import re
 from collections.abc import AsyncIterator, Callable, Iterable
-from contextlib import AbstractAsyncContextManager, asynccontextmanager, suppress
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from pathlib import Path
 from typing import Any
 
 import uvicorn
-from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
-from fastapi.responses import JSONResponse, Response
+from fastapi import Depends, FastAPI, Request
+from fastapi.responses import Response
 
 from bwsd import __version__
 from bwsd.controller.facade import Controller
 from bwsd.gate import Gate
 
-from . import control, data, problems, web
-from .auth import LOGINS, Auth, TokenStore, refused_token, require
+from . import control, data, problems, stream, web
+from .auth import Auth, TokenStore, refused_token, require
 from .context import Context
-from .doors import DEFAULT_DOORS, BodyDeadline, Doors, TokenFirst, server_config
-from .events import QUEUE_SIZE, EventHub, Subscriber
-from .hosts import HostCheck, default_hosts, origin_allowed
+from .doors import DEFAULT_DOORS, BodyDeadline, Crowding, Doors, TokenFirst, server_config
+from .events import QUEUE_SIZE, EventHub
+from .hosts import HostCheck, default_hosts
 from .metrics import CONTENT_TYPE, Metrics, RequestTimer
 from .models import MAX_BODY_BYTES, Error, Health
-from .problems import ApiError, error_body
 from .view import RelaxedView, SkeletonView
 
 PREFIX = "/api/v1"
 DESCRIPTION = """Control and state of a braiding-weaving machine (see docs/api.md).
 
 Reads need a viewer token unless the daemon's config opens them; every change needs an
-operator token. Send it as `Authorization: Bearer TOKEN` (`?token=TOKEN` on the WebSocket).
+operator token. Send it as `Authorization: Bearer TOKEN`; on the event WebSocket, as its first
+message (subprotocol `bwsd.auth`), or as the handshake's header.
 """
 
 
@@ -87,10 +85,11 @@ def create_app(
     app.add_middleware(problems.BodyLimit, limit=MAX_BODY_BYTES)
     app.add_middleware(TokenFirst, routes=app.router.routes)
     app.add_middleware(RequestTimer, metrics=metrics)
+    app.add_middleware(Crowding)  # a connection over the client's limit: said, then closed
     app.add_middleware(HostCheck, hosts=app.state.hosts)  # outermost: another name, no answer
     control.router.install(app, PREFIX, ["machine"], MAX_BODY_BYTES)
     data.router.install(app, PREFIX, ["records"], MAX_BODY_BYTES)
-    app.add_api_websocket_route(f"{PREFIX}/events", _events(ctx))
+    app.add_api_websocket_route(f"{PREFIX}/events", stream.route(ctx, doors.body_timeout))
     app.add_api_route(
         "/healthz",
         healthz,
@@ -181,7 +180,13 @@ async def healthz(request: Request, response: Response) -> Health:
     problems = ctx.controller.health()
     if problems:
         response.status_code = 503
-    return Health(ok=not problems, open_reads=auth.open_reads, problems=problems)
+    return Health(
+        ok=not problems,
+        open_reads=auth.open_reads,
+        problems=problems,
+        boot=ctx.boot,
+        started=ctx.started,
+    )
 
 
 def _metrics(metrics: Metrics) -> Callable[[], Any]:
@@ -190,114 +195,3 @@ def _metrics(metrics: Metrics) -> Callable[[], Any]:
         return Response(metrics.render(), media_type=CONTENT_TYPE)
 
     return get_metrics
-
-
-# ----- the event WebSocket -----
-def _events(ctx: Context) -> Callable[[WebSocket], Any]:
-    async def events(websocket: WebSocket) -> None:
-        """Every controller event as JSON; first a hello with the current state."""
-        token = websocket.query_params.get("token") or _bearer(websocket)
-        auth: Auth = websocket.app.state.auth
-        try:
-            _check_origin(websocket)
-            auth.authorize(token, "viewer")
-        except ApiError as exc:
-            await _deny(websocket, exc)
-            return
-        await websocket.accept()
-        sub = ctx.hub.subscribe()
-        try:
-            await websocket.send_text(json.dumps(_hello(ctx)))
-            await _serve(websocket, sub, lambda: auth.authorize(token, "viewer"))
-        finally:
-            ctx.hub.unsubscribe(sub)
-
-    return events
-
-
-def _check_origin(websocket: WebSocket) -> None:
-    """A browser's handshake must come from a page of one of the daemon's own names
-    (``[api] hosts``) or an origin the config lists (``[api] origins``): never from the Host
-    the request itself gives, which a rebinding page chooses. Clients that send no
-    ``Origin`` are not browsers."""
-    origin = websocket.headers.get("origin")
-    if origin is None:
-        return
-    state = websocket.app.state
-    if not origin_allowed(origin, state.hosts, state.origins):
-        raise ApiError(403, f"origin {origin[:100]!r} is not allowed ([api] hosts, origins)")
-
-
-def _bearer(websocket: WebSocket) -> str | None:
-    scheme, _, token = websocket.headers.get("authorization", "").partition(" ")
-    return token.strip() if scheme.lower() == "bearer" else None
-
-
-async def _deny(websocket: WebSocket, exc: ApiError) -> None:
-    """Refuse the handshake with the HTTP status and JSON body (or close 1008 where unsupported)."""
-    client = websocket.client.host if websocket.client else "an unknown client"
-    LOGINS.note("refused an event stream to %s: %s", client, exc.detail)
-    if "websocket.http.response" in websocket.scope.get("extensions", {}):
-        body = error_body(str(exc.detail), **exc.extra)
-        await websocket.send_denial_response(
-            JSONResponse(body, status_code=exc.status_code, headers=exc.headers)
-        )
-    else:
-        await websocket.close(code=1008, reason=str(exc.detail))
-
-
-def _hello(ctx: Context) -> dict[str, Any]:
-    st = ctx.controller.status()
-    return {
-        "event": "hello",
-        "state": int(st.state),
-        "name": st.state.label,
-        "program_id": st.program_id,
-        "index": st.index,
-    }
-
-
-async def _serve(websocket: WebSocket, sub: Subscriber, still: Callable[[], object]) -> None:
-    """Send the queue while reading (and ignoring) what the client says, until it leaves, or
-    until its token no longer allows it (``still`` raises: removed, or its role changed)."""
-    tasks = {
-        asyncio.create_task(_pump(websocket, sub)),
-        asyncio.create_task(_drain(websocket)),
-        asyncio.create_task(_recheck(websocket, still)),
-    }
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for task in tasks:
-            task.cancel()
-        for task in tasks:
-            with suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError, OSError):
-                await task
-
-
-RECHECK = 0.5  # s between checks of an open event stream's token
-
-
-async def _recheck(websocket: WebSocket, still: Callable[[], object]) -> None:
-    """Close the stream (1008, policy) within RECHECK of its token's removal or demotion."""
-    while True:
-        await asyncio.sleep(RECHECK)
-        try:
-            still()
-        except ApiError as exc:
-            LOGINS.note("closed an event stream: %s", exc.detail)
-            await websocket.close(code=1008, reason=str(exc.detail)[:120])
-            return
-
-
-async def _pump(websocket: WebSocket, sub: Subscriber) -> None:
-    while True:
-        for text in await sub.next():
-            await websocket.send_text(text)
-
-
-async def _drain(websocket: WebSocket) -> None:
-    while True:
-        message = await websocket.receive()
-        if message["type"] == "websocket.disconnect":
-            return

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+import uuid
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -26,6 +28,9 @@ class Context:
     hub: EventHub
     relaxed: RelaxedView
     last_fault: str | None = None
+    # Which start of the daemon this is: a client that sees another knows it restarted.
+    boot: str = field(default_factory=lambda: uuid.uuid4().hex)
+    started: float = field(default_factory=time.time)
 
     # ----- the controller's events -----
     def install(self) -> None:

@@ -5,7 +5,8 @@
   route's dependencies run; without this, idle unauthenticated uploads held memory.
 - ``BodyDeadline``: a body must arrive whole within ``[api] body_timeout`` seconds (408).
 - ``guarded_protocol``: the HTTP protocol uvicorn would pick, with a limit of connections
-  per client address and in all, and the same deadline for a request's head.
+  per client address and in all, and the same deadline for a request's head; ``Crowding``
+  tells a connection over its client's limit why it is closed.
 - ``Doors``: those limits and TLS, from ``[api]``; ``server_config`` makes uvicorn's config.
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import ssl
 from collections.abc import Iterable
@@ -168,33 +170,59 @@ SLOW = Summary(log, "slow clients")
 
 
 # ----- connections -----
+CROWDED = "bwsd.crowded"  # in a connection's ASGI state: it is over its client's limit
+OVERFLOW = 8  # connections over the limit one address may hold at once to be told why
+TRY_LATER = 1013  # the WebSocket close code of a connection over the limit
+
+
+@dataclass(frozen=True)
+class Crowded:
+    """A connection over its client's limit: how many its address holds, this one included."""
+
+    open: int
+    limit: int
+
+    @property
+    def message(self) -> str:
+        return f"try again later: {self.open} connections from this address (limit {self.limit})"
+
+
 def guarded_protocol(doors: Doors) -> type[asyncio.Protocol]:
     """uvicorn's HTTP protocol with the connection limits and the head deadline of ``doors``.
 
-    A connection over a limit is closed at once, before a byte is read. WebSocket
+    A connection over the per-client limit is told why by its first answer (``Crowding``)
+    and closed, if its address holds fewer than ``OVERFLOW`` such connections; beyond that,
+    and over the limit in all, it is closed at once, before a byte is read. WebSocket
     connections count too (uvicorn keeps them in the same set once upgraded).
     """
     base: Any = AutoHTTPProtocol
 
     class Guarded(base):  # type: ignore[misc]
+        app_state: dict[str, Any]  # uvicorn's: what each request's ASGI scope gets as "state"
+
         def connection_made(self, transport: asyncio.Transport) -> None:
             super().connection_made(transport)
             client = self.client[0] if self.client else None
             total = len(self.connections)
-            same = sum(1 for c in self.connections if _host(c) == client)
-            if total > doors.max_connections or same > doors.max_connections_per_client:
+            mine = [c for c in self.connections if _host(c) == client]
+            if total > doors.max_connections or len(mine) > doors.max_connections_per_client:
                 CROWD.note(
                     "refused a connection from %s: %d open from it, %d in all "
                     "(limits %d and %d: [api] max_connections_per_client, "
                     "max_connections)",
                     client,
-                    same - 1,
+                    len(mine) - 1,
                     total - 1,
                     doors.max_connections_per_client,
                     doors.max_connections,
                 )
-                transport.abort()
-                return
+                told = sum(1 for c in mine if CROWDED in getattr(c, "app_state", {}))
+                if total > doors.max_connections or told >= OVERFLOW:
+                    transport.abort()
+                    return
+                # Its own copy of the state its requests carry: they are answered "try later".
+                crowded = Crowded(len(mine), doors.max_connections_per_client)
+                self.app_state = {**self.app_state, CROWDED: crowded}
             self._head_timer = self.loop.call_later(doors.body_timeout, self._head_late)
 
         def connection_lost(self, exc: Exception | None) -> None:
@@ -215,6 +243,34 @@ def guarded_protocol(doors: Doors) -> type[asyncio.Protocol]:
                 self.transport.close()
 
     return Guarded
+
+
+class Crowding:
+    """ASGI middleware: the request of a connection over its client's limit is answered 503
+    (``Retry-After``), a WebSocket is accepted and closed at once with 1013 (try again
+    later); the reason names the connections and the limit, a WebSocket's also comes first
+    as a ``refused`` event. Either way the connection then closes."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        crowded = scope.get("state", {}).get(CROWDED) if scope["type"] != "lifespan" else None
+        if not isinstance(crowded, Crowded):
+            await self.app(scope, receive, send)
+            return
+        detail = {"open": crowded.open, "limit": crowded.limit}
+        if scope["type"] == "http":
+            headers = {"Retry-After": "5", "Connection": "close"}
+            body = error_body(crowded.message, **detail)
+            await JSONResponse(body, status_code=503, headers=headers)(scope, receive, send)
+            return
+        await receive()  # websocket.connect
+        offered = scope.get("subprotocols") or [None]
+        await send({"type": "websocket.accept", "subprotocol": offered[0]})
+        event = {"event": "refused", "code": TRY_LATER, "error": crowded.message, **detail}
+        await send({"type": "websocket.send", "text": json.dumps(event)})
+        await send({"type": "websocket.close", "code": TRY_LATER, "reason": crowded.message})
 
 
 CROWD = Summary(log, "refused connections")

@@ -238,6 +238,8 @@ class Health(BaseModel):
     problems: dict[str, str] = Field(
         default_factory=dict, description="what is down, by part: a task, the recovery, the journal"
     )
+    boot: str = Field(description="this start of the daemon: another value, it restarted")
+    started: float = Field(description="when this start began (Unix time)")
 
 
 Responses = dict[int | str, dict[str, Any]]

@@ -169,7 +169,8 @@ def test_refused_logins_are_one_info_line_not_an_error_each(live, caplog):
     caplog.set_level(logging.INFO)
     for _ in range(5):
         with pytest.raises(InvalidStatus):
-            connect(live.ws + "?token=" + "x" * 43, open_timeout=5).close()
+            wrong = {"Authorization": "Bearer " + "x" * 43}
+            connect(live.ws, additional_headers=wrong, open_timeout=5).close()
         live.client().post("/commands/start", json={})
     time.sleep(0.2)
     errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
@@ -224,8 +225,7 @@ def test_the_api_serves_tls_with_the_configured_certificate(tls):
 def test_a_websocket_outlives_the_head_deadline(guarded):
     """The head deadline closed every WebSocket once it ran out: the request that upgraded
     the connection never began an HTTP cycle, so the timer took it for a silent client."""
-    url = f"{guarded.ws}?token={guarded.tokens['viewer']}"
-    with connect(url, open_timeout=5) as ws:
+    with connect(guarded.ws, additional_headers=guarded.headers("viewer"), open_timeout=5) as ws:
         time.sleep(3 * DOORS.body_timeout)
         ws.ping().wait(5)  # answered: the connection is still open
         operator = guarded.client("operator")

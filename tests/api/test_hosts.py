@@ -26,8 +26,9 @@ def handshake(live: Live, host: str, origin: str | None = None) -> bytes:
     port = int(live.base.rsplit(":", 1)[1])
     token = live.tokens["viewer"]
     lines = [
-        f"GET /api/v1/events?token={token} HTTP/1.1",
+        "GET /api/v1/events HTTP/1.1",
         f"Host: {host}",
+        f"Authorization: Bearer {token}",
         "Upgrade: websocket",
         "Connection: Upgrade",
         "Sec-WebSocket-Version: 13",
@@ -68,7 +69,7 @@ def test_an_origin_must_be_one_of_our_names_not_the_hosts_it_gives(served: Live)
 
 def test_a_removed_token_closes_its_event_stream(live: Live):
     name = "viewer-token"
-    with connect(f"{live.ws}?token={live.tokens['viewer']}", open_timeout=WAIT) as ws:
+    with connect(live.ws, additional_headers=live.headers("viewer"), open_timeout=WAIT) as ws:
         assert json.loads(ws.recv(timeout=WAIT))["event"] == "hello"
         from bwsd.tokens import TokenStore
 
@@ -80,7 +81,7 @@ def test_a_removed_token_closes_its_event_stream(live: Live):
         assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
         assert time.monotonic() - removed < 5
     with pytest.raises(InvalidStatus):
-        connect(f"{live.ws}?token={live.tokens['viewer']}", open_timeout=WAIT)
+        connect(live.ws, additional_headers=live.headers("viewer"), open_timeout=WAIT)
 
 
 def test_the_names_served_and_what_an_origin_must_say():

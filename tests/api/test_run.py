@@ -45,7 +45,7 @@ def _metric(text: str, name: str) -> float:
 
 def test_upload_reset_start_runs_to_complete_with_every_event(live: Live):
     operator, viewer = live.client("operator"), live.client("viewer")
-    with connect(f"{live.ws}?token={live.tokens['viewer']}", open_timeout=WAIT) as ws:
+    with connect(live.ws, additional_headers=live.headers("viewer"), open_timeout=WAIT) as ws:
         assert json.loads(ws.recv(timeout=WAIT))["event"] == "hello"
         loaded = operator.post("/programs", json={"name": "braid.bws", "text": BRAID})
         assert loaded.status_code == 201, loaded.text

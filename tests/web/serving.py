@@ -4,6 +4,7 @@ API clients, the loom's control channel."""
 from __future__ import annotations
 
 import asyncio
+import socket
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -27,10 +28,25 @@ def example(stem: str) -> tuple[str, dict[str, object]]:
     return text, machine
 
 
-def serve(tmp: Path, machine: dict[str, object], text: str) -> tuple[Served, Mock, str]:
+def free_port() -> int:
+    """A loopback port free now: for a daemon that must come back on the same address."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def serve(
+    tmp: Path,
+    machine: dict[str, object],
+    text: str,
+    port: int = 0,
+    simulator: dict[str, Any] | None = None,
+) -> tuple[Served, Mock, str]:
     """The mock loom set up for ``text`` and `bwsd serve` on it (Modbus), with an operator's
-    token: the daemon, the loom and the token; the caller stops both."""
-    mock = start_mock(tmp, {}, machine=machine, program=text)
+    token: the daemon, the loom and the token; the caller stops both. ``port``: the API's
+    (0: any free one); ``simulator``: more of the mock loom's settings."""
+    mock = start_mock(tmp, simulator or {}, machine=machine, program=text)
     config = tmp / "bwsd.toml"
     config.write_text(
         toml(
@@ -38,7 +54,7 @@ def serve(tmp: Path, machine: dict[str, object], text: str) -> tuple[Served, Moc
                 "machine": machine,
                 "fieldbus": {"backend": "modbus", **BUS},
                 "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                "api": {"port": 0},
+                "api": {"port": port},
                 "plc": {"port": 0},
             }
         )
@@ -67,3 +83,11 @@ def loom_control(mock: Mock, message: dict[str, Any]) -> None:
             asyncio.run, request("127.0.0.1", mock.ports["control"], message)
         ).result(timeout=WAIT)
     assert answer["ok"], answer
+
+
+def restart(served: Served, token: str) -> Served:
+    """Stop ``served`` (SIGTERM) and start `bwsd serve` again on the same config and state
+    folder (and so on the same port, when the config names one)."""
+    served.stop()
+    folder = served.log.parent
+    return Served(folder / "bwsd.toml", folder / "state", token)
