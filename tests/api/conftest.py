@@ -64,9 +64,12 @@ class Live:
 
 
 class _Thread(threading.Thread):
-    def __init__(self, mock: Mock, folder: Path, open_reads: bool, doors: Doors) -> None:
+    def __init__(
+        self, mock: Mock, folder: Path, open_reads: bool, doors: Doors, options: dict[str, Any]
+    ) -> None:
         super().__init__(daemon=True, name="live-api")
         self.mock, self.folder, self.open_reads, self.doors = mock, folder, open_reads, doors
+        self.options = options
         self.ready = threading.Event()
         self.live: Live | None = None
         self.error: BaseException | None = None
@@ -98,7 +101,7 @@ class _Thread(threading.Thread):
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as the daemon's listener
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-        self.server = server(app, doors=self.doors, log_level="warning")
+        self.server = server(app, doors=self.doors, **{"log_level": "warning", **self.options})
         serving = asyncio.create_task(self.server.serve(sockets=[sock]))
         async with asyncio.timeout(WAIT):
             while not self.server.started:
@@ -125,12 +128,17 @@ class _Thread(threading.Thread):
 
 
 def start_live(
-    mock: Mock, folder: Path, open_reads: bool = False, doors: Doors = DEFAULT_DOORS
+    mock: Mock,
+    folder: Path,
+    open_reads: bool = False,
+    doors: Doors = DEFAULT_DOORS,
+    **options: Any,
 ) -> Iterator[Live]:
-    """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given)."""
+    """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given);
+    ``options`` go to uvicorn's config (``timeout_keep_alive=...``)."""
     folder = folder / ("open" if open_reads else "closed")
     folder.mkdir()
-    thread = _Thread(mock, folder, open_reads, doors)
+    thread = _Thread(mock, folder, open_reads, doors, options)
     thread.start()
     if not thread.ready.wait(WAIT):
         raise RuntimeError("the API did not start")

@@ -85,9 +85,14 @@ def loom_control(mock: Mock, message: dict[str, Any]) -> None:
     assert answer["ok"], answer
 
 
-def restart(served: Served, token: str) -> Served:
-    """Stop ``served`` (SIGTERM) and start `bwsd serve` again on the same config and state
-    folder (and so on the same port, when the config names one)."""
-    served.stop()
+def again(served: Served, token: str) -> Served:
+    """`bwsd serve` again (``served`` stopped) on its config and state folder, and so on the
+    same port when the config names one."""
     folder = served.log.parent
     return Served(folder / "bwsd.toml", folder / "state", token)
+
+
+def restart(served: Served, token: str) -> Served:
+    """Stop ``served`` (SIGTERM) and start it again."""
+    served.stop()
+    return again(served, token)

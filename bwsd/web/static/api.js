@@ -166,20 +166,39 @@ export function errorText(answer) {
 
 // ----- the event stream -----
 
+// The token goes in the stream's first message, never in its URL: the browser prints a
+// failed socket's URL on its console, and servers and proxies log URLs (docs/api.md).
+const SUBPROTOCOL = 'bwsd.auth';
+const POLICY = 1008; // the daemon refused the token (unknown, removed, or too low a role)
+const TRY_LATER = 1013; // too many connections from this address: the daemon said how many
 const FIRST_RETRY_MS = 500;
 const LAST_RETRY_MS = 5000;
+const CROWDED_FIRST_MS = 1000;
+const CROWDED_LAST_MS = 30000;
 
 /**
- * The daemon's event WebSocket, reconnected with a backoff (0.5 s doubling to 5 s).
+ * Why the event stream is down, as far as the daemon said: it closed it over too many
+ * connections from this address (`crowded`: the limit, and the connections counted), it
+ * refused the token (`denied`, with its reason), or nothing was said (`lost`: no daemon,
+ * or the connection dropped).
+ * @typedef {{kind: 'lost'}
+ *   | {kind: 'crowded', limit: number | null, open: number | null, reason: string}
+ *   | {kind: 'denied', reason: string, wasUp: boolean}} LinkDown
+ */
+
+/**
+ * The daemon's event WebSocket, reconnected with a backoff: 0.5 s doubling to 5 s, or 1 s
+ * doubling to 30 s while the daemon refuses it for too many connections.
  *
- * `onEvent(message)` gets every parsed event; `onLink(live)` is told when the link goes
- * up or down. `start()` connects (again, e.g. with a new token), `stop()` hangs up for good.
+ * `onEvent(message)` gets every parsed event (the `auth` answer too); `onLink(live, why)`
+ * is told when the link goes up (once the daemon accepted the token) or down, and why.
+ * `start()` connects (again, e.g. with a new token), `stop()` hangs up for good.
  */
 export class EventLink {
   /**
    * @param {object} callbacks
    * @param {(event: DaemonEvent) => void} callbacks.onEvent
-   * @param {(live: boolean) => void} callbacks.onLink
+   * @param {(live: boolean, why: LinkDown | null) => void} callbacks.onLink
    */
   constructor({ onEvent, onLink }) {
     this.onEvent = onEvent;
@@ -187,6 +206,9 @@ export class EventLink {
     /** @type {WebSocket | null} */
     this.socket = null;
     this.retryMs = FIRST_RETRY_MS;
+    this.crowdedMs = CROWDED_FIRST_MS;
+    /** @type {number | null} when the next attempt starts (ms since the epoch), while down */
+    this.retryAt = null;
     /** @type {ReturnType<typeof setTimeout> | undefined} */
     this.timer = undefined;
     this.wanted = false;
@@ -197,8 +219,7 @@ export class EventLink {
     const url = new URL('api/v1/events', location.href);
     url.protocol = location.protocol === 'https:' ? 'wss:' : 'ws:';
     url.hash = '';
-    const token = getToken();
-    if (token) url.searchParams.set('token', token);
+    url.search = '';
     return url.href;
   }
 
@@ -206,6 +227,7 @@ export class EventLink {
     this.stop();
     this.wanted = true;
     this.retryMs = FIRST_RETRY_MS;
+    this.crowdedMs = CROWDED_FIRST_MS;
     this.connect();
   }
 
@@ -213,22 +235,23 @@ export class EventLink {
     this.wanted = false;
     clearTimeout(this.timer);
     this.timer = undefined;
+    this.retryAt = null;
     if (this.socket) {
       const socket = this.socket;
       this.socket = null;
       socket.onopen = socket.onmessage = socket.onclose = socket.onerror = null;
       socket.close();
     }
-    this.onLink(false);
+    this.onLink(false, null);
   }
 
   connect() {
-    const socket = new WebSocket(EventLink.url());
+    const socket = new WebSocket(EventLink.url(), SUBPROTOCOL);
     this.socket = socket;
-    socket.onopen = () => {
-      this.retryMs = FIRST_RETRY_MS;
-      this.onLink(true);
-    };
+    /** @type {{limit?: unknown, open?: unknown} | null} the daemon's `refused` event, if it sent one */
+    let refused = null;
+    let up = false;
+    socket.onopen = () => socket.send(JSON.stringify({ type: 'auth', token: getToken() }));
     socket.onmessage = (message) => {
       let event;
       try {
@@ -236,16 +259,54 @@ export class EventLink {
       } catch {
         return; // not an event of ours
       }
+      if (event.event === 'refused') {
+        refused = event;
+        return;
+      }
+      if (event.event === 'auth' && !up) {
+        up = true; // the daemon took the token: the events follow
+        this.retryMs = FIRST_RETRY_MS;
+        this.crowdedMs = CROWDED_FIRST_MS;
+        this.retryAt = null;
+        this.onLink(true, null);
+      }
       this.onEvent(event);
     };
     socket.onerror = () => {}; // the close that follows says it all
-    socket.onclose = () => {
+    socket.onclose = (close) => {
       if (this.socket !== socket) return;
       this.socket = null;
-      this.onLink(false);
+      const why = downWhy(close, refused, up);
+      let delay;
+      if (why.kind === 'crowded') {
+        // Many tabs retrying at once: spread them, so that they do not come back together.
+        delay = this.crowdedMs * (0.8 + 0.4 * Math.random());
+        this.crowdedMs = Math.min(this.crowdedMs * 2, CROWDED_LAST_MS);
+      } else {
+        delay = this.retryMs;
+        this.retryMs = Math.min(this.retryMs * 2, LAST_RETRY_MS);
+      }
+      this.retryAt = this.wanted ? Date.now() + delay : null;
+      this.onLink(false, why);
       if (!this.wanted) return;
-      this.timer = setTimeout(() => this.connect(), this.retryMs);
-      this.retryMs = Math.min(this.retryMs * 2, LAST_RETRY_MS);
+      this.timer = setTimeout(() => this.connect(), delay);
     };
   }
+}
+
+/**
+ * Why a stream closed, from its close code (and the `refused` event before it).
+ * @param {CloseEvent} close
+ * @param {{limit?: unknown, open?: unknown} | null} refused
+ * @param {boolean} wasUp the daemon had accepted the token
+ * @returns {LinkDown}
+ */
+function downWhy(close, refused, wasUp) {
+  if (close.code === TRY_LATER) {
+    const limit = typeof refused?.limit === 'number' ? refused.limit : null;
+    const open = typeof refused?.open === 'number' ? refused.open : null;
+    return { kind: 'crowded', limit, open, reason: close.reason };
+  }
+  if (close.code === POLICY) return { kind: 'denied', reason: close.reason, wasUp };
+  return { kind: 'lost' };
 }

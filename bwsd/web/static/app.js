@@ -5,7 +5,10 @@
 // The page shows what the daemon says and offers only what it would accept: a command's
 // button is enabled only when `/state`'s `allowed` has it, the token's role may command
 // (`/whoami`, asked at log in) and the daemon answers. While the daemon does not answer,
-// the last picture stays, greyed, with the time it was last heard from.
+// the last picture stays, greyed, with the time it was last heard from, or with what the
+// daemon said when it refused the event stream (too many connections, the token).
+// What changes without the page asking (a restart, the program it restored, a recovery,
+// the token's role) is said in a banner with its cause until the operator dismisses it.
 //
 // Data flow. The page fetches the state and the whole skeleton once, then follows the
 // daemon's event stream. Each instruction event carries a skeleton delta; deltas are
@@ -23,18 +26,20 @@ import { dismissConfirm } from './confirm.js';
 import { Connection } from './connection.js';
 import { describeNext } from './describe.js';
 import { byId as $, optionalById } from './dom.js';
+import { clock } from './eta.js';
 import { MatrixGrid } from './grid.js';
 import { HistoryPanel } from './history.js';
 import { JobPanel } from './job.js';
 import { say } from './message.js';
+import { Notices } from './notices.js';
 import { ProgramPanel } from './program.js';
 import { Selection } from './selection.js';
 import { Session } from './session.js';
 import { PreformView } from './skeleton.js';
 import { StatusPanel } from './status.js';
 
-/** @import { CommandAnswer, DaemonEvent, InstructionEvent, Next, Skeleton, State } from '../types/daemon' */
-/** @import { Answer } from './api.js' */
+/** @import { AuthEvent, CommandAnswer, DaemonEvent, HelloEvent, InstructionEvent, Next, Skeleton, State } from '../types/daemon' */
+/** @import { Answer, LinkDown } from './api.js' */
 
 const { Palette, css } = colours;
 const COLOUR_KEY = 'bwsd.colourBy';
@@ -65,6 +70,7 @@ const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspendin
  * @property {number[]} drawn
  * @property {{ms: number, nodes: number}[]} work
  * @property {() => ReturnType<PreformView['dump']>} dump
+ * @property {() => ReturnType<Notices['shown']>} notices
  */
 /** @type {Hooks} */
 const hooks = {
@@ -83,6 +89,7 @@ const hooks = {
   drawn: [], // ms between consecutive drawings of the 3D view while updates flow
   work: [], // per frame that applied instructions: {ms: applying and drawing, nodes: shown}
   dump: () => view.dump(), // every yarn shown: [{id, node_ids, nodes}], as the skeleton JSON
+  notices: () => notices.shown(), // the notes of the banner: [{cause, text}]
 };
 window.bwsd = hooks;
 
@@ -178,6 +185,7 @@ const programs = new ProgramPanel({
 });
 const link = new EventLink({ onEvent, onLink });
 const session = new Session({ onLogIn: logIn, onLogOut: logOut });
+const notices = new Notices();
 // The view's colours changed on their own (a section line's zones arrived, a pause
 // refreshed them): what shares the palette follows.
 view.onColoursChanged = () => {
@@ -439,6 +447,9 @@ setInterval(() => {
 
 /** @param {State} state */
 function showState(state) {
+  if (restartedFrom) sayRestored(restartedFrom, state);
+  else if (live.state) noteRecovery(live.state, state);
+  restartedFrom = null;
   const sameProgram = live.state && live.state.program_id === state.program_id;
   if (!sameProgram || state.index >= live.eventIndex || !RUNNING_STATES.has(state.name)) {
     // The state is the truth as of its answer; events only run ahead of it while running.
@@ -537,15 +548,17 @@ function drawStatus() {
   const state = live.state;
   const up = online();
   hooks.online = up === true;
-  status.draw(state, up, connection.lastSeen);
+  status.draw(state, up, connection.lastSeen, connection.why, link.retryAt);
   hooks.state = state?.name ?? null;
   if (state) {
     const hasProgram = state.program_id !== null && state.program_id !== undefined;
     $('program-label').textContent = hasProgram ? `${state.program_name ?? 'unnamed'} (#${state.program_id})` : 'none loaded';
     $('program-label').title = $('program-label').textContent;
     job.draw(state, currentIndex(), currentNext(), up !== false);
+    record.setProgress(hasProgram ? state.program_id ?? null : null, currentIndex(), state.count);
   } else {
     $('program-label').textContent = '—';
+    record.setProgress(null, 0, 0);
   }
   drawButtons();
 }
@@ -616,8 +629,12 @@ function onEvent(event) {
   heard();
   switch (event.event) {
     case 'hello':
+      noteBoot(/** @type {HelloEvent} */ (event)); // its `event` says what it is
       refetch(); // (re)connected: fetch it all
       refreshHistory();
+      break;
+    case 'auth':
+      noteRole(/** @type {AuthEvent} */ (event));
       break;
     case 'program':
     case 'dropped':
@@ -649,9 +666,18 @@ function onEvent(event) {
   }
 }
 
-/** @param {boolean} up */
-function onLink(up) {
-  connection.setLink(up);
+/**
+ * @param {boolean} up
+ * @param {LinkDown | null} why
+ */
+function onLink(up, why) {
+  if (!up && connection.linkUp && live.state) programBefore = programOf(live.state);
+  if (why?.kind === 'denied' && link.wanted && connection.why?.kind !== 'denied') {
+    notices.add('token', why.wasUp
+      ? `The daemon closed this page's event stream: ${why.reason}. The token was revoked, or no longer allows reading.`
+      : `The daemon refused this page's event stream: ${why.reason}.`);
+  }
+  connection.setLink(up, why);
   if (up || !link.wanted) return;
   // Lost (or never had) the stream: show what the daemon says now; this also finds a
   // token that was revoked meanwhile (a 401 logs out and stops the retries).
@@ -661,6 +687,104 @@ function onLink(up) {
 
 function refreshHistory() {
   if (link.wanted) record.refreshSoon();
+}
+
+// ----- what changed that the page did not ask for -----
+
+/**
+ * A program as the page names it, and the state it was in.
+ * @typedef {{id: number | null, name: string | null, state: string}} ProgramShown
+ */
+
+/** @type {string | null} the start of the daemon the last hello came from */
+let daemonBoot = null;
+/** @type {ProgramShown | null} the program shown when the event stream last went down */
+let programBefore = null;
+/** @type {ProgramShown | null} set by a hello from another start: said with the next state */
+let restartedFrom = null;
+
+/**
+ * @param {State} state
+ * @returns {ProgramShown}
+ */
+function programOf(state) {
+  return { id: state.program_id ?? null, name: state.program_name ?? null, state: state.name };
+}
+
+/** @param {ProgramShown} program */
+function named(program) {
+  return `${program.name ?? 'unnamed'} (#${program.id})`;
+}
+
+/**
+ * A hello from another start of the daemon than the last: it restarted.
+ * @param {HelloEvent} hello
+ */
+function noteBoot(hello) {
+  if (daemonBoot !== null && hello.boot !== daemonBoot) {
+    notices.add('restart', `The daemon restarted: this start began at ${clock(new Date(hello.started * 1000))}.`);
+    restartedFrom = programBefore ?? (live.state ? programOf(live.state) : { id: null, name: null, state: '—' });
+  }
+  daemonBoot = hello.boot;
+}
+
+/**
+ * After a restart, the first state: the program the daemon restored, or lost, and why.
+ * @param {ProgramShown} before
+ * @param {State} state
+ */
+function sayRestored(before, state) {
+  const now = programOf(state);
+  const says = state.recovering || state.reason || '';
+  const why = `the daemon is ${state.name} (it was ${before.state})${says ? `: ${says}` : ''}`;
+  if (before.id !== null && now.id === before.id) {
+    const how = state.recovering ? 'is being restored' : 'was restored';
+    notices.add('program', `Program ${named(now)} ${how}; ${why}.`);
+  } else if (before.id !== null && now.id === null) {
+    notices.add('program', `Program ${named(before)} was not restored: no program is loaded; ${why}.`);
+  } else if (now.id !== null) {
+    const not = before.id !== null ? `, not ${named(before)}` : '';
+    notices.add('program', `The daemon came back with program ${named(now)}${not}; ${why}.`);
+  }
+}
+
+/**
+ * A recovery that began, ended or failed between two states of the same start.
+ * @param {State} old
+ * @param {State} state
+ */
+function noteRecovery(old, state) {
+  const was = old.recovering ?? '';
+  const now = state.recovering ?? '';
+  if (was === now) return;
+  if (now) {
+    notices.add('recovery', `After the restart: ${now}.`);
+    return;
+  }
+  const before = programOf(old);
+  if (state.program_id === before.id && state.count > 0) {
+    const at = `instruction ${state.index} of ${state.count}`;
+    notices.add('recovery', `After the restart: program ${named(before)} is restored, at ${at}.`);
+    refetch(); // its skeleton could not be read while it was rebuilt
+  } else if (before.id !== null && (state.program_id ?? null) === null) {
+    notices.add('recovery', `After the restart: program ${named(before)} was not restored: ${state.reason ?? ''}.`);
+  }
+}
+
+/**
+ * The daemon's answer to the stream's auth message, and its word when the token's role
+ * changed: the page then offers what the new role may do.
+ * @param {AuthEvent} event
+ */
+function noteRole(event) {
+  const before = session.role;
+  if (before !== null && event.role !== before) {
+    notices.add('role', `The role of the token ${event.name} changed from ${before} to ${event.role}: the page offers what ${event.role === 'admin' ? 'an' : 'a'} ${event.role} may do.`);
+  }
+  session.name = event.name;
+  session.role = event.role;
+  drawSession();
+  drawButtons();
 }
 
 // ----- session -----
@@ -768,6 +892,7 @@ function logOut() {
   session.end();
   link.stop();
   clearPicture();
+  notices.dismiss();
   say('logged out', '');
   start();
 }

@@ -1,9 +1,12 @@
 // @ts-check
 // Whether the daemon answers: up while the event stream is open and the last request was
 // answered; `lastSeen` is when it last answered or sent an event (what the page shows as
-// "disconnected since").
+// "disconnected since"); `why` is what the daemon said when it closed the stream (too many
+// connections, a refused token), or that it said nothing.
 
 import { messageOf, say, saysUnreachable } from './message.js';
+
+/** @import { LinkDown } from './api.js' */
 
 export class Connection {
   /** @param {() => void} onChange called when the page must draw the link again */
@@ -13,6 +16,8 @@ export class Connection {
     this.answering = true; // the last request was answered
     /** @type {Date | null} */
     this.lastSeen = null;
+    /** @type {LinkDown | null} why the stream is down (null while it is up, or not asked for) */
+    this.why = null;
   }
 
   /** The daemon answered or sent an event. */
@@ -37,12 +42,14 @@ export class Connection {
   }
 
   /**
-   * The event stream opened or closed.
+   * The event stream opened or closed (and why, as far as the daemon said).
    * @param {boolean} up
+   * @param {LinkDown | null} why
    */
-  setLink(up) {
+  setLink(up, why) {
     this.linkUp = up;
-    if (up) this.heard();
+    this.why = up ? null : why;
+    if (up || (why && why.kind !== 'lost')) this.heard(); // a refusal is an answer
     this.onChange();
   }
 
@@ -60,5 +67,6 @@ export class Connection {
   reset() {
     this.answering = true;
     this.lastSeen = null;
+    this.why = null;
   }
 }

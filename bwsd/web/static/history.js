@@ -1,7 +1,9 @@
 // @ts-check
 // The history: the programs loaded (newest first, paged back with `before`) and the journal's
 // PackML states and events (oldest first, paged on with `after_state` / `after_event`),
-// brought up to date whenever the daemon announces a change.
+// brought up to date whenever the daemon announces a change. The loaded program's progress
+// is the one the Job panel shows (`/state`'s index and count, set with `setProgress`): the
+// journal writes `done` late, and two numbers for one run would disagree.
 
 import { request } from './api.js';
 import { byId as $ } from './dom.js';
@@ -82,6 +84,8 @@ export class HistoryPanel {
   afterEvent;
   /** @type {LogEntry[]} */
   entries;
+  /** @type {{programId: number | null, index: number, count: number}} the loaded program's progress */
+  progress = { programId: null, index: 0, count: 0 };
 
   /**
    * @param {object} callbacks
@@ -200,15 +204,43 @@ export class HistoryPanel {
     $('history-older').hidden = !this.olderLeft;
   }
 
+  /**
+   * The loaded program (null: none) and how far it is, as `/state` says: its record shows
+   * these, whatever the journal's `done` says yet.
+   * @param {number | null} programId
+   * @param {number} index
+   * @param {number} count
+   */
+  setProgress(programId, index, count) {
+    const was = this.progress;
+    if (was.programId === programId && was.index === index && was.count === count) return;
+    this.progress = { programId, index, count };
+    for (const id of new Set([was.programId, programId])) {
+      const record = this.programs.find((r) => r.id === id);
+      const shown = $('history-programs').querySelector(`li[data-program="${id}"] .record-progress`);
+      if (record && shown) shown.textContent = this.done(record);
+    }
+  }
+
+  /**
+   * "27 / 50": the instructions done of a program's count; the loaded program's from `/state`.
+   * @param {ProgramRecord} record
+   */
+  done(record) {
+    const now = this.progress;
+    if (record.id === now.programId) return `${now.index} / ${now.count}`;
+    return `${record.done} / ${record.instructions}`;
+  }
+
   /** @param {ProgramRecord} record */
   programItem(record) {
     const item = element('li', 'record');
     item.dataset.program = String(record.id);
     const head = element('span', 'record-head', `#${record.id} ${record.name}`);
     const outcome = element('span', `outcome outcome-${record.outcome}`, record.outcome);
-    const facts = element('span', 'minor',
-      ` ${record.done} / ${record.instructions} · loaded ${when(record.created)}` +
-        (record.finished ? ` · ended ${when(record.finished)}` : ''));
+    const facts = element('span', 'minor');
+    facts.append(' ', element('span', 'record-progress', this.done(record)),
+      ` · loaded ${when(record.created)}` + (record.finished ? ` · ended ${when(record.finished)}` : ''));
     const edit = element('button', 'link-button', 'edit');
     edit.type = 'button';
     edit.title = 'put this program\'s text in the Program panel, to check or load it again';

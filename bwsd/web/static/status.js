@@ -1,7 +1,8 @@
 // @ts-check
 // What the daemon says about the machine, drawn as it says it: the header's state badge and
-// e-stop badge, the e-stop and disconnected banners, and the Status panel (machine health,
-// bus, why it stopped, recovery, unit mode).
+// e-stop badge, the e-stop and link banners (the daemon unreachable, too many connections,
+// the token refused), and the Status panel (machine health, bus, why it stopped, recovery,
+// unit mode).
 //
 // Nothing here is guessed: the state, the stop cause and its reason, the bus and the
 // machine's faults come from `/state` (and the fault names from `/machine`). While the
@@ -13,6 +14,7 @@ import { byId as $ } from './dom.js';
 import { clock } from './eta.js';
 
 /** @import { Bus, Cell, State } from '../types/daemon' */
+/** @import { LinkDown } from './api.js' */
 
 /**
  * Why the machine stopped, as an operator says it (`stop_cause` in docs/api.md).
@@ -86,6 +88,74 @@ export function stopText(state) {
   return cause || reason;
 }
 
+/** Commands that leave any state towards an end: never the way on after an e-stop. */
+const EXITS = new Set(['stop', 'abort']);
+
+/**
+ * "Clear", "Reset and Abort", "Stop, Abort and Clear": command names as the buttons say
+ * them, in a sentence.
+ * @param {string[]} names
+ */
+export function commandList(names) {
+  const said = names.map((name) => name.charAt(0).toUpperCase() + name.slice(1));
+  if (said.length <= 1) return said.join('');
+  return `${said.slice(0, -1).join(', ')} and ${said[said.length - 1]}`;
+}
+
+/**
+ * The e-stop banner: '' when it is not shown. While the e-stop is pressed, it says what the
+ * daemon accepts meanwhile; once released, while the machine still stands for it (the stop
+ * cause is the e-stop), the next step. Both come from `allowed`, never from a guess of
+ * PackML's table: in Aborted the way on is Clear, in Stopped Reset.
+ * @param {State} state
+ * @param {Bus} bus
+ */
+export function estopText(state, bus) {
+  const allowed = state.allowed ?? [];
+  if (bus.estop === true) {
+    const meanwhile = allowed.length ? `only ${commandList(allowed)}` : 'no command';
+    return `Emergency stop pressed. Nothing moves. Release it on the machine: until then the daemon accepts ${meanwhile}.`;
+  }
+  if (bus.estop !== false || state.stop_cause !== 'estop' || !STANDING.has(state.name)) return '';
+  const onward = allowed.filter((name) => !EXITS.has(name));
+  const next = onward.length ? ` Next: ${commandList(onward)}.` : '';
+  return `The emergency stop stopped the machine (${state.name}); it is released.${next}`;
+}
+
+/**
+ * The link banner's text while the page does not follow the daemon: unreachable, too many
+ * connections from this address, or the token refused.
+ * @param {LinkDown | null} why
+ * @param {Date | null} lastSeen
+ * @param {number | null} retryAt when the page tries again (ms since the epoch)
+ */
+export function linkText(why, lastSeen, retryAt) {
+  const since = lastSeen ? clock(lastSeen) : '';
+  const again = retryAt ? ` It tries again at ${clock(new Date(retryAt))}.` : '';
+  if (why?.kind === 'crowded') {
+    const limit = why.limit === null ? '' : ` (limit ${why.limit})`;
+    return {
+      key: 'crowded',
+      short: 'too many connections',
+      banner: `Too many tabs/connections open to this daemon${limit}: close some. The daemon refused this page's event stream (${why.reason}); the page shows the machine as it was at ${since || 'the start'}, greyed.${again}`,
+    };
+  }
+  if (why?.kind === 'denied') {
+    return {
+      key: 'denied',
+      short: 'no permission',
+      banner: `No permission: the daemon refused this page's event stream (${why.reason}). Log in with a token that may read.`,
+    };
+  }
+  return {
+    key: 'down',
+    short: `disconnected since ${since || 'the start'}`,
+    banner: lastSeen
+      ? `The daemon does not answer: the page shows the machine as it was at ${since}, greyed. It keeps trying.`
+      : 'The daemon does not answer yet. The page keeps trying.',
+  };
+}
+
 export class StatusPanel {
   constructor() {
     /** @type {Record<string, string>} axis -> fault name, from /machine (while axes report faults) */
@@ -96,14 +166,17 @@ export class StatusPanel {
   /**
    * Draw `state` (the last /state answer, or null); `online`: the daemon answers and the
    * event link is up (null: the page does not ask, logged out); `lastSeen`: when the
-   * daemon was last heard from (a Date, or null).
+   * daemon was last heard from (a Date, or null); `why`: why the link is down, and
+   * `retryAt` when the page tries again.
    * @param {State | null} state
    * @param {boolean | null} online
    * @param {Date | null} lastSeen
+   * @param {LinkDown | null} [why]
+   * @param {number | null} [retryAt]
    */
-  draw(state, online, lastSeen) {
+  draw(state, online, lastSeen, why = null, retryAt = null) {
     document.body.dataset.online = String(online !== false);
-    this.drawLink(online, lastSeen);
+    this.drawLink(online, lastSeen, why, retryAt);
     const badge = $('state');
     if (!state) {
       badge.textContent = '—';
@@ -118,7 +191,9 @@ export class StatusPanel {
     const bus = state.bus ?? {};
     const estop = online !== false && bus.estop === true;
     $('estop-badge').hidden = !estop;
-    $('estop-banner').hidden = !estop;
+    const banner = online !== false ? estopText(state, bus) : '';
+    $('estop-banner').hidden = !banner;
+    $('estop-text').textContent = banner;
     const machine = online !== false ? machineHealth(bus, this.faultNames) : { text: 'unknown (no answer)', key: 'unknown' };
     $('machine').textContent = machine.text;
     $('machine').dataset.health = machine.key;
@@ -134,24 +209,28 @@ export class StatusPanel {
   /**
    * @param {boolean | null} online
    * @param {Date | null} lastSeen
+   * @param {LinkDown | null} why
+   * @param {number | null} retryAt
    */
-  drawLink(online, lastSeen) {
+  drawLink(online, lastSeen, why, retryAt) {
     const box = $('link');
+    const banner = $('offline-banner');
     if (online === null) {
       box.textContent = box.dataset.link = 'off'; // logged out: the page does not ask
-      $('offline-banner').hidden = true;
+      banner.hidden = true;
       return;
     }
-    const since = lastSeen ? clock(lastSeen) : 'the start';
-    box.textContent = online ? 'connected' : `disconnected since ${since}`;
-    box.dataset.link = online ? 'live' : 'down';
-    const banner = $('offline-banner');
     banner.hidden = online;
-    if (!online) {
-      banner.textContent = lastSeen
-        ? `The daemon does not answer: the page shows the machine as it was at ${since}, greyed. It keeps trying.`
-        : 'The daemon does not answer yet. The page keeps trying.';
+    if (online) {
+      box.textContent = 'connected';
+      box.dataset.link = 'live';
+      return;
     }
+    const said = linkText(why, lastSeen, retryAt);
+    box.textContent = said.short;
+    box.dataset.link = said.key;
+    banner.dataset.cause = said.key;
+    banner.textContent = said.banner;
   }
 
   /** Nothing known (logged out, or before the first answer). */

@@ -110,14 +110,32 @@ export interface State {
   stop_cause?: string;
   allowed: string[];
   recovering?: string;
+  resumable?: boolean;
   bus?: Bus;
   next?: Next | null;
 }
 
-/** An event of the event stream: `hello`, `program`, `state`, `mode`, `fault`... */
+/** An event of the event stream: `hello`, `auth`, `program`, `state`, `mode`, `fault`... */
 export interface DaemonEvent {
   event: string;
   to?: string; // a state event's new state
+}
+
+/** The first event: the state, and which start of the daemon sends it. */
+export interface HelloEvent extends DaemonEvent {
+  event: 'hello';
+  name: string;
+  program_id?: number | null;
+  index: number;
+  boot: string; // another value than before: the daemon restarted
+  started: number; // when this start began, seconds (Unix time)
+}
+
+/** The answer to the stream's auth message, and again when the token's role changes. */
+export interface AuthEvent extends DaemonEvent {
+  event: 'auth';
+  name: string;
+  role: string;
 }
 
 /** An instruction event: what was done, and the skeleton's change. */
