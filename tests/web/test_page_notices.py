@@ -224,15 +224,17 @@ def test_a_changed_role_and_a_revoked_token_are_said(live: Live, page: Browsing)
 
 # ----- one progress -----
 def test_the_job_and_the_history_give_the_same_progress_mid_run(slow_live: Live, page: Browsing):
+    """The History read the journal at Start, and the journal writes `done` late: it said
+    "running 0 / 1000" while the Job counted the instructions the daemon announced."""
     live = slow_live
     _load(live, LONG)
     _command(live, "reset")
-    _command(live, "start")
     page.open(live, live.tokens["operator"])
     page.ready()
-    page.state("Execute")
-    page.until("() => window.bwsd.done >= 3")
     page.page.locator('#history-programs li[data-program="1"]').wait_for(timeout=MS)
+    _command(live, "start")
+    page.state("Execute")
+    page.until("() => window.bwsd.done >= 5")
     both = page.page.evaluate(
         """() => [document.querySelector('#progress-text').textContent,
                   document.querySelector('#history-programs li[data-program="1"]').textContent,
@@ -242,6 +244,6 @@ def test_the_job_and_the_history_give_the_same_progress_mid_run(slow_live: Live,
     done = re.fullmatch(r"(\d+) / (\d+)", job)
     assert done is not None, job
     index, count = int(done[1]), int(done[2])
-    assert shown == "Execute" and 3 <= index < count == 1000, both  # mid-run
+    assert shown == "Execute" and 0 < index < count == 1000, both  # mid-run
     assert f" {index} / {count} " in history, both
     assert page.errors == []
