@@ -239,8 +239,13 @@ export class EventLink {
     if (this.socket) {
       const socket = this.socket;
       this.socket = null;
-      socket.onopen = socket.onmessage = socket.onclose = socket.onerror = null;
-      socket.close();
+      socket.onmessage = socket.onclose = socket.onerror = null;
+      // Closed while still connecting, the browser warns on its console: close it once open.
+      if (socket.readyState === WebSocket.CONNECTING) socket.onopen = () => socket.close();
+      else {
+        socket.onopen = null;
+        socket.close();
+      }
     }
     this.onLink(false, null);
   }

@@ -134,10 +134,11 @@ export function linkText(why, lastSeen, retryAt) {
   const again = retryAt ? ` It tries again at ${clock(new Date(retryAt))}.` : '';
   if (why?.kind === 'crowded') {
     const limit = why.limit === null ? '' : ` (limit ${why.limit})`;
+    const counted = why.open === null ? why.reason : `${why.open} connections from this address`;
     return {
       key: 'crowded',
       short: 'too many connections',
-      banner: `Too many tabs/connections open to this daemon${limit}: close some. The daemon refused this page's event stream (${why.reason}); the page shows the machine as it was at ${since || 'the start'}, greyed.${again}`,
+      banner: `Too many tabs/connections open to this daemon${limit}: close some. The daemon refused this page's event stream (${counted}); the page shows the machine as it was at ${since || 'the start'}, greyed.${again}`,
     };
   }
   if (why?.kind === 'denied') {
