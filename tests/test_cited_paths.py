@@ -39,6 +39,7 @@ NOT_MODULES = {
     "bwsd.service": "the systemd unit's file name",
     "bwsd.token": "a key of the page's local storage",
     "bwsd.colourBy": "a key of the page's local storage",
+    "bwsd.auth": "the event WebSocket's subprotocol (docs/api.md)",
 }
 
 
