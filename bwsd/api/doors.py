@@ -265,7 +265,8 @@ class Crowding:
             body = error_body(crowded.message, **detail)
             await JSONResponse(body, status_code=503, headers=headers)(scope, receive, send)
             return
-        await receive()  # websocket.connect
+        if (await receive())["type"] != "websocket.connect":
+            return  # gone before its handshake was taken
         offered = scope.get("subprotocols") or [None]
         await send({"type": "websocket.accept", "subprotocol": offered[0]})
         event = {"event": "refused", "code": TRY_LATER, "error": crowded.message, **detail}
