@@ -133,6 +133,18 @@ function fresh() {
   };
 }
 
+/**
+ * A program as the page names it, and the state it was in.
+ * @typedef {{id: number | null, name: string | null, state: string}} ProgramShown
+ */
+
+/** @type {string | null} the start of the daemon the last hello came from */
+let daemonBoot = null;
+/** @type {ProgramShown | null} the program shown when the event stream last went down */
+let programBefore = null;
+/** @type {ProgramShown | null} set by a hello from another start: said with the next state */
+let restartedFrom = null;
+
 // The link to the daemon: up while the event stream is open and the last request was
 // answered; `lastSeen` is when it last answered or sent an event.
 const connection = new Connection(() => {
@@ -690,18 +702,6 @@ function refreshHistory() {
 }
 
 // ----- what changed that the page did not ask for -----
-
-/**
- * A program as the page names it, and the state it was in.
- * @typedef {{id: number | null, name: string | null, state: string}} ProgramShown
- */
-
-/** @type {string | null} the start of the daemon the last hello came from */
-let daemonBoot = null;
-/** @type {ProgramShown | null} the program shown when the event stream last went down */
-let programBefore = null;
-/** @type {ProgramShown | null} set by a hello from another start: said with the next state */
-let restartedFrom = null;
 
 /**
  * @param {State} state
