@@ -20,7 +20,7 @@ from bwsd.api.doors import DEFAULT_DOORS, Doors
 from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
-from tests.fieldbus.conftest import Mock, client_config, mock
+from tests.support.fieldbus import Mock, client_config, mock
 from tests.timing import scaled
 
 __all__ = ["Live", "live", "mock", "open_live", "start_live"]

@@ -20,7 +20,7 @@ from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
 from tests.api.skeletons import apply_delta, yarns_of
-from tests.fieldbus.conftest import client_config
+from tests.support.fieldbus import client_config
 
 RUN_STATES = ["Resetting", "Idle", "Starting", "Execute", "Completing", "Complete"]
 

@@ -33,7 +33,7 @@ from bwsd.journal import Journal
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.support.fieldbus import Mock, client_config, start_mock
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"

@@ -19,7 +19,7 @@ from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.controller.matrix import Rig, complete, resume
-from tests.controller.test_runner import bits, run
+from tests.support.controller import bits, run
 
 SLOW = {"stroke_speed": 10.0, "takeup_speed": 10.0}  # a 10 mm stroke: 1 s out, 1 s back
 SHIFTS = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\n"

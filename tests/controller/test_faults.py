@@ -28,8 +28,8 @@ from bwsd.journal.writer import ROUTINE
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.controller.test_runner import TEXT, bits, controller, run
-from tests.fieldbus.conftest import Mock, start_mock
+from tests.support.controller import TEXT, bits, controller, run
+from tests.support.fieldbus import Mock, start_mock
 
 FILL = [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
 

@@ -12,7 +12,7 @@ from bwsd.fieldbus.axes import axis_by_name, machine_axes
 from bwsd.fieldbus.base import AxisState, MachineState
 from bwsd.program import parse_program
 from bwsd.twin import Twin
-from tests.fieldbus.conftest import MACHINE
+from tests.support.fieldbus import MACHINE
 
 TEXT = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nWEFT x=15 y=-5 z=2 angle=0 length=20\n"
 M = parse_config({"machine": MACHINE}).machine

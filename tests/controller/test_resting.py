@@ -16,8 +16,8 @@ from bwsd.controller.packml import Command, State
 from bwsd.controller.status import StopCause
 from bwsd.journal import Journal
 from tests.controller.matrix import TEXT, Rig, _refuse_writes
-from tests.controller.test_runner import controller, run
-from tests.fieldbus.conftest import MACHINE
+from tests.support.controller import controller, run
+from tests.support.fieldbus import MACHINE
 
 
 def test_a_restart_restores_a_loaded_program_with_its_cause(mock, tmp_path):

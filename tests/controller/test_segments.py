@@ -23,8 +23,8 @@ from bwsd.journal import Journal
 from bwsd.program import parse_program
 from bwsd.twin import Shift, simulate
 from tests.controller.test_faults import after, machine_occupancy, poke
-from tests.controller.test_runner import bits, run
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.support.controller import bits, run
+from tests.support.fieldbus import Mock, client_config, start_mock
 
 MACHINE = {
     "rows": 8,

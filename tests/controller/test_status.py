@@ -21,7 +21,7 @@ from bwsd.fieldbus.base import (
     FieldbusTimeout,
 )
 from bwsd.plc import StopReason
-from tests.fieldbus.conftest import MACHINE
+from tests.support.fieldbus import MACHINE
 
 AXIS = machine_axes(parse_config({"machine": MACHINE}).machine)[5]
 

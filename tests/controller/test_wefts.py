@@ -39,8 +39,8 @@ from bwsd.twin import Twin, Weft, simulate
 from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_faults import after, poke
-from tests.controller.test_runner import bits
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
+from tests.support.controller import bits
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
 
 Point = tuple[int, int, int]
 Ends = tuple[Point, Point]

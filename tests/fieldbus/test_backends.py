@@ -23,7 +23,7 @@ from bwsd.fieldbus.axes import axis_by_name, shift_stroke_um
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_POSITION, FAULT_STALL
 from bwsd.twin import Shift, Twin
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
 
 FILL = [(1, 1), (1, 2), (2, 1), (2, 2)]
 

@@ -24,7 +24,7 @@ from bwsd.fieldbus.cia402 import DRIVE_OBJECTS, Cia402, dictionary
 from bwsd.twin.machine import Machine, Segment
 from simulator_hw.control import request
 from tests.doc_tables import doc_table
-from tests.fieldbus.conftest import MACHINE, Mock, start_mock
+from tests.support.fieldbus import MACHINE, Mock, start_mock
 
 DOC = "fieldbus-canopen.md"
 DRIVES = doc_table(DOC, "axis", "node", "target (0x607A)", after="## Drives")

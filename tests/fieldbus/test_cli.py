@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 

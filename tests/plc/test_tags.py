@@ -32,7 +32,7 @@ from bwsd.plc.registers import (
     REG_UNIT_MODE_CHANGE_REQUEST,
 )
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, client_config
+from tests.support.fieldbus import MACHINE, client_config
 
 # The mock loom's fill: cases at (1, 1), (1, 2), (2, 1), (2, 2); 15 instructions.
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"

@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from tests.fieldbus.conftest import MACHINE, PROGRAM, toml
+from tests.support.fieldbus import MACHINE, PROGRAM, toml
 
 LINE = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} (DEBUG|INFO|WARNING|ERROR) [\w.]+: ")
 

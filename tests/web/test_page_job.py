@@ -23,7 +23,7 @@ from playwright.sync_api import Browser, Page
 from bwsd.api.doors import Doors
 from bwsd.controller import resting
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, loom_control
 

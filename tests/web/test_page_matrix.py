@@ -26,7 +26,7 @@ from bwsd.api.auth import TokenStore
 from bwsd.config import load_config
 from simulator_hw.control import request
 from tests.api.conftest import BRAID, WAIT
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
 

@@ -20,7 +20,7 @@ import pytest
 from bwsd.export.crossings import crossings
 from bwsd.export.skeleton_json import skeleton_from_dict
 from bwsd.program.sections import parse_section
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from typing import Any
 
 import numpy as np
 import pytest
@@ -17,34 +16,12 @@ from bwsd.controller.plan import Limits
 from bwsd.controller.recovery import lines_left
 from bwsd.controller.status import Event, InstructionDone
 from bwsd.errors import ProgramError
-from bwsd.fieldbus import AxisMove, open_bus
-from bwsd.journal import Journal
+from bwsd.fieldbus import AxisMove
 from bwsd.program import parse_program
 from bwsd.twin import replay, simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import client_config
-
-# The mock loom's fill (tests/fieldbus/conftest.py): cases at (1, 1), (1, 2), (2, 1), (2, 2).
-CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
-TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
-
-
-def run(scenario: Any) -> Any:
-    return asyncio.run(asyncio.wait_for(scenario, 120))
-
-
-async def controller(mock, tmp_path, **kw) -> tuple[Controller, Journal, list[dict]]:
-    config = client_config("modbus", mock.ports)
-    bus = open_bus(config)
-    await bus.connect()
-    journal = Journal.open(tmp_path / "journal.db")
-    events: list[dict] = []
-    return Controller(config.machine, bus, journal, publish=events.append, **kw), journal, events
-
-
-def bits(twin) -> list:
-    sk = twin.skeleton()
-    return [(y.node_ids.tobytes(), y.nodes.tobytes()) for y in sk.yarns] + list(sk.contacts)
+from tests.support.controller import TEXT, bits, controller, run
+from tests.support.fieldbus import client_config
 
 
 def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
