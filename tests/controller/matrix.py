@@ -166,8 +166,10 @@ def _refuse_writes(journal: Journal, refused: bool) -> None:
     own connection, the one the daemon writes with: SQLite then refuses every write, as a
     full disk refuses the writes that need room (``query_only``; a limit on its pages would
     still take the records that fit in the room its pages have left)."""
-    with journal._mutex:  # type: ignore[attr-defined]  # fault injection into the real file
-        journal._conn.execute(f"PRAGMA query_only = {int(refused)}")  # type: ignore[attr-defined]
+    with journal._mutex:  # fault injection into the real file
+        conn = journal._conn
+        assert conn is not None  # the journal is open
+        conn.execute(f"PRAGMA query_only = {int(refused)}")
 
 
 def _raise_once(ctl: Controller) -> None:

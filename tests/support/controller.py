@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from bwsd.controller.facade import Controller, Settings
+from bwsd.controller.packml import State, UnitMode
 from bwsd.controller.plan import Limits
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
@@ -42,10 +43,23 @@ async def controller(
     return ctl, journal, events
 
 
-def bits(twin: Twin) -> list[tuple[bytes, bytes] | ContactData]:
-    """The twin's skeleton as bytes: equal only when every node and contact is."""
+def bits(twin: Twin | None) -> list[tuple[bytes, bytes] | ContactData]:
+    """The twin's skeleton as bytes: equal only when every node and contact is. A
+    controller's twin is taken as it is (``ctl.twin``): the test has loaded a program."""
+    assert twin is not None
     sk = twin.skeleton()
     yarns: list[tuple[bytes, bytes] | ContactData] = [
         (y.node_ids.tobytes(), y.nodes.tobytes()) for y in sk.yarns
     ]
     return yarns + list(sk.contacts)
+
+
+def state_now(ctl: Controller) -> State:
+    """The PackML state, read anew. A test reads it again after awaiting a change, and mypy
+    would keep ``ctl.packml.state`` narrowed to what an earlier ``assert ... is`` saw."""
+    return ctl.packml.state
+
+
+def mode_now(ctl: Controller) -> UnitMode:
+    """The unit mode, read anew (as ``state_now``)."""
+    return ctl.packml.mode
