@@ -92,7 +92,7 @@ class _Thread(threading.Thread):
 
     async def _serve(self, controller: Controller, journal: Journal) -> None:
         store = TokenStore.load(self.folder / "tokens.json")
-        tokens = {role: store.add(f"{role}-token", role) for role in ROLES}
+        tokens: dict[str, str] = {role: store.add(f"{role}-token", role) for role in ROLES}
         app = create_app(controller, store, self.open_reads, doors=self.doors)
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as the daemon's listener

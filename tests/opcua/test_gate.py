@@ -19,9 +19,9 @@ from cryptography import x509
 
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.opcua.security import CERT_FILE
-from bwsd.opcua.space import TAGS
+from bwsd.opcua.space import NAMESPACE, TAGS
 from bwsd.opcua.values import requested
-from tests.opcua.conftest import NAMESPACE, TEXT, loom, rig, run, var
+from tests.opcua.conftest import TEXT, loom, rig, run, var
 from tests.opcua.test_server import read
 from tests.support.controller import mode_now
 

@@ -312,7 +312,7 @@ def test_a_session_over_an_unsecured_channel_can_do_nothing(mock, tmp_path):
             client = await unsecured_session(r.server.url, "operator", r.users["operator"])
             try:
                 idx = await client.uaclient.read_attributes(
-                    [ua.NodeId(ua.ObjectIds.Server_NamespaceArray)], ua.AttributeIds.Value
+                    [ua.NodeId(ua.Int32(ua.ObjectIds.Server_NamespaceArray))], ua.AttributeIds.Value
                 )
                 pytest.fail(f"read over an unsecured channel: {idx}")
             except ua.uaerrors.BadUserAccessDenied:
