@@ -116,12 +116,12 @@ def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_pa
             running = await plc.command(START)
             assert running.state_current == State.EXECUTE and running.cmd_invalid == 0
             seen: list[tuple[int, int]] = []
-            end = await plc.until(
-                lambda t: (
-                    seen.append((t.state_current, t.instruction_index))
-                    or t.state_current == State.COMPLETE
-                )
-            )
+
+            def complete(t: Tags) -> bool:
+                seen.append((t.state_current, t.instruction_index))
+                return t.state_current == State.COMPLETE
+
+            end = await plc.until(complete)
             indices = [index for _, index in seen]
             assert indices == sorted(indices)  # the index only moves forward
             assert any(s == State.EXECUTE and 0 < i < 15 for s, i in seen)

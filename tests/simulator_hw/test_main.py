@@ -26,8 +26,13 @@ def test_garbage_on_the_modbus_port_is_logged_in_lines_without_frames(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
     command = [bwsd, "mock", "--config", str(config), "--program", str(program)]
-    pipes = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "stdin": subprocess.DEVNULL}
-    mock = subprocess.Popen(command, text=True, **pipes)
+    mock = subprocess.Popen(
+        command,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+    )
     try:
         assert mock.stdout is not None
         ready = mock.stdout.readline()

@@ -9,10 +9,10 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import pytest
 
@@ -20,7 +20,27 @@ from bwsd.config import Config, parse_config
 from tests.timing import scaled
 
 ROOT = Path(__file__).resolve().parents[2]
-MACHINE = {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0, "c_mat": 0.5}
+
+
+class MachineTable(TypedDict):
+    """A config's [machine] table as these tests write it: Machine's own first fields."""
+
+    rows: int
+    cols: int
+    pitch_x: float
+    pitch_y: float
+    d_mat: float
+    c_mat: float
+
+
+MACHINE: MachineTable = {
+    "rows": 4,
+    "cols": 4,
+    "pitch_x": 10.0,
+    "pitch_y": 10.0,
+    "d_mat": 100.0,
+    "c_mat": 0.5,
+}
 PROGRAM = "FILL row=1 col=0\n.XX.\n.XX.\nEND\n"  # cases at (1, 1), (1, 2), (2, 1), (2, 2)
 BUS = {
     "timeout": scaled(3.0),
@@ -70,7 +90,7 @@ def start_mock(
     simulator: dict[str, Any],
     ports: dict[str, int] | None = None,
     *,
-    machine: dict[str, Any] = MACHINE,
+    machine: Mapping[str, Any] = MACHINE,
     program: str = PROGRAM,
     tables: dict[str, dict[str, Any]] | None = None,
 ) -> Mock:
@@ -115,7 +135,7 @@ def start_mock(
 
 
 def client_config(
-    backend: str, ports: dict[str, int], *, machine: dict[str, Any] = MACHINE, **bus: Any
+    backend: str, ports: dict[str, int], *, machine: Mapping[str, Any] = MACHINE, **bus: Any
 ) -> Config:
     """A config for bwsd's side, pointing at the mock loom's ports."""
     return parse_config(
