@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import threading
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -126,7 +126,7 @@ class _Thread(threading.Thread):
 
 def start_live(
     mock: Mock, folder: Path, open_reads: bool = False, doors: Doors = DEFAULT_DOORS
-) -> Iterator[Live]:
+) -> Generator[Live, None, None]:
     """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given)."""
     folder = folder / ("open" if open_reads else "closed")
     folder.mkdir()
