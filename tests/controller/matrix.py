@@ -177,10 +177,10 @@ def _raise_once(ctl: Controller) -> None:
     real = ctl.bus.state
 
     async def state() -> Any:
-        ctl.bus.state = real  # type: ignore[method-assign]
+        ctl.bus.state = real  # type: ignore[method-assign]  # the real read again
         raise RuntimeError("injected: an error nothing expects")
 
-    ctl.bus.state = state  # type: ignore[method-assign]
+    ctl.bus.state = state  # type: ignore[method-assign]  # the fault, injected once
 
 
 # ----- one cell -----

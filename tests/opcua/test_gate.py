@@ -230,7 +230,7 @@ def test_a_read_of_every_tag_takes_one_status_snapshot(mock, tmp_path):
                     calls.append(time.monotonic())
                 return status()
 
-            ctl.status = counted  # type: ignore[method-assign]
+            ctl.status = counted  # type: ignore[method-assign]  # counts the door's reads
             values = await client.read_values(nodes)
             assert len(values) == len(TAGS) and values[0] == State.STOPPED
             assert len(calls) == 1

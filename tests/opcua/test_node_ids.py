@@ -44,7 +44,12 @@ def arguments(text: str) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
     assert found, text
 
     def pairs(part: str | None) -> list[tuple[str, str]]:
-        return [tuple(p.split(": ")) for p in (part or "").split(", ") if p]  # type: ignore[misc]
+        named = []
+        for p in (part or "").split(", "):
+            if p:
+                name, kind = p.split(": ")
+                named.append((name, kind))
+        return named
 
     return pairs(found[1]), pairs(found[2])
 

@@ -367,6 +367,7 @@ def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path
 def test_a_bad_allow_entry_is_a_config_error_naming_the_key(mock, tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"allow": "127.0.0.1 plc-3"}}, "bwsd.toml")
     with pytest.raises(ConfigError, match=r"\[plc\.allow\]: 'plc-3' is not an IP address"):
+        # no controller: the config is refused before one is needed
         plc_tags(SimpleNamespace(), config)  # type: ignore[arg-type]
 
 

@@ -37,7 +37,9 @@ def test_garbage_on_the_modbus_port_is_logged_in_lines_without_frames(tmp_path):
         assert mock.stdout is not None
         ready = mock.stdout.readline()
         assert ready.startswith("ready modbus="), ready
-        port = int(re.search(r"modbus=(\d+)", ready)[1])  # type: ignore[index]
+        found = re.search(r"modbus=(\d+)", ready)
+        assert found is not None, ready
+        port = int(found[1])
         with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
             sock.sendall(bytes.fromhex("000100000006010300deadbeef0011223344556677"))
             sock.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
