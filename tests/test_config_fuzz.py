@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from bwsd.config import load_config, parse_config
 from bwsd.errors import ConfigError
-from tests.fieldbus.conftest import MACHINE, toml
+from tests.support.fieldbus import MACHINE, toml
 
 GOOD = toml({"machine": MACHINE})
 FIXTURE = HealthCheck.function_scoped_fixture  # the file is rewritten by every example

@@ -26,7 +26,7 @@ from bwsd.program.braidweave import braid_weave
 from bwsd.program.render import Generated
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served, same_geometry
 
 # Strokes take time (a 10 mm shift 50 ms, the shortest weft, 14 mm, 70 ms out and as long

@@ -23,7 +23,7 @@ from bwsd.twin import simulate
 from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_wefts import loom_wefts, twin_wefts
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served, daemon_config, same_geometry
 from tests.timing import scaled
 

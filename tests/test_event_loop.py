@@ -28,7 +28,7 @@ from bwsd.api.auth import TokenStore
 from bwsd.config import load_config, parse_config
 from bwsd.daemon import start, stop
 from bwsd.program.generators import braid4
-from tests.fieldbus.conftest import BUS, ROOT, start_mock
+from tests.support.fieldbus import BUS, ROOT, start_mock
 
 SLOW = 0.020  # s
 

@@ -16,7 +16,7 @@ import pytest
 
 from bwsd.errors import ExtraMissingError
 from bwsd.extras import CANOPEN, VTK, needs
-from tests.fieldbus.conftest import toml
+from tests.support.fieldbus import toml
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCKED = ("vtk", "vtkmodules", "pytexgen", "matplotlib", "meshio", "canopen", "can")

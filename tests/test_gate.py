@@ -22,7 +22,7 @@ from bwsd.fieldbus import open_bus
 from bwsd.gate import Caller, Gate, Refused, command_of, mode_of
 from bwsd.journal import Journal
 from bwsd.tokens import TokenStore
-from tests.fieldbus.conftest import client_config, mock
+from tests.support.fieldbus import client_config, mock
 
 __all__ = ["mock"]  # the mock loom fixture
 

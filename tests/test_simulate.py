@@ -110,6 +110,7 @@ def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     import os
     import pty
 
+    assert BWSD, "the bwsd console script is not installed beside this Python"
     program, config = example("braid-L")
     leader, follower = pty.openpty()
     try:

@@ -13,6 +13,7 @@ import pytest
 from fastapi.routing import APIRoute
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
+from websockets.typing import Origin
 
 from bwsd.api import TokenError, TokenStore
 from bwsd.controller.packml import State
@@ -103,6 +104,7 @@ def _writes(app) -> list[tuple[str, str]]:
     found = []
     for route in app.routes:
         if isinstance(route, APIRoute):
+            assert route.methods is not None  # an APIRoute always has its methods
             for method in sorted(route.methods - {"GET", "HEAD"}):
                 found.append((method, _filled(route)))
     return found
@@ -202,7 +204,7 @@ def test_the_event_socket_checks_the_token_like_a_read(live, open_live):
 def test_the_event_socket_refuses_a_page_on_another_origin(open_live):
     """With open reads, a page on any origin could otherwise read the live events."""
     with pytest.raises(InvalidStatus) as refused:
-        connect(open_live.ws, open_timeout=WAIT, origin="http://evil.example")
+        connect(open_live.ws, open_timeout=WAIT, origin=Origin("http://evil.example"))
     assert refused.value.response.status_code == 403
     assert b"origin 'http://evil.example' is not allowed" in refused.value.response.body
     own = open_live.base  # the page the daemon serves itself
@@ -218,8 +220,12 @@ def _load(server) -> None:
 
 def test_a_token_in_the_socket_url_never_reaches_the_server_log(live):
     records: list[logging.LogRecord] = []
-    handler = logging.Handler()
-    handler.emit = records.append  # type: ignore[method-assign]
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            records.append(record)
+
+    handler = Keep()
     logger = logging.getLogger("uvicorn.error")
     level = logger.level
     logger.addHandler(handler)

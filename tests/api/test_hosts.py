@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import socket
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pytest
@@ -14,10 +16,11 @@ from websockets.sync.client import connect
 
 from bwsd.api.hosts import allowed_hosts, host_of, origin_allowed
 from tests.api.conftest import WAIT, Live, start_live
+from tests.support.fieldbus import Mock
 
 
 @pytest.fixture(params=[False, True], ids=["closed reads", "open reads"])
-def served(request, mock, tmp_path):  # type: ignore[no-untyped-def]
+def served(request: pytest.FixtureRequest, mock: Mock, tmp_path: Path) -> Iterator[Live]:
     yield from start_live(mock, tmp_path, open_reads=request.param)
 
 

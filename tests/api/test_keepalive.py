@@ -21,7 +21,7 @@ import uvicorn
 from bwsd import daemon
 from bwsd.config import parse_config
 from tests.api.conftest import WAIT
-from tests.fieldbus.conftest import BUS, MACHINE, Mock
+from tests.support.fieldbus import BUS, MACHINE, Mock
 
 
 class _Recorded(uvicorn.Server):

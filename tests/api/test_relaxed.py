@@ -11,7 +11,7 @@ from bwsd.relax import Options, relax
 from bwsd.relax.document import relaxed_to_dict
 from bwsd.twin import simulate
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
-from tests.fieldbus.conftest import client_config
+from tests.support.fieldbus import client_config
 
 
 def _run_to_complete(live: Live) -> None:

@@ -6,13 +6,17 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+from collections.abc import Awaitable
+from typing import TypeVar
 
 import pytest
 
 from bwsd.controller.supervisor import Supervisor
 
+T = TypeVar("T")
 
-def run(coro):  # type: ignore[no-untyped-def]
+
+def run(coro: Awaitable[T]) -> T:
     return asyncio.run(asyncio.wait_for(coro, 30))
 
 

@@ -22,8 +22,9 @@ from bwsd.fieldbus import (
 from bwsd.fieldbus.axes import axis_by_name, shift_stroke_um
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_POSITION, FAULT_STALL
 from bwsd.twin import Shift, Twin
+from bwsd.twin.instructions import Axis
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
 
 FILL = [(1, 1), (1, 2), (2, 1), (2, 2)]
 
@@ -60,7 +61,12 @@ def backend(request: pytest.FixtureRequest) -> str:
 class TestBackendContract:
     def test_shifts_move_the_cases_as_the_twin_predicts(self, mock, backend):
         twin = Twin(client_config(backend, mock.ports).machine, FILL)
-        moves = [("row", 1, 1), ("col", 1, -1), ("row", 2, -1), ("col", 3, 1)]
+        moves: list[tuple[Axis, int, int]] = [
+            ("row", 1, 1),
+            ("col", 1, -1),
+            ("row", 2, -1),
+            ("col", 3, 1),
+        ]
 
         async def body(bus: Fieldbus) -> None:
             state = await bus.state()
@@ -226,7 +232,12 @@ class TestSegmentAxes:
         twin = Twin(
             client_config(backend, segment_mock.ports, machine=SEGMENTED).machine, SEGMENT_FILL
         )
-        strokes = [("row", 1, 1), ("col", 2, 1), ("row", 1, -1), ("col", 2, -2)]
+        strokes: list[tuple[Axis, int, int]] = [
+            ("row", 1, 1),
+            ("col", 2, 1),
+            ("row", 1, -1),
+            ("col", 2, -2),
+        ]
 
         async def body(bus: Fieldbus) -> None:
             for kind, line, k in strokes:

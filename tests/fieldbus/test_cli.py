@@ -6,18 +6,19 @@ import asyncio
 import shutil
 import subprocess
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
 
-def hw_config(tmp: Path, mock: Mock, backend: str, machine: dict[str, Any] = MACHINE) -> Path:
+def hw_config(tmp: Path, mock: Mock, backend: str, machine: Mapping[str, Any] = MACHINE) -> Path:
     path = tmp / f"{backend}.toml"
     path.write_text(
         toml(

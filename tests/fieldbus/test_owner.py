@@ -10,8 +10,8 @@ import pytest
 from bwsd.fieldbus import open_bus
 from bwsd.fieldbus.base import BusHeld, owner_id
 from bwsd.fieldbus.owner import LOCK_NAME, BusLock, StateFolderError, holder, refuse_if_held
-from tests.fieldbus.conftest import client_config
 from tests.fieldbus.test_backends import run, stroke
+from tests.support.fieldbus import client_config
 
 
 def test_the_lock_names_its_holder_and_is_free_once_released(tmp_path: Path):

@@ -199,7 +199,8 @@ def test_outcomes_through_a_run(journal: Journal) -> None:
     journal.set_outcome(pid, "complete")
     rec = journal.program(pid)
     assert (rec.outcome, rec.done, rec.reason) == ("complete", 1, "")
-    assert rec.finished is not None and rec.finished > rec.started
+    assert rec.started is not None and rec.finished is not None
+    assert rec.finished > rec.started
     assert journal.active_program() is None
 
 

@@ -21,8 +21,8 @@ from bwsd.journal import SCHEMA_VERSION, Journal, JournalError
 from bwsd.journal import schema as journal_schema
 from bwsd.journal.files import main_file_session, wal_holds_a_commit
 from bwsd.journal.schema import APPLICATION_ID
-from tests.fieldbus.conftest import start_mock
 from tests.journal.conftest import DONE, TOTAL, downgrade, files
+from tests.support.fieldbus import start_mock
 from tests.test_daemon import LONG, Served, daemon_config
 
 Writer = Callable[[Path, str], subprocess.Popen[str]]

@@ -123,7 +123,7 @@ def test_an_exception_reaches_its_caller_and_the_writer_goes_on(path: Path) -> N
             assert isinstance(results[0], JournalError)
             assert f"program {pid}, instruction 1: the program is loaded" in str(results[0])
             assert isinstance(results[1], ValueError) and str(results[1]) == "boom"
-            assert results[2:] == [None, None]
+            assert list(results[2:]) == [None, None]
             pending = await writer.run(journal.pending, pid)
             assert pending is not None and pending.index == 1
 

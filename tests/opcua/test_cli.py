@@ -13,8 +13,8 @@ from asyncua import Client
 
 from bwsd.cli import main
 from bwsd.opcua.security import OpcUaError
-from tests.fieldbus.conftest import MACHINE, toml
 from tests.opcua.conftest import rig, run
+from tests.support.fieldbus import MACHINE, toml
 
 
 def thumbprint(out: str) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.fieldbus.conftest import MACHINE, toml
+from tests.support.fieldbus import MACHINE, toml
 
 NEEDS = "needs asyncua: pip install 'bwsd[opcua]'"
 

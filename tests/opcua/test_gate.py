@@ -19,10 +19,11 @@ from cryptography import x509
 
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.opcua.security import CERT_FILE
-from bwsd.opcua.space import TAGS
+from bwsd.opcua.space import NAMESPACE, TAGS
 from bwsd.opcua.values import requested
-from tests.opcua.conftest import NAMESPACE, TEXT, loom, rig, run, var
+from tests.opcua.conftest import TEXT, loom, rig, run, var
 from tests.opcua.test_server import read
+from tests.support.controller import mode_now
 
 V = ua.VariantType
 
@@ -80,7 +81,7 @@ def test_a_unit_mode_sent_as_int16_or_wrong_acts_as_its_number_or_not_at_all(moc
             assert refused.value.code == ua.StatusCodes.BadTypeMismatch
             assert r.controller.packml.mode is UnitMode.MAINTENANCE
             await client.write_values([mode, request], [ua.Variant(3, V.Int16), True])
-            assert r.controller.packml.mode is UnitMode.MANUAL
+            assert mode_now(r.controller) is UnitMode.MANUAL
 
     run(scenario())
 
@@ -229,7 +230,7 @@ def test_a_read_of_every_tag_takes_one_status_snapshot(mock, tmp_path):
                     calls.append(time.monotonic())
                 return status()
 
-            ctl.status = counted  # type: ignore[method-assign]
+            ctl.status = counted  # type: ignore[method-assign]  # counts the door's reads
             values = await client.read_values(nodes)
             assert len(values) == len(TAGS) and values[0] == State.STOPPED
             assert len(calls) == 1

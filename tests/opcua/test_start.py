@@ -117,7 +117,7 @@ def test_serve_answers_healthz_while_opcua_starts(tmp_path):
             if found:
                 break
         listening = time.monotonic()
-        answers = []
+        answers: list[tuple[float, float]] = []
         with httpx.Client(base_url=found[1], timeout=30) as client:
             while not ready.is_set() or not answers:
                 asked = time.monotonic()

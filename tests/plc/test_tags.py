@@ -32,7 +32,7 @@ from bwsd.plc.registers import (
     REG_UNIT_MODE_CHANGE_REQUEST,
 )
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, client_config
+from tests.support.fieldbus import MACHINE, client_config
 
 # The mock loom's fill: cases at (1, 1), (1, 2), (2, 1), (2, 2); 15 instructions.
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
@@ -116,12 +116,12 @@ def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_pa
             running = await plc.command(START)
             assert running.state_current == State.EXECUTE and running.cmd_invalid == 0
             seen: list[tuple[int, int]] = []
-            end = await plc.until(
-                lambda t: (
-                    seen.append((t.state_current, t.instruction_index))
-                    or t.state_current == State.COMPLETE
-                )
-            )
+
+            def complete(t: Tags) -> bool:
+                seen.append((t.state_current, t.instruction_index))
+                return t.state_current == State.COMPLETE
+
+            end = await plc.until(complete)
             indices = [index for _, index in seen]
             assert indices == sorted(indices)  # the index only moves forward
             assert any(s == State.EXECUTE and 0 < i < 15 for s, i in seen)
@@ -367,6 +367,7 @@ def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path
 def test_a_bad_allow_entry_is_a_config_error_naming_the_key(mock, tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"allow": "127.0.0.1 plc-3"}}, "bwsd.toml")
     with pytest.raises(ConfigError, match=r"\[plc\.allow\]: 'plc-3' is not an IP address"):
+        # no controller: the config is refused before one is needed
         plc_tags(SimpleNamespace(), config)  # type: ignore[arg-type]
 
 

@@ -23,9 +23,10 @@ from bwsd.program.parser import parse_program
 from bwsd.relax import Options, crimp, relax
 from bwsd.relax.document import relaxed_to_dict
 from bwsd.relax.solver import Layout
+from bwsd.relax.state import Chains
 from bwsd.relax.topology import contact_sides
 from bwsd.twin import Machine, Shift, TakeUp, Twin, simulate
-from bwsd.twin.skeleton import SkeletonData
+from bwsd.twin.skeleton import FloatArray, SkeletonData
 from tests.relax.conftest import EXAMPLES, metrics_of, overlap_share, relaxed_of, twin_of
 from tests.relax.passes import passes_through
 from tests.twin.test_against_reference import _fitting, braids
@@ -161,8 +162,8 @@ def test_no_step_passes_a_yarn_through_another(name: str) -> None:
     """An independent continuous check of every step's straight-line motion."""
     found: list[int] = []
 
-    def trace(old: np.ndarray, new: np.ndarray, chains: object) -> None:
-        lay = Layout.of(chains)  # type: ignore[arg-type]
+    def trace(old: FloatArray, new: FloatArray, chains: Chains) -> None:
+        lay = Layout.of(chains)
         found.append(passes_through(old, new, lay.a, lay.b, lay.yarn))
 
     relax(twin_of(name), Options(max_steps=150), trace=trace)
@@ -300,8 +301,8 @@ def test_small_random_programs_relax_without_a_pass_through_or_a_side_flipped(
     event("3 contacts or more" if len(sk.contacts) >= 3 else "fewer than 3 contacts")
     found: list[int] = []
 
-    def trace(old: np.ndarray, new: np.ndarray, chains: object) -> None:
-        lay = Layout.of(chains)  # type: ignore[arg-type]
+    def trace(old: FloatArray, new: FloatArray, chains: Chains) -> None:
+        lay = Layout.of(chains)
         found.append(passes_through(old, new, lay.a, lay.b, lay.yarn))
 
     relaxed = relax(sk, Options(max_separate=100, max_steps=100), trace=trace)

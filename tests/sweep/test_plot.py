@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
@@ -22,7 +24,7 @@ def results(tmp_path_factory):
     return output
 
 
-def _rows(**change):
+def _rows(**change: Any) -> dict[str, Any]:
     base = {"status": "ok", "takeup": 1.0, "c_mat": 0.3, "angle_warp": 10.0}
     return {**base, **change}
 

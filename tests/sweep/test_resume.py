@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pyarrow.parquet as pq
 
@@ -32,7 +33,7 @@ c_mat = [0.3, 0.6]
 """
 
 
-def _complete_lines(path) -> int:
+def _complete_lines(path: Path) -> int:
     try:
         return path.read_bytes().count(b"\n")
     except FileNotFoundError:

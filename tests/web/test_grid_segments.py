@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from bwsd.api.auth import TokenStore
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
 
