@@ -23,7 +23,7 @@ from bwsd.twin import simulate
 from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_wefts import loom_wefts, twin_wefts
-from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served, daemon_config, same_geometry
 from tests.timing import scaled
 
@@ -130,7 +130,7 @@ def travelling(
     backend: str = request.param
     bus = {"port": mock.ports["modbus"]}
     if backend == "canopen":
-        bus = {"port": mock.ports["socketcand"], "heartbeat_ms": 50}
+        bus = {"port": mock.ports["socketcand"], "heartbeat_ms": HEARTBEAT_MS}
     tables = {
         "machine": MACHINE,
         "fieldbus": {"backend": backend, **BUS, "timeout": 10.0},

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from simulator_hw.control import request
-from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
 
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
@@ -26,7 +26,10 @@ def hw_config(tmp: Path, mock: Mock, backend: str, machine: Mapping[str, Any] = 
                 "machine": machine,
                 "fieldbus": {"backend": backend, **BUS},
                 "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
+                "fieldbus.canopen": {
+                    "port": mock.ports["socketcand"],
+                    "heartbeat_ms": HEARTBEAT_MS,
+                },
             }
         )
     )
