@@ -223,6 +223,7 @@ def test_the_build_warns_of_nothing_and_the_license_is_an_spdx_expression(wheel)
     assert re.fullmatch(r"setuptools>=[\d.]+,<\d+", setuptools), setuptools
 
 
+@pytest.mark.slow
 def test_a_build_without_three_js_warns(tmp_path):
     """The page cannot draw without it: the build says so (and the page, see tests/web)."""
     tree = tmp_path / "tree"

@@ -34,6 +34,8 @@ from simulator_hw.control import request
 from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.timing import scaled
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"
 LONG = TEXT.replace("REPEAT 4", "REPEAT 80")  # 400 instructions: room for every kill

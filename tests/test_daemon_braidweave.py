@@ -29,6 +29,8 @@ from simulator_hw.control import request
 from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served, same_geometry
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 # Strokes take time (a 10 mm shift 50 ms, the shortest weft, 14 mm, 70 ms out and as long
 # back), so that the watcher below sees every insert stroke under way.
 SPEEDS = {"stroke_speed": 200.0, "takeup_speed": 400.0}

@@ -27,6 +27,8 @@ from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock,
 from tests.test_daemon import Served, daemon_config, same_geometry
 from tests.timing import scaled
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 FILL = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
 TURNED = FILL + "WEFT x=-5 y=15 z=2 angle=90 length=20\nTAKEUP 2\n"  # the inserter turns first
 STRAIGHT = FILL + "WEFT x=15 y=-5 z=2 angle=0 length=20\nTAKEUP 2\n"  # it is at 0 already

@@ -119,6 +119,7 @@ def _filled(route: APIRoute) -> str:
     return path
 
 
+@pytest.mark.slow
 def test_every_write_route_refuses_no_token_and_a_viewer_token(live):
     writes = _writes(live.app)
     assert {p for _, p in writes} >= {
@@ -142,6 +143,7 @@ def test_every_write_route_refuses_no_token_and_a_viewer_token(live):
     assert live.controller.program is None
 
 
+@pytest.mark.slow
 def test_reads_need_a_viewer_token_unless_open(live):
     _load(live)
     with httpx.Client(base_url=live.api, timeout=WAIT) as client:
@@ -162,6 +164,7 @@ def test_reads_need_a_viewer_token_unless_open(live):
         assert client.get(live.base + "/healthz").json() == health
 
 
+@pytest.mark.slow
 def test_open_reads_serve_anyone_but_writes_still_need_an_operator(open_live):
     _load(open_live)
     with httpx.Client(base_url=open_live.api, timeout=WAIT) as client:
@@ -176,6 +179,7 @@ def test_open_reads_serve_anyone_but_writes_still_need_an_operator(open_live):
         assert client.post("/commands/reset", headers=viewer).status_code == 403
 
 
+@pytest.mark.slow
 def test_whoami_names_the_token_and_its_role_before_anything_is_refused(live, open_live):
     with httpx.Client(base_url=live.api, timeout=WAIT) as client:
         for role in ("viewer", "operator", "admin"):
@@ -188,6 +192,7 @@ def test_whoami_names_the_token_and_its_role_before_anything_is_refused(live, op
         assert client.get("/whoami", headers={"Authorization": "Bearer nope"}).status_code == 401
 
 
+@pytest.mark.slow
 def test_the_event_socket_checks_the_token_like_a_read(live, open_live):
     for server, token, status in ((live, None, 401), (live, "nope", 401), (open_live, "nope", 401)):
         url = server.ws + (f"?token={token}" if token else "")
@@ -201,6 +206,7 @@ def test_the_event_socket_checks_the_token_like_a_read(live, open_live):
             assert hello["event"] == "hello" and hello["name"] == "Stopped"
 
 
+@pytest.mark.slow
 def test_the_event_socket_refuses_a_page_on_another_origin(open_live):
     """With open reads, a page on any origin could otherwise read the live events."""
     with pytest.raises(InvalidStatus) as refused:
@@ -218,6 +224,7 @@ def _load(server) -> None:
         assert answer.status_code == 201, answer.text
 
 
+@pytest.mark.slow
 def test_a_token_in_the_socket_url_never_reaches_the_server_log(live):
     records: list[logging.LogRecord] = []
 

@@ -23,6 +23,8 @@ from bwsd.api.doors import Doors
 from tests.api.conftest import BRAID, Live, start_live
 from tests.support.fieldbus import Mock
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 DOORS = Doors(max_connections=6, max_connections_per_client=3, body_timeout=0.5)
 
 

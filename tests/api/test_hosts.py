@@ -43,6 +43,7 @@ def handshake(live: Live, host: str, origin: str | None = None) -> bytes:
         return raw.recv(65536)
 
 
+@pytest.mark.slow
 def test_a_foreign_host_is_refused_on_rest_and_on_the_event_socket(served: Live):
     viewer = served.headers("viewer")
     with httpx.Client(base_url=served.base, timeout=WAIT) as client:
@@ -57,6 +58,7 @@ def test_a_foreign_host_is_refused_on_rest_and_on_the_event_socket(served: Live)
     assert handshake(served, "127.0.0.1").startswith(b"HTTP/1.1 101")
 
 
+@pytest.mark.slow
 def test_an_origin_must_be_one_of_our_names_not_the_hosts_it_gives(served: Live):
     """A rebinding page gives the same name as Host and Origin: equal, and still refused."""
     port = served.base.rsplit(":", 1)[1]
@@ -69,6 +71,7 @@ def test_an_origin_must_be_one_of_our_names_not_the_hosts_it_gives(served: Live)
         assert handshake(served, "127.0.0.1", origin=own).startswith(b"HTTP/1.1 101")
 
 
+@pytest.mark.slow
 def test_a_removed_token_closes_its_event_stream(live: Live):
     name = "viewer-token"
     with connect(f"{live.ws}?token={live.tokens['viewer']}", open_timeout=WAIT) as ws:

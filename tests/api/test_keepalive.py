@@ -23,6 +23,8 @@ from bwsd.config import parse_config
 from tests.api.conftest import WAIT
 from tests.support.fieldbus import BUS, MACHINE, Mock
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 class _Recorded(uvicorn.Server):
     """A uvicorn server that lets the test reach its connections."""

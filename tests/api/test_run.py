@@ -11,6 +11,7 @@ from typing import Any
 from unittest.mock import ANY
 
 import httpx
+import pytest
 from websockets.sync.client import ClientConnection, connect
 
 from bwsd.controller.packml import State
@@ -21,6 +22,8 @@ from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
 from tests.api.skeletons import apply_delta, yarns_of
 from tests.support.fieldbus import client_config
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 RUN_STATES = ["Resetting", "Idle", "Starting", "Execute", "Completing", "Complete"]
 

@@ -4,12 +4,15 @@ every answer is one the schema documents (status, content type, body)."""
 from __future__ import annotations
 
 import httpx
+import pytest
 import schemathesis
 from hypothesis import HealthCheck, Phase, given, settings
 from schemathesis import GenerationMode
 from schemathesis.core.result import Ok
 
 from tests.api.conftest import BRAID, WAIT, Live
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 EXAMPLES = 25  # per operation and mode: the whole run stays around a minute
 CONFIG = schemathesis.Config.from_dict(

@@ -21,6 +21,8 @@ from simulator_hw.control import request
 from tests.controller.matrix import Rig, complete, resume
 from tests.support.controller import bits, run, state_now
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 SLOW = {"stroke_speed": 10.0, "takeup_speed": 10.0}  # a 10 mm stroke: 1 s out, 1 s back
 SHIFTS = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n{SHIFTS}"

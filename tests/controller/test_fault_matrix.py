@@ -16,6 +16,8 @@ from bwsd.twin import simulate
 from tests.controller.matrix import FAULTS, STATES, TEXT, Rig, complete, resume, run_cell
 from tests.support.controller import bits
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 @pytest.mark.parametrize("state", STATES, ids=lambda s: s.label)
 @pytest.mark.parametrize("fault", FAULTS)

@@ -32,6 +32,8 @@ from simulator_hw.control import request
 from tests.support.controller import TEXT, bits, controller, run, state_now
 from tests.support.fieldbus import Mock, start_mock
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 FILL = [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
 
 

@@ -13,6 +13,8 @@ from bwsd.journal import Journal
 from simulator_hw.control import request
 from tests.support.fieldbus import client_config
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 # The mock loom's four cases (1, 1), (1, 2), (2, 1), (2, 2) wound round each other with no
 # take-up: the contacts climb to the guides and an instruction jams.
 TURN = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\n"

@@ -19,6 +19,8 @@ from tests.controller.matrix import TEXT, Rig, _refuse_writes
 from tests.support.controller import controller, run, state_now
 from tests.support.fieldbus import MACHINE
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 def test_a_restart_restores_a_loaded_program_with_its_cause(mock, tmp_path):
     async def scenario() -> None:

@@ -23,6 +23,8 @@ from simulator_hw.control import request
 from tests.support.controller import TEXT, bits, controller, run, state_now
 from tests.support.fieldbus import client_config
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
     async def scenario() -> None:

@@ -26,6 +26,8 @@ from tests.controller.test_faults import after, machine_occupancy, poke
 from tests.support.controller import bits, run, state_now
 from tests.support.fieldbus import Mock, client_config, start_mock
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 MACHINE = {
     "rows": 8,
     "cols": 8,

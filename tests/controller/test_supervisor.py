@@ -42,6 +42,7 @@ def test_a_failed_task_is_logged_with_its_traceback_reported_and_down(caplog):
     assert record.exc_info is not None  # the traceback is in the log
 
 
+@pytest.mark.slow
 def test_a_restartable_task_comes_back_with_backoff_and_is_up_again():
     starts: list[float] = []
 

@@ -42,6 +42,8 @@ from tests.controller.test_faults import after, poke
 from tests.support.controller import bits, state_now
 from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 Point = tuple[int, int, int]
 Ends = tuple[Point, Point]
 GRID = 1 << 32  # grid points per millimetre (docs/twin.md)

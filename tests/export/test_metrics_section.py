@@ -253,6 +253,7 @@ def test_section_line_rules():
         section_header("FILL\n# section: L:2x6\n", "p.bws")
 
 
+@pytest.mark.slow
 def test_bad_section_text_is_one_line_from_the_console_script(braid):
     assert BWSD, "the bwsd console script is not installed beside this Python"
     done = subprocess.run(
@@ -391,6 +392,7 @@ def test_tables_show_groups_mixing_and_footprint(tmp_path, capsys, braid):
     assert metrics(simulate_program(braid[1], braid[0])[0], None)["footprint"] is None
 
 
+@pytest.mark.slow
 def test_metrics_with_section_and_height_needs_no_extra(tmp_path, braid):
     """The console script with VTK, pytexgen and matplotlib unimportable."""
     assert BWSD, "the bwsd console script is not installed beside this Python"

@@ -105,6 +105,7 @@ def test_the_docs_list_every_example_but_the_largest():
     assert sorted(_table()) == [s for s in stems if s != "braid-24x24"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stem", sorted(_table()))
 def test_each_example_overlaps_as_the_docs_say_and_brute_force_finds(stem):
     """The figures of docs/exports.md are what the metric gives; a brute-force computation

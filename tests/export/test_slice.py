@@ -86,6 +86,7 @@ def test_png(small, tmp_path):
     assert len(data) > 5_000
 
 
+@pytest.mark.slow
 def test_centreline_and_empty_slices(centreline, tmp_path):
     assert draw_slice(centreline, 50.0, tmp_path / "free.png") == 3
     assert draw_slice(centreline, -5.0, tmp_path / "empty.png") == 0

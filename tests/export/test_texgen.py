@@ -77,6 +77,7 @@ def test_nothing_on_stdout(small, tmp_path, capfd):
     assert capfd.readouterr().out == ""
 
 
+@pytest.mark.slow
 def test_nothing_on_piped_stdout(tmp_path):
     """With stdout a pipe the C library buffers fully: the chatter must not leak later."""
     script = (

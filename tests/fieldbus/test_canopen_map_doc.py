@@ -86,6 +86,7 @@ def mock(tmp_path: Path) -> Iterator[Mock]:
     running.stop()
 
 
+@pytest.mark.slow
 def test_a_live_loom_places_the_inserter_at_the_documented_nodes(mock):
     """Each positioning drive at its documented node: enabled, given an absolute target by
     SDO (0x607A, 0x2003, controlword 0x1F then 0x0F), it travels there and stays."""

@@ -15,6 +15,8 @@ import pytest
 from simulator_hw.control import request
 from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
 

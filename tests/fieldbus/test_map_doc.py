@@ -171,6 +171,7 @@ async def registers(client: AsyncModbusTcpClient, address: int, count: int) -> l
     return list(answer.registers)
 
 
+@pytest.mark.slow
 def test_a_live_loom_answers_at_the_documented_addresses(any_map):
     mock, version = any_map
     base_at, stride = block()

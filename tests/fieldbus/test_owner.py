@@ -39,6 +39,7 @@ def test_a_missing_state_folder_holds_nothing(tmp_path: Path):
     assert holder(tmp_path / "none") is None
 
 
+@pytest.mark.slow
 def test_a_second_client_cannot_move_while_the_first_holds_the_loom(mock, backend):
     """The loom's own check: it works whatever state folder the second client uses."""
 

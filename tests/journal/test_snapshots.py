@@ -361,6 +361,7 @@ def _written(path: Path) -> bytes:
     return path.read_bytes()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_a_damaged_file_is_refused_by_check(path: Path, seed: int) -> None:
     data = bytearray(_written(path))
@@ -373,6 +374,7 @@ def test_a_damaged_file_is_refused_by_check(path: Path, seed: int) -> None:
     assert str(err.value).startswith(f"{path}: damaged: ")
 
 
+@pytest.mark.slow
 def test_garbage_over_any_page_is_a_journal_error(path: Path) -> None:
     """Whichever page is lost, opening or checking refuses the file, naming it."""
     good = _written(path)

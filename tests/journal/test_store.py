@@ -488,6 +488,7 @@ def test_usable_from_worker_threads(journal: Journal) -> None:
 STEPS = st.lists(st.tuples(st.sampled_from(["started", "done"]), st.integers(0, 6)), max_size=25)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(steps=STEPS)
 def test_accepts_exactly_the_ordered_steps(steps: list[tuple[str, int]]) -> None:

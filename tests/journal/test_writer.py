@@ -76,6 +76,7 @@ def test_reads_see_every_write_submitted_before_them(path: Path) -> None:
     assert asyncio.run(main()) == list(range(1, 11))
 
 
+@pytest.mark.slow
 def test_a_locked_journal_fails_an_urgent_write_after_its_busy_timeout(path: Path) -> None:
     """Another process holds the lock: an urgent write waits the writer's busy timeout (the
     config's ``[journal] busy_timeout``), a routine one 0.2 s, then each fails."""

@@ -16,6 +16,8 @@ from bwsd.opcua.security import OpcUaError
 from tests.opcua.conftest import rig, run
 from tests.support.fieldbus import MACHINE, toml
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 def thumbprint(out: str) -> str:
     found = re.search(r"thumbprint \(SHA-1\) ([0-9A-F:]{59})", out)

@@ -11,6 +11,8 @@ import pytest
 
 from tests.support.fieldbus import MACHINE, toml
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 NEEDS = "needs asyncua: pip install 'bwsd[opcua]'"
 
 

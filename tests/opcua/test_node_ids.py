@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import pytest
 from asyncua import Client, Node, ua
 
 from bwsd.opcua import space
@@ -83,6 +84,7 @@ async def browse(client: Client, node: ua.NodeId) -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_a_live_server_serves_every_documented_node_as_documented(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as r:

@@ -18,6 +18,8 @@ from bwsd.opcua.space import NAMESPACE, TAGS, node_id
 from tests.opcua.conftest import TEXT, client_cert, loom, rig, run, session, var
 from tests.support.controller import mode_now, state_now
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 MAINTENANCE = ua.Variant(int(UnitMode.MAINTENANCE), ua.VariantType.Int32)
 EXPECTED_RUN = [
     State.RESETTING,

@@ -15,8 +15,11 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from bwsd.deploy.folder import init_folder
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 LATE = 1.0  # s: the longest /healthz may take while OPC UA starts (issue: "within 1 s")
 

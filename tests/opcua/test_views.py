@@ -25,6 +25,8 @@ from tests.opcua.conftest import TEXT, client_cert, loom, run, session, trust, v
 from tests.support.fieldbus import BUS, MACHINE, start_mock, toml
 from tests.test_daemon import Served
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 READ = (
     "Status/StateCurrent",
     "Status/UnitModeCurrent",

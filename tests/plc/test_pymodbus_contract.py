@@ -143,6 +143,7 @@ def test_trace_connect_runs_with_the_new_connection_listed_before_it_is_read():
     run(scenario())
 
 
+@pytest.mark.slow
 def test_trace_pdu_returning_none_leaves_a_request_unanswered():
     """The mock loom's mute: a received request whose trace returns None gets no answer."""
 

@@ -48,6 +48,7 @@ def test_every_example_has_a_config_and_a_registry_entry():
         assert (ROOT / "config" / f"{stem}.toml").is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stem", STEMS)
 def test_example_is_exactly_what_its_command_prints(stem, tmp_path, capsys):
     config = tmp_path / "machine.toml"

@@ -52,6 +52,7 @@ def _parsed(gen: Generated) -> Program:
     return program
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_valid_and_occupancy_restored_every_cycle(name: str):
     gen = CASES[name]()
@@ -63,6 +64,7 @@ def test_valid_and_occupancy_restored_every_cycle(name: str):
     assert all(state == states[0] for state in states)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_config_text_loads_back_to_the_machine(name: str):
     gen = CASES[name]()
@@ -127,6 +129,7 @@ SECTIONS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("shape", "flange", "web", "segments", "carriers", "period", "k"), SECTIONS
 )
@@ -219,6 +222,7 @@ def test_every_shaped_braid_is_one_preform_by_its_k_cycles(shape, flange, web, s
     assert contact_groups(sk) == [list(range(len(sk.yarns)))]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("shape", "flange", "web", "segments", "message"),
     [
@@ -267,6 +271,7 @@ def test_bad_parameters_are_refused(call):
         call()
 
 
+@pytest.mark.slow
 def test_every_weft_is_caught_and_each_weave_is_one_preform():
     """Each weft passed the exact shed check where the generator put it (else simulate
     raises) and the move closing its shed caught it."""
@@ -278,6 +283,7 @@ def test_every_weft_is_caught_and_each_weave_is_one_preform():
         assert contact_groups(sk) == [list(range(len(sk.yarns)))], name
 
 
+@pytest.mark.slow
 def test_every_warp_line_sheds_in_every_pick():
     gen = weave_3d(3, 4, cycles=1)
     program = _parsed(gen)
@@ -292,6 +298,7 @@ def test_every_warp_line_sheds_in_every_pick():
         assert lines == (warp_rows if shed.axis == "row" else warp_cols)
 
 
+@pytest.mark.slow
 def test_u_section_wefts_stop_at_the_opening():
     gen = weave_3d(5, 6, cycles=1, shape="U", leg=2, base=2)
     wefts = [w for w in _parsed(gen).instructions if isinstance(w, Weft)]

@@ -63,6 +63,7 @@ def straight_length(sk: SkeletonData) -> float:
 # --- Why: "braid-2x2 has 50 % of its yarn length within one diameter of another yarn" -----
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_relaxed_examples_have_no_interpenetration(name: str) -> None:
     """The share of yarn length within d less 1 % of d of another yarn, by the metrics' own
@@ -73,6 +74,7 @@ def test_relaxed_examples_have_no_interpenetration(name: str) -> None:
     assert after == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_worst_overlap_is_within_one_percent_of_d(name: str) -> None:
     """The solver's own figure agrees with the metrics: no pair closer than 0.99 d."""
@@ -157,6 +159,7 @@ def test_every_contact_keeps_its_side(name: str) -> None:
     assert np.array_equal(before[told], after[told])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["twist", "braid-2x2"])
 def test_no_step_passes_a_yarn_through_another(name: str) -> None:
     """An independent continuous check of every step's straight-line motion."""
@@ -192,6 +195,7 @@ def test_the_tension_weighted_length_never_rises(name: str) -> None:
     assert relaxed.figures.energy < relaxed.figures.energy_twin
 
 
+@pytest.mark.slow
 def test_the_same_input_gives_the_same_bytes() -> None:
     sk = twin_of("braid-2x2")
     one = relaxed_to_dict(relax(sk))
@@ -231,6 +235,7 @@ def braid_metrics(takeup: float, relaxed: bool) -> dict[str, Any]:
     return metrics(sk, program.cycle_length, takeups=takeups_of(program))
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="missed: 6.0 against 4.5 mm (docs/relax.md, Results)")
 def test_the_one_over_h_law_holds_after_relaxation() -> None:
     """tan(braid angle) x take-up per cycle of the formed zone stays constant within 10 %
@@ -274,6 +279,7 @@ def test_sections_are_flattened_and_read_back_from_texgen(tmp_path: Path) -> Non
         assert np.allclose(theirs[:, 2:], mine[:, 2:], atol=1e-6)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=20,
     deadline=None,

@@ -45,6 +45,7 @@ def test_a_machine_with_more_axes_than_node_ids_is_served_over_modbus_only():
         MockLoom(over, [], canopen=True)
 
 
+@pytest.mark.slow
 def test_the_mock_loom_says_when_it_serves_modbus_only(tmp_path: Path):
     config = tmp_path / "mock.toml"
     config.write_text(

@@ -50,6 +50,7 @@ def test_one_line_per_hue_value_through_the_mean_of_each_point():
     )
 
 
+@pytest.mark.slow
 def test_the_png_has_a_line_of_each_colour(results, tmp_path):
     png = tmp_path / "angle.png"
     assert plot(results, png, "takeup", "angle_warp", "c_mat") == 2
@@ -62,6 +63,7 @@ def test_the_png_has_a_line_of_each_colour(results, tmp_path):
     assert len(fig.axes[0].get_lines()) == 2
 
 
+@pytest.mark.slow
 def test_plot_command_and_its_errors(results, tmp_path):
     run = bwsd(
         "sweep",

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 
 from bwsd.sweep.runner import Options, run_sweep
 from bwsd.sweep.spec import load_spec
@@ -53,6 +54,7 @@ def _kill_when_rows(proc: subprocess.Popen[bytes], log, rows: int) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_resumes_without_redoing_finished_candidates(tmp_path):
     spec_path = write(tmp_path, SLOW_SPEC)
     output = tmp_path / "slow.parquet"

@@ -169,12 +169,14 @@ def _compare(case) -> int:
     return jams
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(programs(degenerate=False))
 def test_random_programs_match_reference(case):
     _compare(case)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(programs(degenerate=True))
 def test_degenerate_programs_match_reference(case):
@@ -236,6 +238,7 @@ FLAT_CROSSING = (
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(braids())
 @example(FLAT_CROSSING)
@@ -260,6 +263,7 @@ def kernel_path(request, monkeypatch):
     return request.param
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel_path", ["exact-only", "one-cell", "fine-cells"], indirect=True)
 @settings(
     max_examples=15,

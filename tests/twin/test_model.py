@@ -285,6 +285,7 @@ def test_every_coordinate_lies_on_the_grid():
 
 
 # One warp sweeping the triangle (0,0,0), (0,0,100), (10,0,100) in the plane y = 0.
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(
     z=st.floats(1.0, 99.0),

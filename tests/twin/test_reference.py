@@ -229,6 +229,7 @@ def test_rest_point_against_brute_force_on_random_input():
         _check_rest_point(y, m, u, d)
 
 
+@pytest.mark.slow
 def test_rest_point_on_small_random_input_rich_in_exact_ties():
     rng = random.Random(1)
     ties = 0
@@ -377,6 +378,7 @@ def test_segment_distance_on_simple_cases():
     assert segment_distance2((0, 0, 0), (1, 1, 0), (0, 1, 1), (1, 0, 1)) == 1
 
 
+@pytest.mark.slow
 def test_segment_distance_against_a_numeric_minimum_and_exact_bounds():
     rng = random.Random(11)
     for trial in range(80):

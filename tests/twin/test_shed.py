@@ -6,6 +6,8 @@ import itertools
 import random
 from fractions import Fraction
 
+import pytest
+
 from bwsd.twin.shed import closest, distance2
 
 
@@ -28,6 +30,7 @@ def test_simple_cases():
     assert distance2((0, 0, 0), (2, 2, 0), (0, 2, 1), (2, 0, 1)) == 1  # interior point
 
 
+@pytest.mark.slow
 def test_against_sampling_on_random_integer_segments():
     rng = random.Random(7)
     for _ in range(150):

@@ -17,6 +17,8 @@ from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 MACHINE = {
     "rows": 4,
     "cols": 6,

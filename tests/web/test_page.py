@@ -7,12 +7,15 @@ from typing import Any
 
 import matplotlib.image as mpimg
 import numpy as np
+import pytest
 from playwright.sync_api import FilePayload
 
 from bwsd.controller.packml import State
 from tests.api.conftest import BRAID, BRAID_STEPS, Live
 from tests.api.skeletons import yarns_of
 from tests.web.conftest import MS, Browsing
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 # Every yarn shown, as the tests' skeleton reading has it: id -> node ids and coordinates.
 DUMP = """() => Object.fromEntries(window.bwsd.dump().map(

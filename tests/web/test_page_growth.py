@@ -23,6 +23,8 @@ from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 CYCLES = 30
 
 DUMP = """() => Object.fromEntries(window.bwsd.dump().map(

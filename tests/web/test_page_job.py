@@ -27,6 +27,8 @@ from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, loom_control
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 ROOT = Path(__file__).resolve().parents[2]
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
 SIZES = [(420, 800), (1024, 768), (1600, 1000)]

@@ -30,6 +30,8 @@ from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 ROOT = Path(__file__).resolve().parents[2]
 # A shed open from the start (rows 0 and 2 full, row 1 empty): the first instruction is a WEFT.
 WEAVE = {"rows": 3, "cols": 10, "pitch_x": 10.0, "pitch_y": 8.0, "d_mat": 100.0, "c_mat": 0.5}

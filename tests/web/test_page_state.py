@@ -26,6 +26,8 @@ from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, loom_control
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
 ENABLED = """() => [...document.querySelectorAll('button[data-command]')]
     .filter(b => !b.disabled).map(b => b.dataset.command)"""

@@ -25,6 +25,8 @@ from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-view-*.png there
 
 
