@@ -11,7 +11,7 @@
 #include <string.h>
 
 #include "snapshot.h"
-#include "sweep.h"
+#include "swept.h"
 
 typedef struct {
     PyObject_HEAD State s;

@@ -5,7 +5,7 @@
  * builds Y, X and the restart point on the grid. Candidate order never matters: the choice is
  * a total order decided exactly.
  */
-#include "sweep.h"
+#include "swept.h"
 
 #include <math.h>
 #include <stdlib.h>
