@@ -287,6 +287,12 @@ static PyMethodDef methods[] = {
      " pull, alpha) -> (steps, rejected, energy, worst, status, alpha)"},
     {NULL, NULL, 0, NULL}};
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_step", "The relaxation's steps.", -1, methods};
+static struct PyModuleDef module = {
+    .m_base = PyModuleDef_HEAD_INIT,
+    .m_name = "_step",
+    .m_doc = "The relaxation's steps.",
+    .m_size = -1,
+    .m_methods = methods,
+};
 
 PyMODINIT_FUNC PyInit__step(void) { return PyModule_Create(&module); }
