@@ -12,8 +12,8 @@
 #define BIG_LIMBS 16 /* 1024 bits */
 
 typedef struct {
-    int neg;                  /* 1 when negative (never for zero) */
-    int n;                    /* limbs in use; 0 for zero */
+    int neg; /* 1 when negative (never for zero) */
+    int n;   /* limbs in use; 0 for zero */
     uint64_t d[BIG_LIMBS];
 } big;
 

@@ -186,8 +186,8 @@ static int Kernel_init(Kernel *k, PyObject *args, PyObject *kw) {
     int shift;
     double d;
     PyObject *num, *den;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "y*y*LidSS", names, &gx, &gy, &gz, &shift, &d,
-                                     &num, &den))
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "y*y*LidSS", names, &gx, &gy, &gz, &shift, &d, &num,
+                                     &den))
         return -1;
     Py_ssize_t cols = gx.len / 8, rows = gy.len / 8;
     int err = E_OK;
@@ -198,10 +198,9 @@ static int Kernel_init(Kernel *k, PyObject *args, PyObject *kw) {
     }
     if (!err) err = state_init(&k->s, (int32_t)rows, (int32_t)cols, gx.buf, gy.buf, gz, shift);
     if (!err)
-        err = set_diameter(k, d, (const unsigned char *)PyBytes_AS_STRING(num),
-                           (size_t)PyBytes_GET_SIZE(num),
-                           (const unsigned char *)PyBytes_AS_STRING(den),
-                           (size_t)PyBytes_GET_SIZE(den));
+        err = set_diameter(
+            k, d, (const unsigned char *)PyBytes_AS_STRING(num), (size_t)PyBytes_GET_SIZE(num),
+            (const unsigned char *)PyBytes_AS_STRING(den), (size_t)PyBytes_GET_SIZE(den));
     PyBuffer_Release(&gx);
     PyBuffer_Release(&gy);
     if (err == E_OK) {
@@ -210,8 +209,10 @@ static int Kernel_init(Kernel *k, PyObject *args, PyObject *kw) {
     }
     if (err != E_REFUSED) { /* not ready: nothing may use or free it again */
         state_free(&k->s);
-        if (err == E_NOMEM) PyErr_NoMemory();
-        else PyErr_SetString(PyExc_ValueError, "bad diameter");
+        if (err == E_NOMEM)
+            PyErr_NoMemory();
+        else
+            PyErr_SetString(PyExc_ValueError, "bad diameter");
     }
     return -1;
 }
@@ -317,7 +318,8 @@ static int describe(const State *s, Mark mk, const Moved *mv, Outcome *out) {
                          sizeof(int32_t) * 5 * (size_t)(s->nc - mk.nc0));
     if (!err) err = new_nodes(s, mk.nn0, &p[NODES]);
     if (!err) err = moved(s, mv, &p[MOVED], &p[CHANGES]);
-    if (!err) err = bytes_copy(&p[OCCUPANCY], s->occ, sizeof(int32_t) * (size_t)s->rows * (size_t)s->cols);
+    size_t cells = (size_t)s->rows * (size_t)s->cols;
+    if (!err) err = bytes_copy(&p[OCCUPANCY], s->occ, sizeof(int32_t) * cells);
     out->ny0 = mk.ny0;
     out->ny = s->ny;
     return err;
@@ -456,8 +458,10 @@ static int points(const State *s, const int32_t *id, Py_ssize_t n, Bytes *b) {
     int err = bytes_alloc(b, sizeof(int64_t) * 3 * (size_t)n);
     int64_t *out = b->p;
     for (Py_ssize_t i = 0; i < n && !err; i++) {
-        if (id[i] < 0 || id[i] >= s->nn) err = E_BAD_NODE;
-        else memcpy(out + 3 * i, P(s, id[i]), 3 * sizeof(int64_t));
+        if (id[i] < 0 || id[i] >= s->nn)
+            err = E_BAD_NODE;
+        else
+            memcpy(out + 3 * i, P(s, id[i]), 3 * sizeof(int64_t));
     }
     return err;
 }
