@@ -1,7 +1,7 @@
-/* The relaxation's steps (docs/relax.md, "Method"): a loop over nodes and pairs in the
- * fixed order of the arrays given, so the same input gives the same bytes. Built with the
- * package (setup.py), -ffp-contract=off as the twin's kernel; the interpreter lock is
- * released while it runs.
+/* The relaxation's steps (docs/relax.md, "The method, and why"): a loop over nodes and pairs
+ * in the fixed order of the arrays given, so the same input gives the same bytes. Built with
+ * the package (setup.py), with the twin kernel's flags (-ffp-contract=off among them); the
+ * interpreter lock is released while it runs.
  *
  * One step, from positions x0:
  *   1. caps: each node may move at most CAP times the least distance from its segments to

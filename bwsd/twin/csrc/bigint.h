@@ -2,7 +2,7 @@
  *
  * Magnitude in 64-bit limbs, least significant first, plus a sign. Every operation checks
  * its capacity and sets BIG_OVERFLOW in the context instead of overflowing; the callers'
- * proven bounds (bwsd/twin/_kernel/exact.c) stay far below it.
+ * proven bounds (exact.c) stay far below it.
  */
 #ifndef BWSD_BIGINT_H
 #define BWSD_BIGINT_H
