@@ -1,12 +1,14 @@
 /* bwsd.twin._kernel: the twin's compiled kernel as a Python type (used by bwsd/twin/model.py).
  *
  * Arrays cross as bytes in native byte order; bwsd.twin reads them with numpy. Every method
- * that reads or changes the state (the instructions shift, takeup, weft and replay, add_warp,
- * every query, dump) does its work in C between KERNEL_BEGIN and KERNEL_END: with the kernel
- * taken, so that a second caller is refused while one is inside (the Python side serialises
- * its callers with a lock), and with the interpreter lock released. Kernel.load reads a dump
- * with the interpreter lock released too, into a kernel no other caller can see yet;
- * Kernel(...) builds one under the lock.
+ * that reads or changes the state does its work in C between KERNEL_BEGIN and KERNEL_END,
+ * with the kernel taken: a second caller is refused while one is inside (the Python side
+ * serialises its callers with a lock). The instructions (shift, takeup, weft, replay) and
+ * dump run with the interpreter lock released; add_warp and the queries, short, keep it:
+ * a thread that gives the lock away waits up to a switch interval to take it back while
+ * another thread runs Python, and the daemon's event loop reads the twin. Kernel.load reads
+ * a dump with the lock released too, into a kernel no other caller can see yet; Kernel(...)
+ * builds one under the lock.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -76,31 +78,35 @@ static int kernel_give(Kernel *k, int err) {
     return err;
 }
 
-/* The kernel's part of a method, after shapely's GEOS_INIT_THREADS and GEOS_FINISH_THREADS
- * (src/geos.h):
+/* The kernel's part of a method, after shapely's GEOS_INIT / GEOS_FINISH and their _THREADS
+ * variants (src/geos.h):
  *
  *     int err;
- *     KERNEL_BEGIN(k, err)
+ *     KERNEL_BEGIN(k, err, RELEASE_LOCK)  (or KEEP_LOCK)
  *         ... C only: no Python object or function, no return, no goto out of it ...
  *     KERNEL_END(k, err)
  *     if (err) return NULL;  (the exception is set; free what the C part made)
  *     ... the result from what the C part left in C variables ...
  *
- * KERNEL_BEGIN takes the kernel and releases the interpreter lock; when the kernel cannot be
- * taken it sets err to E_REFUSED (the exception set) and the C part is skipped. The C part
- * sets err (E_OK when it succeeds). KERNEL_END takes the interpreter lock back, raises err if
- * set and gives the kernel back: no path leaves it taken.
+ * KERNEL_BEGIN takes the kernel and, with RELEASE_LOCK, releases the interpreter lock; when
+ * the kernel cannot be taken it sets err to E_REFUSED (the exception set) and the C part is
+ * skipped. The C part sets err (E_OK when it succeeds); it touches nothing of Python with
+ * either mode, so a method may change its mode alone. KERNEL_END takes the interpreter lock
+ * back if it was released, raises err if set and gives the kernel back: no path leaves the
+ * kernel taken.
  */
-#define KERNEL_BEGIN(k, err)                                                                       \
+enum { KEEP_LOCK, RELEASE_LOCK };
+
+#define KERNEL_BEGIN(k, err, lock)                                                                 \
     if (((err) = kernel_take(k)) == E_OK) {                                                        \
-        Py_BEGIN_ALLOW_THREADS
+        PyThreadState *kernel_save_ = (lock) == RELEASE_LOCK ? PyEval_SaveThread() : NULL;
 
 #define KERNEL_END(k, err)                                                                         \
-    Py_END_ALLOW_THREADS                                                                           \
+    if (kernel_save_) PyEval_RestoreThread(kernel_save_);                                          \
     (err) = kernel_give((k), (err));                                                               \
     }
 
-/* A malloc'ed array made without the interpreter lock, to become bytes after. */
+/* A malloc'ed array made in the C part of a call, to become bytes after it. */
 typedef struct {
     void *p;
     size_t n;
@@ -224,7 +230,7 @@ static PyObject *Kernel_add_warp(Kernel *k, PyObject *args) {
     int32_t warp = 0;
     if (!PyArg_ParseTuple(args, "iiLLL", &r, &c, &x, &y, &z)) return NULL;
     int64_t fell[3] = {x, y, z};
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         State *s = &k->s;
         if (r < 0 || r >= s->rows || c < 0 || c >= s->cols ||
             s->occ[(int64_t)r * s->cols + c] >= 0 || s->ny != s->nw)
@@ -366,7 +372,7 @@ static PyObject *Kernel_shift(Kernel *k, PyObject *args) {
     Py_buffer moves;
     Outcome out = {0};
     if (!PyArg_ParseTuple(args, "iy*ip", &axis, &moves, &instr, &out.predict)) return NULL;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, RELEASE_LOCK)
         State *s = &k->s;
         Mark mk = begin(s);
         Moved mv = {NULL, NULL, 0};
@@ -386,7 +392,7 @@ static PyObject *Kernel_takeup(Kernel *k, PyObject *args) {
     int instr, err;
     Outcome out = {0};
     if (!PyArg_ParseTuple(args, "Lip", &gz, &instr, &out.predict)) return NULL;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, RELEASE_LOCK)
         State *s = &k->s;
         Mark mk = begin(s);
         Moved mv = {NULL, NULL, 0};
@@ -403,7 +409,7 @@ static PyObject *Kernel_weft(Kernel *k, PyObject *args) {
     Outcome out = {0};
     if (!PyArg_ParseTuple(args, "LLLLLLp", &a, &b, &c, &d, &e, &f, &out.predict)) return NULL;
     int64_t p0[3] = {a, b, c}, p1[3] = {d, e, f};
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, RELEASE_LOCK)
         State *s = &k->s;
         Mark mk = begin(s);
         Moved mv = {NULL, NULL, 0};
@@ -418,7 +424,7 @@ static PyObject *Kernel_replay(Kernel *k, PyObject *args) {
     Py_buffer log;
     int err;
     if (!PyArg_ParseTuple(args, "y*", &log)) return NULL;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, RELEASE_LOCK)
         err = redo(&k->s, log.buf, log.len / (Py_ssize_t)sizeof(Op));
     KERNEL_END(k, err)
     PyBuffer_Release(&log);
@@ -432,7 +438,7 @@ static PyObject *Kernel_counts(Kernel *k, PyObject *noargs) {
     int32_t nn = 0, ny = 0, nw = 0;
     int64_t nc = 0, gz = 0;
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         nn = k->s.nn;
         ny = k->s.ny;
         nw = k->s.nw;
@@ -448,7 +454,7 @@ static PyObject *Kernel_positions(Kernel *k, PyObject *noargs) {
     (void)noargs;
     Bytes b = {0};
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = bytes_copy(&b, k->s.pos, sizeof(int64_t) * 3 * (size_t)k->s.nn);
     KERNEL_END(k, err)
     return reply(&b, 1, err);
@@ -472,7 +478,7 @@ static PyObject *Kernel_points(Kernel *k, PyObject *args) {
     Bytes b = {0};
     int err;
     if (!PyArg_ParseTuple(args, "y*", &ids)) return NULL;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = points(&k->s, ids.buf, ids.len / 4, &b);
     KERNEL_END(k, err)
     PyBuffer_Release(&ids);
@@ -501,7 +507,7 @@ static PyObject *Kernel_chains(Kernel *k, PyObject *args) {
     int first, last, err;
     Bytes b[2] = {{0}};
     if (!PyArg_ParseTuple(args, "ii", &first, &last)) return NULL;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = chains(&k->s, first, last, &b[0], &b[1]);
     KERNEL_END(k, err)
     return reply(b, 2, err);
@@ -512,7 +518,7 @@ static PyObject *Kernel_contacts(Kernel *k, PyObject *noargs) {
     (void)noargs;
     Bytes b = {0};
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = bytes_copy(&b, k->s.contacts, sizeof(int32_t) * 5 * (size_t)k->s.nc);
     KERNEL_END(k, err)
     return reply(&b, 1, err);
@@ -537,7 +543,7 @@ static PyObject *Kernel_warps(Kernel *k, PyObject *noargs) {
     (void)noargs;
     Bytes b[2] = {{0}};
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = warps(&k->s, &b[0], &b[1]);
     KERNEL_END(k, err)
     return reply(b, 2, err);
@@ -556,7 +562,7 @@ static PyObject *Kernel_lengths(Kernel *k, PyObject *noargs) {
     (void)noargs;
     Bytes b = {0};
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         err = lengths(&k->s, &b);
     KERNEL_END(k, err)
     return reply(&b, 1, err);
@@ -569,7 +575,7 @@ static PyObject *Kernel_near(Kernel *k, PyObject *args) {
     int err;
     if (!PyArg_ParseTuple(args, "LLLLLL", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5])) return NULL;
     int64_t lo[3] = {v[0], v[1], v[2]}, hi[3] = {v[3], v[4], v[5]};
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, KEEP_LOCK)
         int32_t *out = NULL;
         int64_t n = segments_near(&k->s, lo, hi, &out);
         err = n < 0 ? E_NOMEM : E_OK;
@@ -583,7 +589,7 @@ static PyObject *Kernel_dump(Kernel *k, PyObject *noargs) {
     (void)noargs;
     Bytes b = {0};
     int err;
-    KERNEL_BEGIN(k, err)
+    KERNEL_BEGIN(k, err, RELEASE_LOCK)
         b.p = state_dump(&k->s, k->dnum, k->ldnum, k->dden, k->ldden, &b.n);
         err = b.p ? E_OK : E_NOMEM;
     KERNEL_END(k, err)
