@@ -85,6 +85,7 @@ def test_worst_overlap_is_within_one_percent_of_d(name: str) -> None:
 # --- Why: "paper-L's section is 60.9 x 85.7 mm ... yarn fills 0.9 % of its bounding box" ---
 
 
+@pytest.mark.slow
 def test_relaxed_paper_l_is_tighter() -> None:
     """Width, thickness and the formed zone's section area shrink, the volume fraction rises
     (the full compaction to the fell's 28 x 40 mm is not reached: docs/relax.md, "Limits")."""
@@ -101,6 +102,7 @@ def test_relaxed_paper_l_is_tighter() -> None:
 # --- Why: "Wefts are straight lines" ----------------------------------------------------
 
 
+@pytest.mark.slow
 def test_relaxed_wefts_are_crimped() -> None:
     """The twin's wefts are straight (crimp 0); relaxed, every weft held by warps bends round
     them, and the reported crimp is (length - span) / span of the written nodes."""
@@ -148,6 +150,7 @@ def test_untwisted_yarns_come_apart() -> None:
 # --- Targets -------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_every_contact_keeps_its_side(name: str) -> None:
     """Each contact's crossing keeps its sign (over or under) from the twin to the relaxed
