@@ -1,9 +1,11 @@
 """Builds the compiled kernels with the package (`pip install .`): the twin's (bwsd/twin/csrc)
 and the relaxation's step (bwsd/relax/csrc).
 
-Everything else about the package is in pyproject.toml. The kernel is C11 with GNU
-extensions (128-bit integers), built with floating-point contraction off: a fused
-multiply-add would change the float filters' error bounds (docs/twin.md, "Exactness").
+Everything else about the package is in pyproject.toml. Both kernels are C11 with GNU
+extensions (the twin's uses 128-bit integers), built with floating-point contraction off (a
+fused multiply-add would change the float filters' error bounds, docs/twin.md, "Exactness")
+and with -Wall -Wextra -Wconversion, of which the compiler has nothing to say
+(tests/test_build.py).
 A build without three.js in bwsd/web/node_modules (`npm ci --prefix bwsd/web` first) warns:
 its live preview page would say that three.js is missing instead of drawing the preform.
 """
@@ -19,7 +21,16 @@ from setuptools.errors import CCompilerError, CompileError, ExecError, PlatformE
 
 SOURCES = sorted(str(p) for p in Path("bwsd/twin/csrc").glob("*.c"))
 THREE = Path("bwsd/web/node_modules/three/build/three.module.js")
-FLAGS = ["-std=gnu11", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fvisibility=hidden"]
+FLAGS = [
+    "-std=gnu11",
+    "-O2",
+    "-ffp-contract=off",
+    "-fno-fast-math",
+    "-fvisibility=hidden",
+    "-Wall",
+    "-Wextra",
+    "-Wconversion",
+]
 
 NO_COMPILER = """
 bwsd: cannot build its twin kernel (bwsd/twin/csrc), a C extension.

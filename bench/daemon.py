@@ -38,7 +38,7 @@ from bwsd.api.auth import TokenStore  # noqa: E402
 from bwsd.config import load_config, parse_config  # noqa: E402
 from bwsd.paths import state_folder, tokens_file  # noqa: E402
 from bwsd.program.generators import braid4  # noqa: E402
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml  # noqa: E402
+from tests.support.fieldbus import BUS, Mock, start_mock, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 
 

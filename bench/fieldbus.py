@@ -36,7 +36,7 @@ from bwsd.fieldbus import AxisMove, Fieldbus, open_bus  # noqa: E402
 from bwsd.fieldbus.axes import axis_by_name, shift_stroke_um  # noqa: E402
 from bwsd.fieldbus.canopen_pdo import CONTROLWORD  # noqa: E402
 from bwsd.fieldbus.cia402 import drive_dictionary  # noqa: E402
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock  # noqa: E402
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock  # noqa: E402
 
 TARGET_REGISTER = 100 + 16 * 10  # the take-up axis's target on the 4 x 4 mock (axis 10)
 ROW1_NODE = 2  # node_base 1 + axis 1

@@ -34,9 +34,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bwsd.api.auth import TokenStore  # noqa: E402
-from tests.fieldbus.conftest import start_mock  # noqa: E402
 from tests.opcua.conftest import TEXT, client_cert, session, trust, var  # noqa: E402
 from tests.opcua.test_views import served_config  # noqa: E402
+from tests.support.fieldbus import start_mock  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 
 CHANGES_PER_CYCLE = 6  # Resetting, Idle, Starting, Execute, Completing, Complete

@@ -43,7 +43,7 @@ from bench.daemon import braid_24x24, machine_table  # noqa: E402
 from bwsd.api.auth import TokenStore  # noqa: E402
 from bwsd.config import load_config  # noqa: E402
 from bwsd.paths import state_folder, tokens_file  # noqa: E402
-from tests.fieldbus.conftest import BUS, start_mock, toml  # noqa: E402
+from tests.support.fieldbus import BUS, start_mock, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 from tests.web.conftest import ARGS, CHROMIUM  # noqa: E402
 

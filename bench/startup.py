@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bwsd.api.auth import TokenStore  # noqa: E402
-from tests.fieldbus.conftest import BUS, MACHINE, start_mock, toml  # noqa: E402
+from tests.support.fieldbus import BUS, MACHINE, start_mock, toml  # noqa: E402
 
 BWSD = Path(sys.executable).with_name("bwsd")
 PROGRAM = "`bwsd program braid4 --rows 4 --cols 4`"

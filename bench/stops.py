@@ -40,7 +40,7 @@ from bwsd.api.auth import TokenStore  # noqa: E402
 from bwsd.config import load_config  # noqa: E402
 from bwsd.paths import state_folder, tokens_file  # noqa: E402
 from simulator_hw.control import request  # noqa: E402
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml  # noqa: E402
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml  # noqa: E402
 from tests.test_daemon import Served  # noqa: E402
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"

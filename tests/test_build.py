@@ -223,6 +223,23 @@ def test_the_build_warns_of_nothing_and_the_license_is_an_spdx_expression(wheel)
     assert re.fullmatch(r"setuptools>=[\d.]+,<\d+", setuptools), setuptools
 
 
+@pytest.mark.slow
+def test_the_kernels_compile_without_a_warning(wheel):
+    """Every C file of both kernels compiled with -Wall -Wextra -Wconversion (setup.py), and
+    the compiler said nothing: what it says is in the build's log (pip wheel -v)."""
+    log = (wheel.parent / "build.log").read_text()
+    compiled = {
+        match[1]: match[0] for match in re.finditer(r"^.*\s-c (\S+\.c)\s.*$", log, re.MULTILINE)
+    }
+    sources = [*(ROOT / "bwsd/twin/csrc").glob("*.c"), ROOT / "bwsd/relax/csrc/step.c"]
+    assert set(compiled) == {str(p.relative_to(ROOT)) for p in sources}
+    for line in compiled.values():
+        assert {"-Wall", "-Wextra", "-Wconversion"} <= set(line.split()), line
+    warnings = re.findall(r"^\s*\S+:\d+(?::\d+)?: warning: .*$", log, re.MULTILINE)
+    assert not warnings
+
+
+@pytest.mark.slow
 def test_a_build_without_three_js_warns(tmp_path):
     """The page cannot draw without it: the build says so (and the page, see tests/web)."""
     tree = tmp_path / "tree"

@@ -135,10 +135,12 @@ def missing() -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_every_cited_path_and_module_exists() -> None:
     assert missing() == []
 
 
+@pytest.mark.slow
 def test_the_scan_finds_citations_and_would_see_a_missing_one(tmp_path: Path) -> None:
     every = list(cited())
     kinds = {kind for _, _, kind, _ in every}

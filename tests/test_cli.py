@@ -56,6 +56,7 @@ def test_the_table_says_what_each_module_registers(name):
     assert action.help == text
 
 
+@pytest.mark.slow
 def test_the_parser_imports_nothing_heavy():
     assert not _imported("--help") & HEAVY
     for name in COMMANDS:
@@ -63,6 +64,7 @@ def test_the_parser_imports_nothing_heavy():
         assert not loaded & HEAVY, f"bwsd {name} --help imports {loaded & HEAVY}"
 
 
+@pytest.mark.slow
 def test_generating_a_braid_imports_nothing_heavy(tmp_path):
     assert not _imported("program", "braid4", "--rows", "3", "--cols", "3") & HEAVY
     assert not _imported("program", "twist") & HEAVY

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from bwsd.config import load_config, parse_config
@@ -13,7 +15,7 @@ GOOD = {
 }
 
 
-def _with(table: str, key: str, value) -> dict:
+def _with(table: str, key: str, value) -> dict[str, dict[str, Any]]:
     data = {name: dict(values) for name, values in GOOD.items()}
     data.setdefault(table, {})[key] = value
     return data

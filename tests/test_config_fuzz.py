@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from bwsd.config import load_config, parse_config
 from bwsd.errors import ConfigError
-from tests.fieldbus.conftest import MACHINE, toml
+from tests.support.fieldbus import MACHINE, toml
 
 GOOD = toml({"machine": MACHINE})
 FIXTURE = HealthCheck.function_scoped_fixture  # the file is rewritten by every example
@@ -45,6 +45,7 @@ def test_arrays_nested_a_thousand_deep_are_a_config_error(tmp_path):
         load_config(path)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
@@ -53,6 +54,7 @@ def test_any_bytes_are_a_config_or_a_config_error(tmp_path, data):
     load(tmp_path, data)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
@@ -90,6 +92,7 @@ tables = st.dictionaries(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None)
 @given(tables)
 def test_any_structure_is_a_config_or_a_config_error(data):

@@ -31,8 +31,10 @@ from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.timing import scaled
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}END\n"

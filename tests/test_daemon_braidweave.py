@@ -26,8 +26,10 @@ from bwsd.program.braidweave import braid_weave
 from bwsd.program.render import Generated
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served, same_geometry
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 # Strokes take time (a 10 mm shift 50 ms, the shortest weft, 14 mm, 70 ms out and as long
 # back), so that the watcher below sees every insert stroke under way.

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from bwsd.config import load_config
 from bwsd.program import load_program
 from bwsd.twin import simulate
@@ -16,6 +18,7 @@ from bwsd.twin import simulate
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_demo_runs_the_example_braid_on_the_mock_loom_to_complete(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
@@ -65,6 +68,7 @@ def _addresses(out: str) -> dict[str, int]:
     return found
 
 
+@pytest.mark.slow
 def test_demos_run_at_once_on_free_ports_while_the_configs_ports_are_taken(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
@@ -106,6 +110,7 @@ def test_demos_run_at_once_on_free_ports_while_the_configs_ports_are_taken(tmp_p
         assert (tmp_path / name / "out" / "demo-state" / "journal.db").is_file()
 
 
+@pytest.mark.slow
 def test_demo_runs_the_config_and_program_given(tmp_path):
     """The config's ports are used (0 here); its bus is pointed at the mock loom wherever that
     listens; the PLC tags are off as the config says; the program is the one given."""
@@ -147,6 +152,7 @@ def test_demo_runs_the_config_and_program_given(tmp_path):
     assert "Complete: 10 instructions done" in done.stdout
 
 
+@pytest.mark.slow
 def test_demo_port_options_take_0_to_65535(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd

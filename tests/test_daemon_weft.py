@@ -23,9 +23,11 @@ from bwsd.twin import simulate
 from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_wefts import loom_wefts, twin_wefts
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served, daemon_config, same_geometry
 from tests.timing import scaled
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 FILL = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\n"
 TURNED = FILL + "WEFT x=-5 y=15 z=2 angle=90 length=20\nTAKEUP 2\n"  # the inserter turns first
@@ -130,7 +132,7 @@ def travelling(
     backend: str = request.param
     bus = {"port": mock.ports["modbus"]}
     if backend == "canopen":
-        bus = {"port": mock.ports["socketcand"], "heartbeat_ms": 50}
+        bus = {"port": mock.ports["socketcand"], "heartbeat_ms": HEARTBEAT_MS}
     tables = {
         "machine": MACHINE,
         "fieldbus": {"backend": backend, **BUS, "timeout": 10.0},

@@ -54,6 +54,7 @@ def test_a_port_in_use_names_the_option_to_change_and_nothing_starts(tmp_path, o
     assert done.stdout == "" and list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_mock_loom_that_cannot_start_says_why(tmp_path):
     text = (ROOT / "config" / "loom.toml").read_text()
     config = tmp_path / "loom.toml"

@@ -22,13 +22,16 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 from websockets.sync.client import connect
 
 from bwsd.api.auth import TokenStore
 from bwsd.config import load_config, parse_config
 from bwsd.daemon import start, stop
 from bwsd.program.generators import braid4
-from tests.fieldbus.conftest import BUS, ROOT, start_mock
+from tests.support.fieldbus import BUS, ROOT, start_mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 SLOW = 0.020  # s
 

@@ -16,7 +16,7 @@ import pytest
 
 from bwsd.errors import ExtraMissingError
 from bwsd.extras import CANOPEN, VTK, needs
-from tests.fieldbus.conftest import toml
+from tests.support.fieldbus import toml
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCKED = ("vtk", "vtkmodules", "pytexgen", "matplotlib", "meshio", "canopen", "can")
@@ -72,6 +72,7 @@ def test_the_block_holds(blocked, tmp_path):
     assert run.returncode == 0, run.stdout + run.stderr
 
 
+@pytest.mark.slow
 def test_the_core_imports_and_simulates_without_the_extras(blocked, tmp_path):
     code = (
         "import sys\n"
@@ -112,6 +113,7 @@ def test_the_core_imports_and_simulates_without_the_extras(blocked, tmp_path):
     assert '"contacts": 73' in metrics.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -134,6 +136,7 @@ def test_an_export_without_the_extra_is_one_line_naming_it(blocked, tmp_path, ar
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_the_canopen_backend_without_the_extra_is_one_line_naming_it(blocked, tmp_path):
     config = tmp_path / "canopen.toml"
     config.write_text(CONFIG_TEXT.replace('backend = "modbus"', 'backend = "canopen"'))
@@ -159,6 +162,7 @@ def test_the_canopen_backend_without_the_extra_is_one_line_naming_it(blocked, tm
     )
 
 
+@pytest.mark.slow
 def test_the_mock_loom_serves_modbus_alone_without_the_canopen_extra(blocked, tmp_path):
     config = tmp_path / "mock.toml"
     config.write_text(

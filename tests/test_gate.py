@@ -22,7 +22,7 @@ from bwsd.fieldbus import open_bus
 from bwsd.gate import Caller, Gate, Refused, command_of, mode_of
 from bwsd.journal import Journal
 from bwsd.tokens import TokenStore
-from tests.fieldbus.conftest import client_config, mock
+from tests.support.fieldbus import client_config, mock
 
 __all__ = ["mock"]  # the mock loom fixture
 
@@ -89,6 +89,7 @@ def test_a_command_of_a_wrong_type_or_out_of_range_is_refused(wire: Any, kind: s
     assert mode.value.kind == kind and mode.value.field == "mode"
 
 
+@pytest.mark.slow
 def test_refusals_change_nothing_and_are_logged_at_info(mock, tmp_path, caplog):
     caplog.set_level(logging.DEBUG)
 
@@ -137,6 +138,7 @@ def test_refusals_change_nothing_and_are_logged_at_info(mock, tmp_path, caplog):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_role_is_the_tokens_role_now_not_at_login(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, gate, tokens):
@@ -160,6 +162,7 @@ def test_a_role_is_the_tokens_role_now_not_at_login(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_load_through_the_gate_is_a_load_and_its_caller_is_journaled(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, gate, tokens):

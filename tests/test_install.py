@@ -58,6 +58,7 @@ def _imported(script: Path) -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_the_bench_extra_carries_what_the_benchmarks_import():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     offered = {_distribution(r) for r in project["dependencies"]}

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import pytest
 
@@ -66,7 +67,7 @@ def _namespaced() -> list[str]:
     return [*prefix, "sh", "-c", f'{ip} link set lo up && exec "$@"', "sh"]
 
 
-def _unavailable(message: str) -> None:
+def _unavailable(message: str) -> NoReturn:
     if os.environ.get("CI") == "true":
         pytest.fail(message)
     pytest.skip(message)

@@ -25,6 +25,7 @@ def _bwsd(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([bwsd, *args], capture_output=True, text=True, timeout=300, cwd=cwd)
 
 
+@pytest.mark.slow
 def test_simulate_runs_a_shipped_example_with_its_shipped_config_from_an_empty_folder(tmp_path):
     files = ("example:braid-L.bws", "--config", "example:braid-L.toml")
     done = _bwsd("simulate", *files, "--json", cwd=tmp_path)
@@ -35,6 +36,7 @@ def test_simulate_runs_a_shipped_example_with_its_shipped_config_from_an_empty_f
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_metrics_and_the_mock_loom_take_them_too(tmp_path):
     done = _bwsd("metrics", "example:twist.bws", "--config", "example:twist.toml", cwd=tmp_path)
     assert done.returncode == 0, done.stderr

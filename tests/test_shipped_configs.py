@@ -37,6 +37,7 @@ def _hw(config: str, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
 
 
+@pytest.mark.slow
 def test_the_loom_config_drives_the_mock_loom_on_both_buses(tmp_path):
     machine = load_config(ROOT / "config/loom.toml").machine
     fill = set(load_program(ROOT / "examples/braid-2x2.bws", machine).fill)

@@ -31,6 +31,7 @@ def example(stem: str) -> tuple[str, str]:
     return str(ROOT / "examples" / f"{stem}.bws"), str(ROOT / "config" / f"{stem}.toml")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "stem", ["twist", "braid-2x2", "weave-plain", "braid-L", "weave-U", "paper-L", "paper-U"]
 )
@@ -48,6 +49,7 @@ def test_simulate_json_matches_the_twin(stem):
     assert summary["seconds"] > 0
 
 
+@pytest.mark.slow
 def test_simulate_writes_skeleton_and_exports_that_read_back(tmp_path):
     program, config = example("braid-L")
     skeleton, tg3, vtp = tmp_path / "s.json", tmp_path / "s.tg3", tmp_path / "s.vtp"
@@ -97,6 +99,7 @@ def test_a_weft_into_a_closed_shed_names_its_line_and_writes_nothing(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_case_leaving_the_matrix_is_refused_with_line_and_column(tmp_path):
     program = tmp_path / "bad.bws"
     program.write_text("FILL row=0 col=0\nX.\n.X\nEND\nROW 0:+1\nROW 0:+1\n")
@@ -106,10 +109,12 @@ def test_a_case_leaving_the_matrix_is_refused_with_line_and_column(tmp_path):
     assert done.stdout == ""
 
 
+@pytest.mark.slow
 def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     import os
     import pty
 
+    assert BWSD, "the bwsd console script is not installed beside this Python"
     program, config = example("braid-L")
     leader, follower = pty.openpty()
     try:
@@ -139,6 +144,7 @@ def test_progress_bar_on_a_terminal_and_none_in_a_pipe():
     assert piped.stderr == ""
 
 
+@pytest.mark.slow
 def test_simulate_takes_the_expansion_limit_from_the_config(tmp_path):
     program, config = example("braid-2x2")
     limited = tmp_path / "limited.toml"
@@ -149,6 +155,7 @@ def test_simulate_takes_the_expansion_limit_from_the_config(tmp_path):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("line", "where"),
     [
@@ -168,6 +175,7 @@ def test_simulate_json_refuses_hostile_numbers_at_their_place(tmp_path, line, wh
     assert done.stderr.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_a_jam_names_its_line_and_writes_nothing(tmp_path):
     """`bwsd program twist --turns 100` (no take-up) winds the yarns up to the guides: the
     twin refuses instruction 114 as a jam; simulate and metrics name its line."""
@@ -187,6 +195,7 @@ def test_a_jam_names_its_line_and_writes_nothing(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_simulate_warns_about_a_loose_weft(tmp_path):
     """A hand-written 30 degree weft that nothing touches: accepted, but it lies loose."""
     program = tmp_path / "loose.bws"

@@ -252,7 +252,9 @@ class Journal(EventLog):
 
     # -- twin snapshots ---------------------------------------------------------------------
 
-    def save_snapshot(self, program_id: int, index: int, data: bytes) -> None:
+    def save_snapshot(
+        self, program_id: int, index: int, data: bytes | bytearray | memoryview
+    ) -> None:
         """Keep the twin's state after instruction ``index`` (0: before the first) as ``data``.
 
         The program must be active and have ``index`` instructions done or more. Only its

@@ -6,7 +6,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import cast
 
-from bwsd.twin.instructions import Axis, Move, Shift, as_moves
+from bwsd.twin.instructions import Axis, MoveEntry, Shift, as_moves
 from bwsd.twin.machine import Machine
 
 Cell = tuple[int, int]
@@ -92,7 +92,7 @@ def fill_block(rows: int, cols: int, cells: Iterable[Cell]) -> list[str]:
     return lines
 
 
-def shift(axis: str, moves: Iterable[tuple[int, ...] | Move]) -> str:
+def shift(axis: str, moves: Iterable[MoveEntry]) -> str:
     """A ROW or COL statement: entries ``(line, k)``, ``(line, k, first, last)`` or Moves."""
     return Shift(cast(Axis, axis), as_moves(moves)).text()
 

@@ -28,7 +28,12 @@ class Move(NamedTuple):
         return f"{self.line}{where}:{self.k:+d}"
 
 
-def as_moves(entries: Iterable[tuple[int, ...] | Move]) -> tuple[Move, ...]:
+# What ``as_moves`` and ``Shift`` take for one entry: a Move, ``(line, k)``,
+# ``(line, k, span)`` or ``(line, k, a, b)``.
+MoveEntry = Move | tuple[int, int] | tuple[int, int, Span | None] | tuple[int, int, int, int]
+
+
+def as_moves(entries: Iterable[MoveEntry]) -> tuple[Move, ...]:
     """Entries as Moves: ``(line, k)``, ``(line, k, span)`` or ``(line, k, a, b)``."""
     out = []
     for entry in entries:
@@ -37,11 +42,11 @@ def as_moves(entries: Iterable[tuple[int, ...] | Move]) -> tuple[Move, ...]:
         elif len(entry) == 4:
             out.append(Move(entry[0], entry[1], (entry[2], entry[3])))
         else:
-            out.append(Move(*entry))  # type: ignore[arg-type]
+            out.append(Move(*entry))
     return tuple(out)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Shift:
     """ROW or COL: each listed line (or line segment) shifts its cases by k cells.
 
@@ -53,8 +58,9 @@ class Shift:
     axis: Axis
     moves: tuple[Move, ...]
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "moves", as_moves(self.moves))
+    def __init__(self, axis: Axis, moves: Iterable[MoveEntry]) -> None:
+        object.__setattr__(self, "axis", axis)
+        object.__setattr__(self, "moves", as_moves(moves))
 
     def text(self) -> str:
         """As written in a program: ``ROW 1:+1 3[0..3]:-1``."""

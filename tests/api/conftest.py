@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import threading
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ from bwsd.api.doors import DEFAULT_DOORS, Doors
 from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
-from tests.fieldbus.conftest import Mock, client_config, mock
+from tests.support.fieldbus import Mock, client_config, mock
 from tests.timing import scaled
 
 __all__ = ["Live", "live", "mock", "open_live", "start_live"]
@@ -95,7 +95,7 @@ class _Thread(threading.Thread):
 
     async def _serve(self, controller: Controller, journal: Journal) -> None:
         store = TokenStore.load(self.folder / "tokens.json")
-        tokens = {role: store.add(f"{role}-token", role) for role in ROLES}
+        tokens: dict[str, str] = {role: store.add(f"{role}-token", role) for role in ROLES}
         app = create_app(controller, store, self.open_reads, doors=self.doors)
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as the daemon's listener
@@ -133,7 +133,7 @@ def start_live(
     open_reads: bool = False,
     doors: Doors = DEFAULT_DOORS,
     **options: Any,
-) -> Iterator[Live]:
+) -> Generator[Live, None, None]:
     """The API on ``mock``, behind ``doors`` (the daemon's defaults unless given);
     ``options`` go to uvicorn's config (``timeout_keep_alive=...``)."""
     folder = folder / ("open" if open_reads else "closed")

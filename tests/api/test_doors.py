@@ -20,7 +20,10 @@ from websockets.sync.client import connect
 
 from bwsd.api.auth import LOGINS
 from bwsd.api.doors import Doors
-from tests.api.conftest import BRAID, Live, Mock, start_live
+from tests.api.conftest import BRAID, Live, start_live
+from tests.support.fieldbus import Mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 DOORS = Doors(max_connections=6, max_connections_per_client=3, body_timeout=0.5)
 

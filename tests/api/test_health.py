@@ -8,11 +8,14 @@ import time
 from typing import Any
 
 import httpx
+import pytest
 
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from tests.api.conftest import BRAID, WAIT, Live
 from tests.controller.matrix import _raise_once
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 def on_loop(live: Live, call: Any) -> Any:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import socket
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pytest
@@ -14,10 +16,11 @@ from websockets.sync.client import connect
 
 from bwsd.api.hosts import allowed_hosts, host_of, origin_allowed
 from tests.api.conftest import WAIT, Live, start_live
+from tests.support.fieldbus import Mock
 
 
 @pytest.fixture(params=[False, True], ids=["closed reads", "open reads"])
-def served(request, mock, tmp_path):  # type: ignore[no-untyped-def]
+def served(request: pytest.FixtureRequest, mock: Mock, tmp_path: Path) -> Iterator[Live]:
     yield from start_live(mock, tmp_path, open_reads=request.param)
 
 
@@ -41,6 +44,7 @@ def handshake(live: Live, host: str, origin: str | None = None) -> bytes:
         return raw.recv(65536)
 
 
+@pytest.mark.slow
 def test_a_foreign_host_is_refused_on_rest_and_on_the_event_socket(served: Live):
     viewer = served.headers("viewer")
     with httpx.Client(base_url=served.base, timeout=WAIT) as client:
@@ -55,6 +59,7 @@ def test_a_foreign_host_is_refused_on_rest_and_on_the_event_socket(served: Live)
     assert handshake(served, "127.0.0.1").startswith(b"HTTP/1.1 101")
 
 
+@pytest.mark.slow
 def test_an_origin_must_be_one_of_our_names_not_the_hosts_it_gives(served: Live):
     """A rebinding page gives the same name as Host and Origin: equal, and still refused."""
     port = served.base.rsplit(":", 1)[1]
@@ -67,6 +72,7 @@ def test_an_origin_must_be_one_of_our_names_not_the_hosts_it_gives(served: Live)
         assert handshake(served, "127.0.0.1", origin=own).startswith(b"HTTP/1.1 101")
 
 
+@pytest.mark.slow
 def test_a_removed_token_closes_its_event_stream(live: Live):
     name = "viewer-token"
     with connect(live.ws, additional_headers=live.headers("viewer"), open_timeout=WAIT) as ws:

@@ -21,7 +21,9 @@ import uvicorn
 from bwsd import daemon
 from bwsd.config import parse_config
 from tests.api.conftest import WAIT
-from tests.fieldbus.conftest import BUS, MACHINE, Mock
+from tests.support.fieldbus import BUS, MACHINE, Mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 class _Recorded(uvicorn.Server):

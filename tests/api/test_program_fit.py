@@ -54,6 +54,7 @@ def test_a_shipped_example_too_big_for_the_loom_names_its_x_and_the_size_it_need
     assert rows <= header_rows and cols <= header_cols  # it fits the machine it was made for
 
 
+@pytest.mark.slow
 def test_the_api_answers_the_line_column_and_size_of_a_fill_too_big(live: Live):
     """The 24 x 24 braid on the 4 x 4 loom: refused at its first X outside, both as a check
     and as a load, naming the 26 x 26 matrix it needs; nothing is loaded."""
@@ -73,6 +74,7 @@ def test_the_api_answers_the_line_column_and_size_of_a_fill_too_big(live: Live):
     assert live.controller.program is None
 
 
+@pytest.mark.slow
 def test_a_line_past_the_matrix_says_how_many_lines_the_program_needs(live: Live):
     operator = live.client("operator")
     text = "FILL row=1 col=0\n.XX.\nEND\nROW 1:+1\nCOL 0:+1 6:-1\n"

@@ -6,12 +6,16 @@ from __future__ import annotations
 import json
 import time
 
+import pytest
+
 from bwsd.program import parse_program
 from bwsd.relax import Options, relax
 from bwsd.relax.document import relaxed_to_dict
 from bwsd.twin import simulate
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
-from tests.fieldbus.conftest import client_config
+from tests.support.fieldbus import client_config
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 def _run_to_complete(live: Live) -> None:

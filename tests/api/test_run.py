@@ -11,16 +11,19 @@ from typing import Any
 from unittest.mock import ANY
 
 import httpx
+import pytest
 from websockets.sync.client import ClientConnection, connect
 
 from bwsd.controller.packml import State
 from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
-from bwsd.twin import simulate
+from bwsd.twin import Machine, Program, simulate
 from simulator_hw.control import request
 from tests.api.conftest import BRAID, BRAID_STEPS, WAIT, Live
 from tests.api.skeletons import apply_delta, yarns_of
-from tests.fieldbus.conftest import client_config
+from tests.support.fieldbus import client_config
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 RUN_STATES = ["Resetting", "Idle", "Starting", "Execute", "Completing", "Complete"]
 
@@ -226,6 +229,7 @@ def test_preview_predicts_on_the_twin_and_never_changes_it(live: Live):
     assert operator.post("/programs", json={"name": "b.bws", "text": BRAID}).status_code == 201
     before = operator.get("/skeleton").json()
     twin = live.controller.twin
+    assert twin is not None
     snapshot = twin.snapshot().to_bytes()
     answer = operator.post("/preview")
     assert answer.status_code == 200, answer.text
@@ -240,12 +244,13 @@ def test_preview_predicts_on_the_twin_and_never_changes_it(live: Live):
     assert [n["yarn"] for n in preview["free_nodes"]] == [0, 1, 2, 3]
 
 
-def _occupancy_after_first(program, machine) -> list[list[int]]:
+def _occupancy_after_first(program: Program, machine: Machine) -> list[list[int]]:
     from bwsd.twin import Twin
 
     twin = Twin.from_program(machine, program)
     twin.apply(program.instructions[0])
-    return twin.occupancy.tolist()
+    occupancy: list[list[int]] = twin.occupancy.tolist()
+    return occupancy
 
 
 def test_unknown_programs_are_404_and_pages_are_bounded(live: Live):

@@ -22,7 +22,10 @@ from websockets.typing import Subprotocol
 
 from bwsd.api.auth import LOGINS
 from bwsd.api.doors import OVERFLOW, Doors
-from tests.api.conftest import WAIT, Live, Mock, start_live
+from tests.api.conftest import WAIT, Live, start_live
+from tests.support.fieldbus import Mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 AUTH = [Subprotocol("bwsd.auth")]
 DOORS = Doors(max_connections=64, max_connections_per_client=3, body_timeout=0.5)

@@ -33,7 +33,7 @@ from bwsd.journal import Journal
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.support.fieldbus import Mock, client_config, start_mock
 
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
 TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
@@ -166,8 +166,10 @@ def _refuse_writes(journal: Journal, refused: bool) -> None:
     own connection, the one the daemon writes with: SQLite then refuses every write, as a
     full disk refuses the writes that need room (``query_only``; a limit on its pages would
     still take the records that fit in the room its pages have left)."""
-    with journal._mutex:  # type: ignore[attr-defined]  # fault injection into the real file
-        journal._conn.execute(f"PRAGMA query_only = {int(refused)}")  # type: ignore[attr-defined]
+    with journal._mutex:  # fault injection into the real file
+        conn = journal._conn
+        assert conn is not None  # the journal is open
+        conn.execute(f"PRAGMA query_only = {int(refused)}")
 
 
 def _raise_once(ctl: Controller) -> None:
@@ -175,10 +177,10 @@ def _raise_once(ctl: Controller) -> None:
     real = ctl.bus.state
 
     async def state() -> Any:
-        ctl.bus.state = real  # type: ignore[method-assign]
+        ctl.bus.state = real  # type: ignore[method-assign]  # the real read again
         raise RuntimeError("injected: an error nothing expects")
 
-    ctl.bus.state = state  # type: ignore[method-assign]
+    ctl.bus.state = state  # type: ignore[method-assign]  # the fault, injected once
 
 
 # ----- one cell -----

@@ -19,7 +19,9 @@ from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.controller.matrix import Rig, complete, resume
-from tests.controller.test_runner import bits, run
+from tests.support.controller import bits, run, state_now
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 SLOW = {"stroke_speed": 10.0, "takeup_speed": 10.0}  # a 10 mm stroke: 1 s out, 1 s back
 SHIFTS = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\n"
@@ -51,6 +53,7 @@ def test_abort_and_stop_cut_the_stroke_at_once_and_the_part_resumes(tmp_path, co
         ctl = await rig.start()
         try:
             await ctl.load("shifts.bws", TEXT)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             await ctl.command(Command.START)
             await half_way(rig)
@@ -90,11 +93,11 @@ def test_an_abort_is_not_queued_behind_a_hold_that_waits_for_its_stroke(tmp_path
             await asyncio.sleep(0.05)
             assert ctl.packml.state is State.HOLDING and not holding.done()
             await ctl.command(Command.ABORT, "by the PLC", "plc")  # the Hold holds the lock
-            assert ctl.packml.state is State.ABORTED
+            assert state_now(ctl) is State.ABORTED
             row1 = (await loom(rig))["axes"]["row1"]
             assert row1["fault"] == FAULT_STALL and 0 < row1["position"] < 10_000, row1
             await holding  # the Hold ends too, where the Abort led
-            assert ctl.packml.state is State.ABORTED
+            assert state_now(ctl) is State.ABORTED
         finally:
             await rig.close()
 

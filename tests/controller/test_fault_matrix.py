@@ -14,7 +14,9 @@ from bwsd.controller.packml import Command, State
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from tests.controller.matrix import FAULTS, STATES, TEXT, Rig, complete, resume, run_cell
-from tests.controller.test_runner import bits
+from tests.support.controller import bits
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 @pytest.mark.parametrize("state", STATES, ids=lambda s: s.label)

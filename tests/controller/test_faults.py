@@ -24,12 +24,15 @@ from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State
 from bwsd.controller.status import Event, Fault, InstructionDone, StopCause
 from bwsd.errors import BwsdError
+from bwsd.fieldbus.base import BoolGrid
 from bwsd.journal.writer import ROUTINE
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
-from tests.controller.test_runner import TEXT, bits, controller, run
-from tests.fieldbus.conftest import Mock, start_mock
+from tests.support.controller import TEXT, bits, controller, run, state_now
+from tests.support.fieldbus import Mock, start_mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 FILL = [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
 
@@ -55,12 +58,12 @@ def after(ctl: Controller, index: int, action: Any) -> None:
     ctl.events.subscribe(hook)
 
 
-async def machine_occupancy(mock: Mock) -> np.ndarray:
+async def machine_occupancy(mock: Mock) -> BoolGrid:
     answer = await request("127.0.0.1", mock.ports["control"], {"cmd": "state"})
     return np.array(answer["occupancy"], dtype=bool)
 
 
-FAULTS = {
+FAULTS: dict[str, tuple[dict[str, Any], str]] = {
     # the bus stops answering before instruction 2: it times out, nothing moved
     "mute": ({"cmd": "fault", "kind": "mute"}, "no answer"),
     # every connection drops once: the next request fails, the move did not start
@@ -75,6 +78,7 @@ def test_every_fault_hold_resumes_to_complete_with_the_predicted_skeleton(mock, 
     async def scenario() -> None:
         ctl, journal, events = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         loom = [mock]
         if kind == "restarted loom":
@@ -96,7 +100,7 @@ def test_every_fault_hold_resumes_to_complete_with_the_predicted_skeleton(mock, 
         try:
             await ctl.command(Command.UNHOLD)
             await ctl.wait()
-            assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+            assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
             whole = simulate(ctl.machine, parse_program(TEXT))
             assert bits(ctl.twin) == bits(whole)
             record = journal.program(pid)
@@ -115,6 +119,7 @@ def test_a_hold_whose_fault_persists_stays_held_with_the_reason(mock, tmp_path):
     async def scenario() -> None:
         ctl, _, _ = await controller(mock, tmp_path)
         await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         after(ctl, 1, lambda: poke(mock, FAULTS["mismatch"][0]))
         await ctl.command(Command.START)
@@ -132,7 +137,7 @@ def test_a_hold_whose_fault_persists_stays_held_with_the_reason(mock, tmp_path):
         poke(mock, {"cmd": "clear"})
         await ctl.command(Command.UNHOLD)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE
+        assert state_now(ctl) is State.COMPLETE
         await ctl.close()
 
     run(scenario())
@@ -148,10 +153,16 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
         ctl, journal, _events = await controller(mock, tmp_path)
         await ctl.start()
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         other = sqlite3.connect(journal.path, isolation_level=None, check_same_thread=False)
         locked: list[float] = []
-        after(ctl, 3, lambda: (other.execute("BEGIN IMMEDIATE"), locked.append(time.monotonic())))
+
+        def lock() -> None:
+            other.execute("BEGIN IMMEDIATE")
+            locked.append(time.monotonic())
+
+        after(ctl, 3, lock)
         faults: list[tuple[float, Fault]] = []
         ctl.events.subscribe(
             lambda e: faults.append((time.monotonic(), e)) if isinstance(e, Fault) else None
@@ -175,7 +186,7 @@ def test_a_journal_locked_mid_run_holds_the_part_and_unhold_finishes_it(mock, tm
             await asyncio.sleep(0.05)
         await ctl.command(Command.UNHOLD)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+        assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
         assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))
         # the state history is written behind the run, in order: wait for what is queued
         await ctl.recorder.writer.queue(ROUTINE, lambda: None)
@@ -217,6 +228,7 @@ def test_with_the_estop_pressed_reset_and_start_are_refused_and_nothing_is_consu
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         control = ("127.0.0.1", mock.ports["control"])
         await request(*control, {"cmd": "estop", "pressed": True})
         with pytest.raises(ControllerError, match="emergency stop is pressed"):
@@ -228,12 +240,12 @@ def test_with_the_estop_pressed_reset_and_start_are_refused_and_nothing_is_consu
         await request(*control, {"cmd": "estop", "pressed": True})
         with pytest.raises(ControllerError, match="emergency stop is pressed"):
             await ctl.command(Command.START)
-        assert ctl.packml.state is State.IDLE
+        assert state_now(ctl) is State.IDLE
         assert journal.program(pid).outcome == "loaded" and ctl.twin.done == 0
         await request(*control, {"cmd": "estop", "pressed": False})
         await ctl.command(Command.START)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE
+        assert state_now(ctl) is State.COMPLETE
         await ctl.close()
 
     run(scenario())
@@ -243,6 +255,7 @@ def test_suspend_is_journaled_suspended_with_its_reason(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         await ctl.command(Command.START)
         while ctl.twin.done < 2:
@@ -255,7 +268,7 @@ def test_suspend_is_journaled_suspended_with_its_reason(mock, tmp_path):
         assert Command.UNSUSPEND in ctl.status().allowed  # the machine shows the twin
         await ctl.command(Command.UNSUSPEND)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE
+        assert state_now(ctl) is State.COMPLETE
         await ctl.close()
 
     run(scenario())

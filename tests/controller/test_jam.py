@@ -11,7 +11,9 @@ from bwsd.controller.facade import Controller
 from bwsd.fieldbus import open_bus
 from bwsd.journal import Journal
 from simulator_hw.control import request
-from tests.fieldbus.conftest import client_config
+from tests.support.fieldbus import client_config
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 # The mock loom's four cases (1, 1), (1, 2), (2, 1), (2, 2) wound round each other with no
 # take-up: the contacts climb to the guides and an instruction jams.

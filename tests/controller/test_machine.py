@@ -18,6 +18,7 @@ from bwsd.fieldbus.base import (
 def test_whether_the_machine_is_lost_is_decided_by_the_error_not_its_words():
     events: list[Any] = []
     worse: list[tuple[Any, Any]] = []
+    # no bus: only how the view judges the errors is under test
     view = MachineView(None, events.append, lambda old, new: worse.append((old, new)))  # type: ignore[arg-type]
     answered = [
         BusHeld("another client holds the loom: pid 7 (claim id 1234abcd)"),

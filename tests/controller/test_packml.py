@@ -408,6 +408,7 @@ def apply(packml: PackML, step: Command | UnitMode | str) -> bool:
     return True
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(start=st.sampled_from(list(State)), run=st.lists(steps, max_size=60))
 def test_random_runs_keep_invariants(start: State, run: list[Command | UnitMode | str]):

@@ -18,7 +18,7 @@ from bwsd.controller.plan import (
     verify,
 )
 from bwsd.fieldbus.base import AxisMove, AxisState, MachineState
-from bwsd.twin import Machine, Shift, TakeUp, Twin, Weft
+from bwsd.twin import Machine, Prediction, Shift, TakeUp, Twin, Weft
 
 MACHINE = Machine(rows=2, cols=2, pitch_x=10, pitch_y=12.5, d_mat=100, c_mat=0.5)
 FILL = [(0, 0), (1, 1)]
@@ -66,7 +66,7 @@ def test_misplaced_names_each_placing_axis_off_the_weft():
     assert misplaced(MACHINE, weft, off, 10) == "weft_z at 30011, the weft's 30000"
 
 
-def _busy_prediction():
+def _busy_prediction() -> Prediction:
     """A prediction of the shipped 8-carrier braid that makes at least two contacts."""
     from pathlib import Path
 

@@ -2,24 +2,23 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from bwsd.config import parse_config
 from bwsd.controller.plan import misplaced, placing
 from bwsd.controller.recovery import Before, settle
 from bwsd.fieldbus.axes import axis_by_name, machine_axes
-from bwsd.fieldbus.base import AxisState, MachineState
+from bwsd.fieldbus.base import AxisState, BoolGrid, MachineState
 from bwsd.program import parse_program
-from bwsd.twin import Twin
-from tests.fieldbus.conftest import MACHINE
+from bwsd.twin import Twin, Weft
+from tests.support.fieldbus import MACHINE
 
 TEXT = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nWEFT x=15 y=-5 z=2 angle=0 length=20\n"
 M = parse_config({"machine": MACHINE}).machine
 INSERT = axis_by_name(M, "weft_insert").index
 
 
-def machine(occupancy: np.ndarray, insert_strokes: int | None, fault: int = 0) -> MachineState:
+def machine(occupancy: BoolGrid, insert_strokes: int | None, fault: int = 0) -> MachineState:
     axes = [AxisState(0, False, 0, 0, 0, 0) for _ in range(11)]
     axes[INSERT] = AxisState(0, False, 3, fault, 20_000, insert_strokes)
     return MachineState(tuple(axes), occupancy, False)
@@ -66,6 +65,7 @@ def test_a_weft_inserted_with_the_inserter_off_its_place_is_blocked():
     program = parse_program(TEXT)
     twin = Twin(M, program.fill)
     weft = program.instructions[0]
+    assert isinstance(weft, Weft)
     pred = twin.predict(weft)
     at_rest = twin.occupancy >= 0
     placed = {m.axis: m.target for m in placing(M, weft)}

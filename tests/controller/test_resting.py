@@ -16,8 +16,10 @@ from bwsd.controller.packml import Command, State
 from bwsd.controller.status import StopCause
 from bwsd.journal import Journal
 from tests.controller.matrix import TEXT, Rig, _refuse_writes
-from tests.controller.test_runner import controller, run
-from tests.fieldbus.conftest import MACHINE
+from tests.support.controller import controller, run, state_now
+from tests.support.fieldbus import MACHINE
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 def test_a_restart_restores_a_loaded_program_with_its_cause(mock, tmp_path):
@@ -42,7 +44,7 @@ def test_a_restart_restores_a_loaded_program_with_its_cause(mock, tmp_path):
         await second.command(Command.RESET)
         await second.command(Command.START)
         await second.wait()
-        assert second.packml.state is State.COMPLETE
+        assert state_now(second) is State.COMPLETE
         await second.close()
         await first.bus.close()
         journal.close()
@@ -54,6 +56,7 @@ def test_a_restart_after_an_abort_restores_it_resumable(mock, tmp_path):
     async def scenario() -> None:
         first, journal, _ = await controller(mock, tmp_path)
         await first.load("braid.bws", TEXT)
+        assert first.twin is not None
         await first.command(Command.RESET)
         await first.command(Command.START)
         while first.twin.done < 3:
@@ -65,6 +68,7 @@ def test_a_restart_after_an_abort_restores_it_resumable(mock, tmp_path):
         journal = Journal.open(journal.path)
         second = Controller(first.machine, first.bus, journal)
         said = await second.recover()
+        assert second.twin is not None
         assert second.packml.state is State.ABORTED and second.twin.done == done
         assert "was aborted (jam cleared by hand)" in said and "Start with resume" in said
         assert second.resumable()
@@ -72,7 +76,7 @@ def test_a_restart_after_an_abort_restores_it_resumable(mock, tmp_path):
             await second.command(command)
         await second.command(Command.START, resume=True)
         await second.wait()
-        assert second.packml.state is State.COMPLETE and journal.program(1).done == 15
+        assert state_now(second) is State.COMPLETE and journal.program(1).done == 15
         await second.close()
         await first.bus.close()
         journal.close()
@@ -90,6 +94,7 @@ def test_a_recovery_that_cannot_complete_holds_with_the_fix_and_abort_ends_it(
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         await ctl.command(Command.START)
         while ctl.twin.done < 3:
@@ -119,12 +124,12 @@ def test_a_recovery_that_cannot_complete_holds_with_the_fix_and_abort_ends_it(
         with pytest.raises(ControllerError, match="recovery failed"):
             await again.command(Command.UNHOLD)
         await again.command(Command.ABORT)
-        assert again.packml.state is State.ABORTED and again.health() == {}
+        assert state_now(again) is State.ABORTED and again.health() == {}
         record = journal.program(pid)
         assert (record.outcome, record.done) == ("aborted", held)  # its journal is kept
         assert [i.index for i in journal.instructions(pid)] == list(range(1, held + 1))
         await again.command(Command.CLEAR)
-        assert again.packml.state is State.STOPPED
+        assert state_now(again) is State.STOPPED
         await again.close()
         await ctl.bus.close()
         journal.close()
@@ -161,7 +166,7 @@ def test_the_reads_at_rest_outlive_a_journal_that_cannot_write_and_see_the_estop
             _refuse_writes(rig.journal, False)
             await ctl.command(Command.UNHOLD)
             await ctl.wait()
-            assert ctl.packml.state is State.COMPLETE
+            assert state_now(ctl) is State.COMPLETE
             assert rig.journal.program(1).done == 15
         finally:
             await rig.close()

@@ -23,8 +23,10 @@ from bwsd.journal import Journal
 from bwsd.program import parse_program
 from bwsd.twin import Shift, simulate
 from tests.controller.test_faults import after, machine_occupancy, poke
-from tests.controller.test_runner import bits, run
-from tests.fieldbus.conftest import Mock, client_config, start_mock
+from tests.support.controller import bits, run, state_now
+from tests.support.fieldbus import Mock, client_config, start_mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 MACHINE = {
     "rows": 8,
@@ -84,6 +86,7 @@ def test_a_program_with_segment_moves_runs_to_complete(segment_mock, tmp_path, b
         ctl, journal = await segment_controller(segment_mock, tmp_path, backend)
         try:
             pid = await ctl.load("l-section.bws", TEXT)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             await ctl.command(Command.START)
             await ctl.wait()
@@ -113,6 +116,7 @@ def test_a_shift_cut_before_its_segment_moved_finishes_with_the_segment_alone(
         ctl, journal = await segment_controller(segment_mock, tmp_path, "modbus")
         try:
             pid = await ctl.load("l-section.bws", TEXT)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             after(ctl, 2, lambda: poke(segment_mock, {"cmd": "fault", "kind": "mute"}))
             await ctl.command(Command.START)
@@ -126,7 +130,7 @@ def test_a_shift_cut_before_its_segment_moved_finishes_with_the_segment_alone(
                 await ctl.bus.execute(step)
             await ctl.command(Command.UNHOLD)
             await ctl.wait()
-            assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+            assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
             assert "pending instruction 3: finish" in caplog.text
             assert (journal.program(pid).outcome, journal.program(pid).done) == ("complete", COUNT)
             assert bits(ctl.twin) == bits(simulate(ctl.machine, parse_program(TEXT)))

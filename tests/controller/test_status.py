@@ -7,7 +7,7 @@ import pytest
 from bwsd.config import parse_config
 from bwsd.controller.packml import State
 from bwsd.controller.plan import Mismatch, RefusedMove
-from bwsd.controller.status import EventStream, Fault, StateChanged, StopCause, cause_of
+from bwsd.controller.status import Event, EventStream, Fault, StateChanged, StopCause, cause_of
 from bwsd.errors import MoveError, TwinError
 from bwsd.fieldbus.axes import machine_axes
 from bwsd.fieldbus.base import (
@@ -21,7 +21,7 @@ from bwsd.fieldbus.base import (
     FieldbusTimeout,
 )
 from bwsd.plc import StopReason
-from tests.fieldbus.conftest import MACHINE
+from tests.support.fieldbus import MACHINE
 
 AXIS = machine_axes(parse_config({"machine": MACHINE}).machine)[5]
 
@@ -54,7 +54,8 @@ def test_the_plc_stop_reason_codes_are_the_causes():
 
 
 def test_a_failing_subscriber_is_logged_and_the_others_still_hear(caplog):
-    stream, heard = EventStream(), []
+    stream = EventStream()
+    heard: list[Event] = []
 
     def broken(event):
         raise RuntimeError("subscriber bug")

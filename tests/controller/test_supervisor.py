@@ -6,13 +6,17 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+from collections.abc import Awaitable
+from typing import TypeVar
 
 import pytest
 
 from bwsd.controller.supervisor import Supervisor
 
+T = TypeVar("T")
 
-def run(coro):  # type: ignore[no-untyped-def]
+
+def run(coro: Awaitable[T]) -> T:
     return asyncio.run(asyncio.wait_for(coro, 30))
 
 
@@ -38,6 +42,7 @@ def test_a_failed_task_is_logged_with_its_traceback_reported_and_down(caplog):
     assert record.exc_info is not None  # the traceback is in the log
 
 
+@pytest.mark.slow
 def test_a_restartable_task_comes_back_with_backoff_and_is_up_again():
     starts: list[float] = []
 

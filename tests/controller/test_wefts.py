@@ -39,8 +39,10 @@ from bwsd.twin import Twin, Weft, simulate
 from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_faults import after, poke
-from tests.controller.test_runner import bits
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
+from tests.support.controller import bits, state_now
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 Point = tuple[int, int, int]
 Ends = tuple[Point, Point]
@@ -155,6 +157,7 @@ def test_every_weft_lands_where_the_twin_put_it(loom, tmp_path, backend, generat
         ctl = await controller(loom, tmp_path, backend, generated)
         try:
             await ctl.load("wefts.bws", generated.program)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             await ctl.command(Command.START)
             await ctl.wait()
@@ -186,6 +189,7 @@ def test_a_weft_axis_fault_holds_and_unhold_resumes_to_the_predicted_skeleton(
         ctl = await controller(loom, tmp_path, backend, generated)
         try:
             await ctl.load("wefts.bws", generated.program)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             # a weft placed away from where the weft before left the inserter: it must move
             after(ctl, later - 1, lambda: poke(loom, {"cmd": "fault", "kind": kind, "axis": axis}))
@@ -201,7 +205,7 @@ def test_a_weft_axis_fault_holds_and_unhold_resumes_to_the_predicted_skeleton(
             poke(loom, {"cmd": "clear"})  # the cause is gone; a latched fault stays
             await ctl.command(Command.UNHOLD)
             await ctl.wait()
-            assert ctl.packml.state is State.COMPLETE, ctl.packml.reason
+            assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
             assert bits(ctl.twin) == bits(simulate(ctl.machine, program))
             made = (await loom_state(loom))["wefts"]
             assert same_wefts(made, ctl.twin, program) > 0  # each in once, where predicted
@@ -246,6 +250,7 @@ def test_on_map_2_a_weft_goes_in_at_the_fixed_position_and_one_elsewhere_is_refu
             with pytest.raises(ProgramError, match=said):
                 await ctl.load("elsewhere.bws", elsewhere)
             await ctl.load("there.bws", there)
+            assert ctl.twin is not None
             await ctl.command(Command.RESET)
             await ctl.command(Command.START)
             await ctl.wait()

@@ -10,11 +10,14 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import numpy.typing as npt
 
-from bwsd.twin.skeleton import SkeletonData
+from bwsd.twin.skeleton import FloatArray, IntArray, SkeletonData
+
+BoolArray = npt.NDArray[np.bool_]
 
 
-def fixed_segments(sk: SkeletonData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def fixed_segments(sk: SkeletonData) -> tuple[FloatArray, FloatArray, IntArray, BoolArray]:
     """Start, end and yarn of every fixed segment of positive length, and whether both its
     nodes are contact nodes."""
     made = {n for c in sk.contacts for n in (c.moving_node, c.hit_node)}
@@ -33,7 +36,7 @@ def fixed_segments(sk: SkeletonData) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 def sample_depths(
     sk: SkeletonData, step: float, low: float = -np.inf, high: float = np.inf, between: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[FloatArray, FloatArray, IntArray]:
     """Per sample of the yarn between heights ``low`` and ``high`` (with ``between``: on
     segments from contact node to contact node only): its weight (length), its overlap depth
     (0 where none) and its yarn. Distances are to every fixed segment of another yarn. (Only
@@ -67,7 +70,7 @@ def sample_depths(
     return weight, np.maximum(d - least, 0.0), yarn
 
 
-def percentile(values: np.ndarray, weights: np.ndarray, share: float) -> float:
+def percentile(values: FloatArray, weights: FloatArray, share: float) -> float:
     """The least value that ``share`` of the weight does not exceed."""
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal, NotRequired, TypedDict
 
 import numpy as np
 import pytest
@@ -17,16 +18,25 @@ MACHINE = Machine(
 Point = tuple[float, float, float]
 
 
-def warp(nodes: Sequence[Point], cell: tuple[int, int] = (0, 0)) -> dict[str, object]:
+class YarnSpec(TypedDict):
+    """One yarn to build: a warp has its cell, a weft its angle."""
+
+    kind: Literal["warp", "weft"]
+    nodes: Sequence[Point]
+    cell: NotRequired[tuple[int, int]]
+    angle: NotRequired[float]
+
+
+def warp(nodes: Sequence[Point], cell: tuple[int, int] = (0, 0)) -> YarnSpec:
     return {"kind": "warp", "nodes": nodes, "cell": cell}
 
 
-def weft(nodes: Sequence[Point], angle: float = 0.0) -> dict[str, object]:
+def weft(nodes: Sequence[Point], angle: float = 0.0) -> YarnSpec:
     return {"kind": "weft", "nodes": nodes, "angle": angle}
 
 
 def build(
-    yarns: Sequence[dict[str, object]],
+    yarns: Sequence[YarnSpec],
     contacts: Sequence[tuple[int, int, int, int, int]] = (),
     *,
     diameter: float = 1.0,

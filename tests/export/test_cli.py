@@ -120,6 +120,7 @@ def test_metrics_json_of_the_worked_example(files, capsys):
     assert sum(result["cycles"]["counts"]) == 15
 
 
+@pytest.mark.slow
 def test_slice_of_the_worked_example(files, capsys):
     out = files / "cut.png"
     status = run(

@@ -9,6 +9,8 @@ import pytest
 from bwsd.export.footprint import Grid, disc_rows, disc_samples
 from bwsd.twin import Machine
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 @pytest.mark.parametrize("diameter", [0.5, 1.0, 1.5])
 def test_runs_hold_every_sample_within_the_radius_and_no_other(diameter):

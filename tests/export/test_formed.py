@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from functools import cache
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ TAKEUPS = (2.0, 4.0, 8.0, 16.0)
 
 
 @cache
-def braid(takeup: float, cycles: int, rows: int = 3) -> dict:
+def braid(takeup: float, cycles: int, rows: int = 3) -> dict[str, Any]:
     """``bwsd metrics`` of a rectangular 4-step braid with a 0.5 mm yarn."""
     generated = GENERATORS["braid4"](rows, rows, cycles=cycles, takeup=takeup, diameter=0.5)
     program = parse_program(generated.program)
@@ -67,6 +68,7 @@ def test_surface_yarns_run_at_a_smaller_angle_than_interior_ones():
 def _zone(stem: str):
     generated = EXAMPLES[stem]()
     program = parse_program(generated.program)
+    assert program.cycle_length is not None  # the generated examples repeat a cycle
     sk = simulate(generated.machine, program).skeleton()
     arrays = Arrays.of(sk)
     guides = guide_heights(generated.machine.d_mat, takeups_of(program))

@@ -70,5 +70,6 @@ def test_three_heights_of_the_formed_zone_or_none():
     )
     arrays = Arrays.of(sk)
     heights = volume_fraction(arrays, Zone((10.0, 30.0), (2, 3), 4, ()))
+    assert heights is not None
     assert [h["z"] for h in heights] == [15.0, 20.0, 25.0]
     assert volume_fraction(arrays, Zone(None, None, 2, (), "too short")) is None

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,21 +14,24 @@ from bwsd.export.angles import skeleton_angles
 from bwsd.export.arrays import Arrays
 from bwsd.export.errors import ExportError
 from bwsd.export.metrics import contact_zone, contacts_per_cycle, metrics, section, weft_contacts
+from bwsd.twin.skeleton import SkeletonData
 
-from .conftest import build, warp, weft
+from .conftest import Point, build, warp, weft
 
 
-def inclined(start, degrees, lengths, azimuth=0.0):
+def inclined(
+    start: Point, degrees: float, lengths: Sequence[float], azimuth: float = 0.0
+) -> list[Point]:
     """Nodes of a polyline leaving ``start`` at ``degrees`` to +z, one segment per length."""
     a, b = math.radians(degrees), math.radians(azimuth)
     step = np.array([math.sin(a) * math.cos(b), math.sin(a) * math.sin(b), math.cos(a)])
     points = [np.array(start, float)]
     for length in lengths:
         points.append(points[-1] + length * step)
-    return [tuple(p) for p in points]
+    return [(float(p[0]), float(p[1]), float(p[2])) for p in points]
 
 
-def angles(sk):
+def angles(sk: SkeletonData) -> dict[str, dict[str, Any]]:
     """The whole skeleton's angles per family."""
     return skeleton_angles(Arrays.of(sk))
 
@@ -85,6 +90,7 @@ def test_section_uses_fixed_nodes_in_the_middle_half_of_the_contact_zone():
     )
     assert contact_zone(sk) == (0.0, 30.0)
     s = section(sk)
+    assert s is not None
     assert s["z"] == [7.5, 22.5]
     # in the band: (0,0,10) (1,0,14) (3,0,16) (0,5,20) and both weft ends; not the free
     # node (0,18,19) nor (0,2,0) (-9,9,30)

@@ -9,6 +9,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -115,12 +116,15 @@ def l_program(tmp_path: Path, *, header: str = "# section: L:1x3:2x1\n", third: 
     return str(tmp_path / "l.bws"), str(tmp_path / "l.toml")
 
 
-def run_json(capsys, program: str, config: str, *args: str) -> dict:
+def run_json(
+    capsys: pytest.CaptureFixture[str], program: str, config: str, *args: str
+) -> dict[str, Any]:
     assert main(["metrics", program, "--config", config, "--json", *args]) == 0
-    return json.loads(capsys.readouterr().out)
+    result: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return result
 
 
-def run_error(capsys, *args: str) -> str:
+def run_error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
     assert main(["metrics", *args]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
@@ -236,8 +240,10 @@ def test_the_option_overrides_the_section_line_and_neither_is_fine(tmp_path, cap
 
 
 def test_section_line_rules():
-    assert section_header("YARN diameter=1\n#Section :rect:2x2  (the body)\n").line == 2
-    assert section_header("  #  section: T:2x8:4x2@1,2\n").section.spec == "T:2x8:4x2"
+    header = section_header("YARN diameter=1\n#Section :rect:2x2  (the body)\n")
+    assert header is not None and header.line == 2
+    named = section_header("  #  section: T:2x8:4x2@1,2\n")
+    assert named is not None and named.section.spec == "T:2x8:4x2"
     assert section_header("ROW 1:+1  # section: rect:1x1\n# sections: rect:1x1\n") is None
     with pytest.raises(
         ProgramError, match=r"p\.bws:3:1: a second '# section:' line \(the first is line 1\)"
@@ -247,6 +253,7 @@ def test_section_line_rules():
         section_header("FILL\n# section: L:2x6\n", "p.bws")
 
 
+@pytest.mark.slow
 def test_bad_section_text_is_one_line_from_the_console_script(braid):
     assert BWSD, "the bwsd console script is not installed beside this Python"
     done = subprocess.run(
@@ -335,7 +342,9 @@ def test_a_rect_braid_fills_more_of_its_square_where_it_is_formed(braid):
     the start edge has exactly the 4 body yarns inside."""
     sk, _ = simulate_program(braid[1], braid[0])
     shape = parse_section("rect:2x2")
-    low, high = section(sk)["z"]
+    band = section(sk)
+    assert band is not None
+    low, high = band["z"]
     for z in np.linspace(low, high, 33):
         result = footprint(sk, float(z), shape)
         covered = result["coverage"] * result["nominal"]["area"]
@@ -383,6 +392,7 @@ def test_tables_show_groups_mixing_and_footprint(tmp_path, capsys, braid):
     assert metrics(simulate_program(braid[1], braid[0])[0], None)["footprint"] is None
 
 
+@pytest.mark.slow
 def test_metrics_with_section_and_height_needs_no_extra(tmp_path, braid):
     """The console script with VTK, pytexgen and matplotlib unimportable."""
     assert BWSD, "the bwsd console script is not installed beside this Python"

@@ -7,16 +7,18 @@ import math
 import re
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from bwsd.config import load_config
 from bwsd.export.arrays import Arrays
-from bwsd.export.formed import Pieces, find_zone, guide_heights, pieces, takeups_of
+from bwsd.export.formed import Pieces, Zone, find_zone, guide_heights, pieces, takeups_of
 from bwsd.export.overlap import interpenetration
 from bwsd.program import load_program
 from bwsd.twin import simulate
+from bwsd.twin.skeleton import FloatArray, SkeletonData
 
 from .brute import percentile, sample_depths
 from .conftest import build, warp, weft
@@ -25,8 +27,9 @@ ROOT = Path(__file__).resolve().parents[2]
 NONE = Pieces(np.zeros(0), np.zeros(0), np.zeros(0))
 
 
-def _whole(sk) -> dict:
-    return interpenetration(Arrays.of(sk), NONE)["skeleton"]
+def _whole(sk: SkeletonData) -> dict[str, Any]:
+    whole: dict[str, Any] = interpenetration(Arrays.of(sk), NONE)["skeleton"]
+    return whole
 
 
 def test_two_parallel_yarns_half_a_diameter_apart_overlap_along_their_common_length():
@@ -85,9 +88,10 @@ def _table() -> dict[str, dict[str, str]]:
 
 
 @cache
-def _example(stem: str):
+def _example(stem: str) -> tuple[SkeletonData, Zone, dict[str, Any]]:
     machine = load_config(ROOT / "config" / f"{stem}.toml").machine
     program = load_program(ROOT / "examples" / f"{stem}.bws", machine)
+    assert program.cycle_length is not None  # every example declares its cycle
     sk = simulate(machine, program).skeleton()
     arrays = Arrays.of(sk)
     zone = find_zone(
@@ -101,6 +105,7 @@ def test_the_docs_list_every_example_but_the_largest():
     assert sorted(_table()) == [s for s in stems if s != "braid-24x24"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stem", sorted(_table()))
 def test_each_example_overlaps_as_the_docs_say_and_brute_force_finds(stem):
     """The figures of docs/exports.md are what the metric gives; a brute-force computation
@@ -123,7 +128,7 @@ def test_each_example_overlaps_as_the_docs_say_and_brute_force_finds(stem):
     _agree(formed, weight, depth, d)
 
 
-def _agree(found: dict, weight: np.ndarray, depth: np.ndarray, d: float) -> None:
+def _agree(found: dict[str, Any], weight: FloatArray, depth: FloatArray, d: float) -> None:
     over = depth > 0
     assert found["share"] == pytest.approx(weight[over].sum() / weight.sum(), abs=0.002)
     assert depth.max() - 1e-9 <= found["worst"] <= depth.max() + d / 32

@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
 
 import pytest
 
+from bwsd.export.crossings import Crossing, crossings
 from bwsd.export.errors import ExportError
-from bwsd.export.slice import bands, crossings, draw_slice
+from bwsd.export.slice import bands, draw_slice
 
 from .conftest import build, warp
 
 
-def xy(found):
+def xy(found: Iterable[Crossing]) -> list[tuple[int, float, float]]:
     return sorted((c.yarn, round(c.x, 12), round(c.y, 12)) for c in found)
 
 
@@ -84,6 +86,7 @@ def test_png(small, tmp_path):
     assert len(data) > 5_000
 
 
+@pytest.mark.slow
 def test_centreline_and_empty_slices(centreline, tmp_path):
     assert draw_slice(centreline, 50.0, tmp_path / "free.png") == 3
     assert draw_slice(centreline, -5.0, tmp_path / "empty.png") == 0

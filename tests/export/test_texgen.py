@@ -46,17 +46,20 @@ def test_file_content(small, tmp_path):
     yarns = list(textile.iter("Yarn"))
     assert len(yarns) == 4
     for y in yarns:
-        assert y.find("Interpolation").get("Periodic") == "0"
-        assert y.find("Interpolation").get("type") == "CInterpolationLinear"
+        interpolation = y.find("Interpolation")
+        assert interpolation is not None
+        assert interpolation.get("Periodic") == "0"
+        assert interpolation.get("type") == "CInterpolationLinear"
         section = y.find("YarnSection/Section")
+        assert section is not None
         assert section.get("type") == "CSectionEllipse"
-        assert float(section.get("Width")) == float(section.get("Height")) == 1.0
+        assert float(section.attrib["Width"]) == float(section.attrib["Height"]) == 1.0
 
 
 def test_zero_diameter_gets_a_tiny_section(centreline, tmp_path):
     path = tmp_path / "line.tg3"
     write_tg3(centreline, path)
-    widths = {float(s.get("Width")) for s in ET.parse(path).getroot().iter("Section")}
+    widths = {float(s.attrib["Width"]) for s in ET.parse(path).getroot().iter("Section")}
     assert widths == {ZERO_DIAMETER_SECTION}
 
 
@@ -74,6 +77,7 @@ def test_nothing_on_stdout(small, tmp_path, capfd):
     assert capfd.readouterr().out == ""
 
 
+@pytest.mark.slow
 def test_nothing_on_piped_stdout(tmp_path):
     """With stdout a pipe the C library buffers fully: the chatter must not leak later."""
     script = (

@@ -8,8 +8,10 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonDataModel import VTK_LINE, vtkUnstructuredGrid
@@ -21,28 +23,32 @@ from bwsd.export.vtk import KIND_CONTACT, KIND_SEGMENT, write_vtu
 
 from .conftest import build, warp, weft
 
+# VTK's arrays, as numpy_support gives them: the dtype is the VTK array's
+Array = npt.NDArray[Any]
+
 
 @dataclass
 class Block:
     type: str
-    data: np.ndarray
+    data: Array
 
 
 @dataclass
 class Mesh:
     """What a .vtu holds, read back by VTK's own reader, laid out by cell block."""
 
-    points: np.ndarray
+    points: Array
     cells: list[Block]
-    point_data: dict[str, np.ndarray]
-    cell_data: dict[str, list[np.ndarray]]
+    point_data: dict[str, Array]
+    cell_data: dict[str, list[Array]]
 
 
 def read_grid(path: Path) -> vtkUnstructuredGrid:
     reader = vtkXMLUnstructuredGridReader()
     reader.SetFileName(str(path))
     reader.Update()
-    return reader.GetOutput()
+    # VTK's stubs name GetOutput's type without importing it: mypy reads Any
+    return cast(vtkUnstructuredGrid, reader.GetOutput())
 
 
 def read_vtu(path: Path) -> Mesh:

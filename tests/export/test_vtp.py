@@ -7,6 +7,7 @@ import errno
 import os
 import subprocess
 import sys
+from typing import cast
 
 import numpy as np
 import pytest
@@ -25,7 +26,8 @@ def read_vtp(path) -> vtkPolyData:
     reader = vtkXMLPolyDataReader()
     reader.SetFileName(str(path))
     reader.Update()
-    poly = reader.GetOutput()
+    # VTK's stubs name GetOutput's type without importing it: mypy reads Any
+    poly = cast(vtkPolyData, reader.GetOutput())
     assert poly.GetNumberOfPoints() > 0, f"nothing read from {path}"
     return poly
 

@@ -41,7 +41,11 @@ def test_segment_axes_follow_the_take_up_in_the_order_declared():
 
 def test_the_weft_positioning_axes_come_last_and_only_those_the_machine_has():
     axes = machine_axes(SEGMENTED)
-    weft = [Axis(22 + i, f"weft_{a}", f"weft_{a}") for i, a in enumerate("xyz")]  # type: ignore[arg-type]
+    weft = [
+        Axis(22, "weft_x", "weft_x"),
+        Axis(23, "weft_y", "weft_y"),
+        Axis(24, "weft_z", "weft_z"),
+    ]
     assert axes[22:] == tuple(weft)
     assert not any(a.relative for a in axes[22:])  # absolute um
     without = machine_axes(dataclasses.replace(SEGMENTED, weft_axes=()))

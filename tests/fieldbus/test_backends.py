@@ -22,8 +22,9 @@ from bwsd.fieldbus import (
 from bwsd.fieldbus.axes import axis_by_name, shift_stroke_um
 from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_POSITION, FAULT_STALL
 from bwsd.twin import Shift, Twin
+from bwsd.twin.instructions import Axis
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, Mock, client_config, start_mock
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
 
 FILL = [(1, 1), (1, 2), (2, 1), (2, 2)]
 
@@ -58,9 +59,15 @@ def backend(request: pytest.FixtureRequest) -> str:
 
 
 class TestBackendContract:
+    @pytest.mark.slow
     def test_shifts_move_the_cases_as_the_twin_predicts(self, mock, backend):
         twin = Twin(client_config(backend, mock.ports).machine, FILL)
-        moves = [("row", 1, 1), ("col", 1, -1), ("row", 2, -1), ("col", 3, 1)]
+        moves: list[tuple[Axis, int, int]] = [
+            ("row", 1, 1),
+            ("col", 1, -1),
+            ("row", 2, -1),
+            ("col", 3, 1),
+        ]
 
         async def body(bus: Fieldbus) -> None:
             state = await bus.state()
@@ -77,6 +84,7 @@ class TestBackendContract:
 
         run(with_bus(mock, backend, body))
 
+    @pytest.mark.slow
     def test_absolute_axes_read_back_their_targets(self, mock, backend):
         async def body(bus: Fieldbus) -> None:
             takeup = axis_by_name(bus.machine, "takeup").index
@@ -91,6 +99,7 @@ class TestBackendContract:
 
         run(with_bus(mock, backend, body))
 
+    @pytest.mark.slow
     def test_a_case_pushed_off_the_matrix_is_a_jam(self, mock, backend):
         async def body(bus: Fieldbus) -> None:
             await bus.execute([stroke(bus, "row1", 1)])  # cols 1, 2 -> 2, 3
@@ -102,6 +111,7 @@ class TestBackendContract:
 
         run(with_bus(mock, backend, body))
 
+    @pytest.mark.slow
     @pytest.mark.parametrize(
         ("kind", "code"),
         [("stall", FAULT_STALL), ("drive", FAULT_DRIVE), ("wrong_position", FAULT_POSITION)],
@@ -115,6 +125,7 @@ class TestBackendContract:
 
         run(with_bus(slow_mock, backend, body))
 
+    @pytest.mark.slow
     def test_emergency_stop(self, slow_mock, backend):
         async def body(bus: Fieldbus) -> None:
             await control(slow_mock, {"cmd": "estop", "pressed": True})
@@ -128,6 +139,7 @@ class TestBackendContract:
 
         run(with_bus(slow_mock, backend, body))
 
+    @pytest.mark.slow
     def test_a_mute_loom_is_a_timeout_or_a_lost_node(self, mock, backend):
         async def body(bus: Fieldbus) -> None:
             await control(mock, {"cmd": "fault", "kind": "mute"})
@@ -137,6 +149,7 @@ class TestBackendContract:
 
         run(with_bus(mock, backend, body))
 
+    @pytest.mark.slow
     def test_a_dropped_connection_is_reported_then_reconnected(self, mock, backend):
         async def body(bus: Fieldbus) -> None:
             await bus.state()
@@ -150,6 +163,7 @@ class TestBackendContract:
 
         run(with_bus(mock, backend, body))
 
+    @pytest.mark.slow
     def test_reconnects_after_the_mock_loom_restarts(self, tmp_path, mock, backend):
         async def body(bus: Fieldbus) -> None:
             await bus.state()
@@ -204,6 +218,7 @@ async def loom_cells(mock: Mock) -> set[tuple[int, int]]:
 
 
 class TestSegmentAxes:
+    @pytest.mark.slow
     def test_the_segment_axes_follow_the_take_up_on_the_bus(self, segment_mock, backend):
         async def body(bus: Fieldbus) -> None:
             names = [axis.name for axis in bus.axes]
@@ -222,11 +237,17 @@ class TestSegmentAxes:
 
         run(with_segment_bus(segment_mock, backend, body))
 
+    @pytest.mark.slow
     def test_a_segment_stroke_moves_only_the_cases_on_the_segment(self, segment_mock, backend):
         twin = Twin(
             client_config(backend, segment_mock.ports, machine=SEGMENTED).machine, SEGMENT_FILL
         )
-        strokes = [("row", 1, 1), ("col", 2, 1), ("row", 1, -1), ("col", 2, -2)]
+        strokes: list[tuple[Axis, int, int]] = [
+            ("row", 1, 1),
+            ("col", 2, 1),
+            ("row", 1, -1),
+            ("col", 2, -2),
+        ]
 
         async def body(bus: Fieldbus) -> None:
             for kind, line, k in strokes:
@@ -242,6 +263,7 @@ class TestSegmentAxes:
 
         run(with_segment_bus(segment_mock, backend, body))
 
+    @pytest.mark.slow
     @pytest.mark.parametrize(
         ("name", "k"),
         [
@@ -270,6 +292,7 @@ WIDE = {**MACHINE, "rows": 24, "cols": 4}  # 24 row axes: a shift of every row i
 WIDE_FILL = "FILL row=0 col=1\n" + "XX\n" * 24 + "END\n"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("when", ["moving", "at rest"])
 def test_a_killed_loom_is_seen_at_once_not_after_each_requests_timeout(tmp_path, backend, when):
     """With a 30 s I/O timeout, a loom killed during a 24-line shift (or between moves) is

@@ -102,6 +102,7 @@ def occupied(state) -> set[tuple[int, int]]:
     return {(int(r), int(c)) for r, c in np.argwhere(state.occupancy)}
 
 
+@pytest.mark.slow
 def test_moves_read_back_and_shifts_move_the_cases():
     async def scenario() -> None:
         async with rig(speeds=Speeds(stroke=500, takeup=500, weft=3600)) as r:
@@ -122,6 +123,7 @@ def test_moves_read_back_and_shifts_move_the_cases():
     run(scenario)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fault", "axis", "target", "speeds", "code", "after_reset"),
     [
@@ -157,6 +159,7 @@ def test_each_injected_fault_is_a_drive_fault_with_its_code(
     run(scenario)
 
 
+@pytest.mark.slow
 def test_estop_refuses_moves_and_cuts_a_running_one():
     async def scenario() -> None:
         async with rig(speeds=Speeds(stroke=20)) as r:
@@ -176,6 +179,7 @@ def test_estop_refuses_moves_and_cuts_a_running_one():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_quick_stop_stalls_moving_axes_and_home_zeroes_the_sequences():
     async def scenario() -> None:
         async with rig(speeds=Speeds(stroke=20, takeup=1000)) as r:
@@ -193,6 +197,7 @@ def test_quick_stop_stalls_moving_axes_and_home_zeroes_the_sequences():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_mute_without_heartbeats_times_out_and_recovers():
     async def scenario() -> None:
         async with rig(heartbeat_ms=0) as r:
@@ -205,6 +210,7 @@ def test_mute_without_heartbeats_times_out_and_recovers():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_mute_is_a_lost_heartbeat_once_three_periods_passed():
     async def scenario() -> None:
         async with rig(heartbeat_ms=30) as r:
@@ -220,6 +226,7 @@ def test_mute_is_a_lost_heartbeat_once_three_periods_passed():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_a_dropped_connection_is_reported_once_then_reconnected():
     async def scenario() -> None:
         async with rig(heartbeat_ms=50) as r:
@@ -235,6 +242,7 @@ def test_a_dropped_connection_is_reported_once_then_reconnected():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_reconnects_after_the_hub_restarts_on_the_same_port():
     async def scenario() -> None:
         async with rig() as r:
@@ -265,6 +273,7 @@ def test_a_closed_port_is_a_connection_error():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_virtual_interface_in_one_process():
     async def scenario() -> None:
         loom = Loom(MACHINE, [(0, 0)], Speeds())
@@ -337,6 +346,7 @@ class Sniffer:
         return frames
 
 
+@pytest.mark.slow
 def test_a_shift_and_its_read_back_go_by_pdo_not_sdo():
     async def scenario() -> None:
         async with rig() as r:
@@ -361,6 +371,7 @@ def test_a_shift_and_its_read_back_go_by_pdo_not_sdo():
     run(scenario)
 
 
+@pytest.mark.slow
 def test_the_mapping_is_written_at_start_and_the_drives_send_what_it_says():
     async def scenario() -> None:
         async with rig() as r:

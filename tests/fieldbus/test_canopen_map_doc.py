@@ -24,7 +24,7 @@ from bwsd.fieldbus.cia402 import DRIVE_OBJECTS, Cia402, dictionary
 from bwsd.twin.machine import Machine, Segment
 from simulator_hw.control import request
 from tests.doc_tables import doc_table
-from tests.fieldbus.conftest import MACHINE, Mock, start_mock
+from tests.support.fieldbus import MACHINE, Mock, start_mock
 
 DOC = "fieldbus-canopen.md"
 DRIVES = doc_table(DOC, "axis", "node", "target (0x607A)", after="## Drives")
@@ -86,14 +86,19 @@ def mock(tmp_path: Path) -> Iterator[Mock]:
     running.stop()
 
 
+@pytest.mark.slow
 def test_a_live_loom_places_the_inserter_at_the_documented_nodes(mock):
     """Each positioning drive at its documented node: enabled, given an absolute target by
     SDO (0x607A, 0x2003, controlword 0x1F then 0x0F), it travels there and stays."""
     nodes = {name: node for node, name in documented_nodes(Machine(**MACHINE), 1).items()}
     network = canopen.Network()
     network.NOTIFIER_CYCLE = 0.05
-    for name in ("weft_x", "weft_y", "weft_z"):
-        network.add_node(canopen.RemoteNode(nodes[name], dictionary(DRIVE_OBJECTS)))
+    drives = {
+        name: canopen.RemoteNode(nodes[name], dictionary(DRIVE_OBJECTS))
+        for name in ("weft_x", "weft_y", "weft_z")
+    }
+    for drive in drives.values():
+        network.add_node(drive)
     port = mock.ports["socketcand"]
     network.connect(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
     try:
@@ -101,7 +106,7 @@ def test_a_live_loom_places_the_inserter_at_the_documented_nodes(mock):
         time.sleep(0.2)
         targets = {"weft_x": 36_000, "weft_y": -8_250, "weft_z": 30_000}
         for seq, (name, target) in enumerate(targets.items(), start=1):
-            move(network[nodes[name]], target, seq)
+            move(drives[name], target, seq)
         state = asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "state"}))
         assert {name: state["axes"][name]["position"] for name in targets} == targets
         assert not any(state["axes"][name]["busy"] for name in targets)

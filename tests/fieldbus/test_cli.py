@@ -6,18 +6,21 @@ import asyncio
 import shutil
 import subprocess
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from simulator_hw.control import request
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 BWSD = shutil.which("bwsd", path=str(Path(sys.executable).parent))
 
 
-def hw_config(tmp: Path, mock: Mock, backend: str, machine: dict[str, Any] = MACHINE) -> Path:
+def hw_config(tmp: Path, mock: Mock, backend: str, machine: Mapping[str, Any] = MACHINE) -> Path:
     path = tmp / f"{backend}.toml"
     path.write_text(
         toml(
@@ -25,7 +28,10 @@ def hw_config(tmp: Path, mock: Mock, backend: str, machine: dict[str, Any] = MAC
                 "machine": machine,
                 "fieldbus": {"backend": backend, **BUS},
                 "fieldbus.modbus": {"port": mock.ports["modbus"]},
-                "fieldbus.canopen": {"port": mock.ports["socketcand"], "heartbeat_ms": 50},
+                "fieldbus.canopen": {
+                    "port": mock.ports["socketcand"],
+                    "heartbeat_ms": HEARTBEAT_MS,
+                },
             }
         )
     )

@@ -24,7 +24,7 @@ from bwsd.fieldbus.axes import machine_axes
 from bwsd.twin.machine import Machine, Segment
 from simulator_hw.control import request
 from tests.doc_tables import DOCS, addresses, doc_table
-from tests.fieldbus.conftest import MACHINE, Mock, start_mock
+from tests.support.fieldbus import MACHINE, Mock, start_mock
 
 DOC = "fieldbus-modbus.md"
 MACHINE_BLOCK = {
@@ -171,6 +171,7 @@ async def registers(client: AsyncModbusTcpClient, address: int, count: int) -> l
     return list(answer.registers)
 
 
+@pytest.mark.slow
 def test_a_live_loom_answers_at_the_documented_addresses(any_map):
     mock, version = any_map
     base_at, stride = block()

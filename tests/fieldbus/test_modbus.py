@@ -212,6 +212,7 @@ def test_the_estop_refuses_moves_and_cuts_running_ones():
     on_loom(loom, test)
 
 
+@pytest.mark.slow
 def test_a_muted_loom_times_out_and_the_bus_recovers():
     loom = Loom(MACHINE, [], Speeds())
 

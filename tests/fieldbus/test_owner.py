@@ -10,8 +10,8 @@ import pytest
 from bwsd.fieldbus import open_bus
 from bwsd.fieldbus.base import BusHeld, owner_id
 from bwsd.fieldbus.owner import LOCK_NAME, BusLock, StateFolderError, holder, refuse_if_held
-from tests.fieldbus.conftest import client_config
 from tests.fieldbus.test_backends import run, stroke
+from tests.support.fieldbus import client_config
 
 
 def test_the_lock_names_its_holder_and_is_free_once_released(tmp_path: Path):
@@ -39,6 +39,7 @@ def test_a_missing_state_folder_holds_nothing(tmp_path: Path):
     assert holder(tmp_path / "none") is None
 
 
+@pytest.mark.slow
 def test_a_second_client_cannot_move_while_the_first_holds_the_loom(mock, backend):
     """The loom's own check: it works whatever state folder the second client uses."""
 

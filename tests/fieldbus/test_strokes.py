@@ -8,6 +8,8 @@ from bwsd.fieldbus import AxisMove, DriveFault, Fieldbus
 from bwsd.fieldbus.axes import axis_by_name
 from tests.fieldbus.test_backends import run, stroke, with_bus
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 @pytest.fixture(params=["modbus", "canopen"])
 def backend(request: pytest.FixtureRequest) -> str:

@@ -57,6 +57,7 @@ def no_nan(name: str) -> Any:
 # -- check ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_check_of_a_killed_writer_reads_the_log_and_changes_nothing(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -81,6 +82,7 @@ def test_check_of_a_killed_writer_reads_the_log_and_changes_nothing(
         assert program is not None and program.done == DONE
 
 
+@pytest.mark.slow
 def test_check_finds_a_lost_log(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -99,6 +101,7 @@ def test_check_finds_a_lost_log(
     assert files(path.parent) == before
 
 
+@pytest.mark.slow
 def test_check_of_a_clean_journal_with_a_held_program(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -125,6 +128,7 @@ def test_check_of_an_older_journal_upgrades_only_its_copy(
     assert files(path.parent) == before
 
 
+@pytest.mark.slow
 def test_check_reports_a_damaged_file(capsys: pytest.CaptureFixture[str], path: Path) -> None:
     with Journal.open(path) as j:
         pid = j.add_program("part.bws", "TAKEUP 1\n", 400)
@@ -177,6 +181,7 @@ def test_check_reports_a_file_that_is_no_journal(
     assert path.read_bytes() == content
 
 
+@pytest.mark.slow
 def test_check_of_a_journal_in_use_says_so_and_reset_refuses(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -195,6 +200,7 @@ def test_check_of_a_journal_in_use_says_so_and_reset_refuses(
     assert proc.poll() is None
 
 
+@pytest.mark.slow
 def test_check_of_a_journal_whose_log_is_deleted_while_in_use(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -207,6 +213,7 @@ def test_check_of_a_journal_whose_log_is_deleted_while_in_use(
     assert "Stop it cleanly (SIGTERM)" in problem
 
 
+@pytest.mark.slow
 def test_check_and_export_of_a_journal_being_written_see_one_sound_state(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, path: Path, writer: Writer
 ) -> None:
@@ -236,6 +243,7 @@ def restarts(path: Path) -> int:
 # -- export -----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_export_writes_json_lines_of_everything_and_changes_nothing(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, path: Path, writer: Writer
 ) -> None:
@@ -287,6 +295,7 @@ def test_export_never_writes_over_the_journal(
 # -- reset ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_reset_without_i_understand_says_what_it_would_do(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -303,6 +312,7 @@ def test_reset_without_i_understand_says_what_it_would_do(
     assert files(path.parent) == before
 
 
+@pytest.mark.slow
 def test_reset_moves_the_journal_aside_and_the_next_start_makes_a_new_one(
     capsys: pytest.CaptureFixture[str], path: Path, writer: Writer
 ) -> None:
@@ -379,6 +389,7 @@ def test_journal_with_config_is_an_error(capsys: pytest.CaptureFixture[str], pat
     assert status == 2 and err.startswith("bwsd: error: --journal names the file itself")
 
 
+@pytest.mark.slow
 def test_errors_are_one_line_without_a_traceback(tmp_path: Path) -> None:
     done = subprocess.run(
         [

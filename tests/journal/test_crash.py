@@ -24,6 +24,8 @@ import pytest
 
 from bwsd.journal import Journal
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 TOTAL = 1000
 KILLS = 30
 REACH = 25  # a killed writer pauses after this many instructions: KILLS * REACH < TOTAL

@@ -199,7 +199,8 @@ def test_outcomes_through_a_run(journal: Journal) -> None:
     journal.set_outcome(pid, "complete")
     rec = journal.program(pid)
     assert (rec.outcome, rec.done, rec.reason) == ("complete", 1, "")
-    assert rec.finished is not None and rec.finished > rec.started
+    assert rec.started is not None and rec.finished is not None
+    assert rec.finished > rec.started
     assert journal.active_program() is None
 
 
@@ -487,6 +488,7 @@ def test_usable_from_worker_threads(journal: Journal) -> None:
 STEPS = st.lists(st.tuples(st.sampled_from(["started", "done"]), st.integers(0, 6)), max_size=25)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(steps=STEPS)
 def test_accepts_exactly_the_ordered_steps(steps: list[tuple[str, int]]) -> None:

@@ -21,8 +21,8 @@ from bwsd.journal import SCHEMA_VERSION, Journal, JournalError
 from bwsd.journal import schema as journal_schema
 from bwsd.journal.files import main_file_session, wal_holds_a_commit
 from bwsd.journal.schema import APPLICATION_ID
-from tests.fieldbus.conftest import start_mock
 from tests.journal.conftest import DONE, TOTAL, downgrade, files
+from tests.support.fieldbus import start_mock
 from tests.test_daemon import LONG, Served, daemon_config
 
 Writer = Callable[[Path, str], subprocess.Popen[str]]
@@ -54,6 +54,7 @@ def resumes_at_27(path: Path) -> None:
         assert pending is not None and pending.index == DONE + 1
 
 
+@pytest.mark.slow
 def test_a_log_deleted_after_a_kill_is_refused_and_nothing_is_touched(
     path: Path, writer: Writer
 ) -> None:
@@ -73,6 +74,7 @@ def test_a_log_deleted_after_a_kill_is_refused_and_nothing_is_touched(
     resumes_at_27(path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["empty", "header", "zeros", "cut"])
 def test_a_log_emptied_or_garbled_after_a_kill_is_refused(
     path: Path, writer: Writer, kind: str
@@ -90,6 +92,7 @@ def test_a_log_emptied_or_garbled_after_a_kill_is_refused(
         Journal.open(path)
 
 
+@pytest.mark.slow
 def test_a_log_left_by_a_reader_of_the_bare_file_is_refused(path: Path, writer: Writer) -> None:
     """A read-only SQLite reader of the file without its log makes an empty one: still lost."""
     writer(path, "kill")
@@ -102,6 +105,7 @@ def test_a_log_left_by_a_reader_of_the_bare_file_is_refused(path: Path, writer: 
         Journal.open(path)
 
 
+@pytest.mark.slow
 def test_a_kill_with_the_log_intact_recovers(path: Path, writer: Writer) -> None:
     writer(path, "kill")
     resumes_at_27(path)
@@ -110,6 +114,7 @@ def test_a_kill_with_the_log_intact_recovers(path: Path, writer: Writer) -> None
     assert rows == [(1,), (0,), (1,)]  # killed, closed; this one is still open
 
 
+@pytest.mark.slow
 def test_a_clean_close_with_a_held_program_is_not_refused(path: Path, writer: Writer) -> None:
     writer(path, "held")
     assert not wal(path).exists()  # closing folded the log into the file and removed it
@@ -119,6 +124,7 @@ def test_a_clean_close_with_a_held_program_is_not_refused(path: Path, writer: Wr
         assert program.instructions == TOTAL
 
 
+@pytest.mark.slow
 def test_a_writer_dying_of_an_exception_is_not_refused(path: Path, writer: Writer) -> None:
     """At exit SQLite folds the log of a connection left open into the file and removes it;
     the journal records its end first, so the next start does not take it for a lost log."""
@@ -136,6 +142,7 @@ def test_the_main_file_itself_says_open_while_a_writer_has_it(path: Path) -> Non
     assert session is not None and session.closed is not None
 
 
+@pytest.mark.slow
 def test_a_log_folded_in_by_another_sqlite_tool_is_refused_too(path: Path, writer: Writer) -> None:
     """Documented: a writable SQLite connection to the journal after a crash folds the log
     into the file and removes it; the file cannot show it holds everything, so it is refused
@@ -149,6 +156,7 @@ def test_a_log_folded_in_by_another_sqlite_tool_is_refused_too(path: Path, write
         Journal.open(path)
 
 
+@pytest.mark.slow
 def test_a_refused_open_keeps_the_log(path: Path, writer: Writer) -> None:
     """Opening reads the log; refusing the file must not fold it in (which would turn a
     crash the next start recovers into a lost log)."""
@@ -166,6 +174,7 @@ def test_a_refused_open_keeps_the_log(path: Path, writer: Writer) -> None:
     assert files(path.parent)[path.name] == before[path.name]
 
 
+@pytest.mark.slow
 def test_a_log_without_its_journal_is_refused(path: Path, writer: Writer) -> None:
     """SQLite would replay a stray log into the new journal made in its place."""
     writer(path, "kill")
@@ -211,6 +220,7 @@ def test_a_version_2_journal_is_upgraded_and_records_sessions(path: Path) -> Non
         assert session is not None and (session.id, session.closed) == (1, None)
 
 
+@pytest.mark.slow
 def test_serve_refuses_a_journal_whose_log_was_lost_in_one_line(
     tmp_path: Path, path: Path, writer: Writer
 ) -> None:

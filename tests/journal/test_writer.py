@@ -76,6 +76,7 @@ def test_reads_see_every_write_submitted_before_them(path: Path) -> None:
     assert asyncio.run(main()) == list(range(1, 11))
 
 
+@pytest.mark.slow
 def test_a_locked_journal_fails_an_urgent_write_after_its_busy_timeout(path: Path) -> None:
     """Another process holds the lock: an urgent write waits the writer's busy timeout (the
     config's ``[journal] busy_timeout``), a routine one 0.2 s, then each fails."""
@@ -123,7 +124,7 @@ def test_an_exception_reaches_its_caller_and_the_writer_goes_on(path: Path) -> N
             assert isinstance(results[0], JournalError)
             assert f"program {pid}, instruction 1: the program is loaded" in str(results[0])
             assert isinstance(results[1], ValueError) and str(results[1]) == "boom"
-            assert results[2:] == [None, None]
+            assert list(results[2:]) == [None, None]
             pending = await writer.run(journal.pending, pid)
             assert pending is not None and pending.index == 1
 

@@ -23,7 +23,7 @@ from bwsd.journal import Journal
 from bwsd.opcua.server import OpcUaServer
 from bwsd.opcua.space import NAMESPACE, ROOT
 from bwsd.tokens import TokenStore
-from tests.fieldbus.conftest import client_config, mock, slow_mock
+from tests.support.fieldbus import client_config, mock, slow_mock
 
 __all__ = ["mock", "slow_mock"]
 

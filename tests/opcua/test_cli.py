@@ -13,8 +13,10 @@ from asyncua import Client
 
 from bwsd.cli import main
 from bwsd.opcua.security import OpcUaError
-from tests.fieldbus.conftest import MACHINE, toml
 from tests.opcua.conftest import rig, run
+from tests.support.fieldbus import MACHINE, toml
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 def thumbprint(out: str) -> str:

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.fieldbus.conftest import MACHINE, toml
+from tests.support.fieldbus import MACHINE, toml
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 NEEDS = "needs asyncua: pip install 'bwsd[opcua]'"
 

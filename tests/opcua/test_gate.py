@@ -19,14 +19,16 @@ from cryptography import x509
 
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.opcua.security import CERT_FILE
-from bwsd.opcua.space import TAGS
+from bwsd.opcua.space import NAMESPACE, TAGS
 from bwsd.opcua.values import requested
-from tests.opcua.conftest import NAMESPACE, TEXT, loom, rig, run, var
+from tests.opcua.conftest import TEXT, loom, rig, run, var
 from tests.opcua.test_server import read
+from tests.support.controller import mode_now
 
 V = ua.VariantType
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("kind", "acts"),
     [(V.Int32, True), (V.Int16, True), (V.Double, False), (V.UInt32, False), (V.String, False)],
@@ -61,6 +63,7 @@ def test_a_command_written_as_a_wrong_type_acts_on_nothing(mock, tmp_path, kind,
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_unit_mode_sent_as_int16_or_wrong_acts_as_its_number_or_not_at_all(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as r, r.session("admin") as client:
@@ -80,7 +83,7 @@ def test_a_unit_mode_sent_as_int16_or_wrong_acts_as_its_number_or_not_at_all(moc
             assert refused.value.code == ua.StatusCodes.BadTypeMismatch
             assert r.controller.packml.mode is UnitMode.MAINTENANCE
             await client.write_values([mode, request], [ua.Variant(3, V.Int16), True])
-            assert r.controller.packml.mode is UnitMode.MANUAL
+            assert mode_now(r.controller) is UnitMode.MANUAL
 
     run(scenario())
 
@@ -139,6 +142,7 @@ def test_a_fresh_install_follows_the_documented_trust_steps(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_node_ids_arrays_and_what_each_user_may_write(mock, tmp_path):
     async def scenario() -> None:
         async with (
@@ -194,6 +198,7 @@ def test_a_program_is_loaded_over_opc_ua_with_the_refusals_of_rest(mock, tmp_pat
     run(scenario())
 
 
+@pytest.mark.slow
 def test_the_server_certificate_names_the_machine_and_the_address_it_listens_on(mock, tmp_path):
     """A client that checks the host name finds it: the machine's name, localhost and the
     listening address (here loopback) are in the certificate's subject alternative names."""
@@ -213,6 +218,7 @@ def test_the_server_certificate_names_the_machine_and_the_address_it_listens_on(
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_read_of_every_tag_takes_one_status_snapshot(mock, tmp_path):
     """A PLC's Read of all the tags is answered from one status of the controller, not one
     per variable (each would rebuild the whole status)."""
@@ -229,7 +235,7 @@ def test_a_read_of_every_tag_takes_one_status_snapshot(mock, tmp_path):
                     calls.append(time.monotonic())
                 return status()
 
-            ctl.status = counted  # type: ignore[method-assign]
+            ctl.status = counted  # type: ignore[method-assign]  # counts the door's reads
             values = await client.read_values(nodes)
             assert len(values) == len(TAGS) and values[0] == State.STOPPED
             assert len(calls) == 1

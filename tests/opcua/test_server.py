@@ -16,6 +16,9 @@ from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.controller.status import StateChanged, StopCause
 from bwsd.opcua.space import NAMESPACE, TAGS, node_id
 from tests.opcua.conftest import TEXT, client_cert, loom, rig, run, session, var
+from tests.support.controller import mode_now, state_now
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 MAINTENANCE = ua.Variant(int(UnitMode.MAINTENANCE), ua.VariantType.Int32)
 EXPECTED_RUN = [
@@ -99,6 +102,7 @@ def test_a_subscription_sees_every_transition_of_a_run_to_complete(slow_mock, tm
             await sub.subscribe_data_change(await var(client, "Status/StateCurrent"), queuesize=100)
             await changes.until(lambda v: v == [State.STOPPED])
             await r.controller.load("braid.bws", TEXT)
+            assert r.controller.twin is not None
             root = await loom(client)
             idx = await client.get_namespace_index(NAMESPACE)
             await root.call_method(f"{idx}:Reset")
@@ -125,17 +129,17 @@ def test_cntrl_cmd_and_cmd_change_request_drive_a_program(slow_mock, tmp_path):
             await cmd.write_value(ua.Variant(int(Command.RESET), ua.VariantType.Int32))
             assert r.controller.packml.state is State.STOPPED  # CntrlCmd alone does nothing
             await request.write_value(True)
-            assert r.controller.packml.state is State.IDLE
+            assert state_now(r.controller) is State.IDLE
             assert await request.read_value() is False  # taken: reads false again
             # both in one write request
             await client.write_values(
                 [cmd, request],
                 [ua.Variant(int(Command.START), ua.VariantType.Int32), True],
             )
-            assert r.controller.packml.state is State.EXECUTE
+            assert state_now(r.controller) is State.EXECUTE
             await cmd.write_value(ua.Variant(int(Command.HOLD), ua.VariantType.Int32))
             await request.write_value(True)
-            assert r.controller.packml.state is State.HELD
+            assert state_now(r.controller) is State.HELD
             assert r.controller.packml.reason == "by OPC UA"
             await until_state(client, State.HELD)
             assert await read(client, "Admin/StopReason/ID") == StopCause.OPERATOR
@@ -158,11 +162,11 @@ def test_unit_mode_changes_need_an_admin(mock, tmp_path):
                 assert r.controller.packml.mode is UnitMode.PRODUCTION
             async with r.session("admin") as client:
                 await (await loom(client)).call_method(f"{idx}:SetUnitMode", MAINTENANCE)
-                assert r.controller.packml.mode is UnitMode.MAINTENANCE
+                assert mode_now(r.controller) is UnitMode.MAINTENANCE
                 mode = await var(client, "Command/UnitMode")
                 await mode.write_value(ua.Variant(3, ua.VariantType.Int32))
                 await (await var(client, "Command/UnitModeChangeRequest")).write_value(True)
-                assert r.controller.packml.mode is UnitMode.MANUAL
+                assert mode_now(r.controller) is UnitMode.MANUAL
                 assert await read(client, "Status/UnitModeCurrent") == UnitMode.MANUAL
             for _ in range(500):  # the journal's writer records who, in order, soon after
                 by = [e.data["by"] for e in r.journal.events(0, 100) if e.kind == "mode"]
@@ -310,7 +314,7 @@ def test_a_session_over_an_unsecured_channel_can_do_nothing(mock, tmp_path):
             client = await unsecured_session(r.server.url, "operator", r.users["operator"])
             try:
                 idx = await client.uaclient.read_attributes(
-                    [ua.NodeId(ua.ObjectIds.Server_NamespaceArray)], ua.AttributeIds.Value
+                    [ua.NodeId(ua.Int32(ua.ObjectIds.Server_NamespaceArray))], ua.AttributeIds.Value
                 )
                 pytest.fail(f"read over an unsecured channel: {idx}")
             except ua.uaerrors.BadUserAccessDenied:

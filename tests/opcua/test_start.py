@@ -15,8 +15,11 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from bwsd.deploy.folder import init_folder
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 LATE = 1.0  # s: the longest /healthz may take while OPC UA starts (issue: "within 1 s")
 
@@ -117,7 +120,7 @@ def test_serve_answers_healthz_while_opcua_starts(tmp_path):
             if found:
                 break
         listening = time.monotonic()
-        answers = []
+        answers: list[tuple[float, float]] = []
         with httpx.Client(base_url=found[1], timeout=30) as client:
             while not ready.is_set() or not answers:
                 asked = time.monotonic()

@@ -21,9 +21,11 @@ from bwsd.controller.packml import Command, State
 from bwsd.controller.status import StopCause
 from bwsd.plc import REG_COUNT, Tags, decode
 from bwsd.plc.registers import REG_CNTRL_CMD
-from tests.fieldbus.conftest import BUS, MACHINE, start_mock, toml
 from tests.opcua.conftest import TEXT, client_cert, loom, run, session, trust, var
+from tests.support.fieldbus import BUS, MACHINE, start_mock, toml
 from tests.test_daemon import Served
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 READ = (
     "Status/StateCurrent",

@@ -1,5 +1,5 @@
-"""The mock loom fixtures of the fieldbus tests, shared here."""
+"""The mock loom fixtures (tests/support/fieldbus.py)."""
 
-from tests.fieldbus.conftest import mock, slow_mock
+from tests.support.fieldbus import mock, slow_mock
 
 __all__ = ["mock", "slow_mock"]

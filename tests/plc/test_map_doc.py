@@ -6,11 +6,14 @@ code and not in the doc fails here.
 
 from __future__ import annotations
 
+import pytest
 from pymodbus.constants import ExcCodes
 
 from bwsd.controller.packml import State, UnitMode
 from tests.doc_tables import addresses, doc_table
 from tests.plc.test_tags import DEVICE, TEXT, Plc, rig, run
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 MAP = doc_table("plc.md", "address", "tag", "type", "access", after="## The map")
 ADDRESS = {row["tag"].removesuffix(" (bwsd)"): addresses(row["address"]) for row in MAP}

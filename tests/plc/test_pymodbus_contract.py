@@ -44,7 +44,7 @@ async def serving(action: Any, **hooks: Any) -> AsyncIterator[tuple[ModbusTcpSer
     try:
         yield server, sockets[0].getsockname()[1]
     finally:
-        await server.shutdown()  # type: ignore[no-untyped-call]
+        await server.shutdown()  # type: ignore[no-untyped-call]  # unannotated in pymodbus
 
 
 async def client(port: int) -> AsyncModbusTcpClient:
@@ -93,7 +93,7 @@ def test_read_only_registers_gaps_and_other_units_are_refused_before_the_action(
     calls: Calls = []
 
     async def action(*args: Any) -> None:
-        calls.append(args)  # type: ignore[arg-type]
+        calls.append(args)
 
     async def scenario() -> None:
         async with serving(action) as (_, port):
@@ -143,6 +143,7 @@ def test_trace_connect_runs_with_the_new_connection_listed_before_it_is_read():
     run(scenario())
 
 
+@pytest.mark.slow
 def test_trace_pdu_returning_none_leaves_a_request_unanswered():
     """The mock loom's mute: a received request whose trace returns None gets no answer."""
 

@@ -32,7 +32,7 @@ from bwsd.plc.registers import (
     REG_UNIT_MODE_CHANGE_REQUEST,
 )
 from simulator_hw.control import request
-from tests.fieldbus.conftest import MACHINE, client_config
+from tests.support.fieldbus import MACHINE, client_config
 
 # The mock loom's fill: cases at (1, 1), (1, 2), (2, 1), (2, 2); 15 instructions.
 CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
@@ -104,6 +104,7 @@ async def rig(mock, tmp_path, **kw) -> AsyncIterator[tuple[Controller, Journal, 
         journal.close()
 
 
+@pytest.mark.slow
 def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_path):
     async def scenario() -> None:
         async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
@@ -116,12 +117,12 @@ def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_pa
             running = await plc.command(START)
             assert running.state_current == State.EXECUTE and running.cmd_invalid == 0
             seen: list[tuple[int, int]] = []
-            end = await plc.until(
-                lambda t: (
-                    seen.append((t.state_current, t.instruction_index))
-                    or t.state_current == State.COMPLETE
-                )
-            )
+
+            def complete(t: Tags) -> bool:
+                seen.append((t.state_current, t.instruction_index))
+                return t.state_current == State.COMPLETE
+
+            end = await plc.until(complete)
             indices = [index for _, index in seen]
             assert indices == sorted(indices)  # the index only moves forward
             assert any(s == State.EXECUTE and 0 < i < 15 for s, i in seen)
@@ -132,6 +133,7 @@ def test_the_handshake_runs_a_program_from_stopped_to_complete(slow_mock, tmp_pa
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_refused_command_sets_cmd_invalid_and_leaves_the_state(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
@@ -150,6 +152,7 @@ def test_a_refused_command_sets_cmd_invalid_and_leaves_the_state(mock, tmp_path)
     run(scenario())
 
 
+@pytest.mark.slow
 def test_status_registers_and_bad_requests_are_refused_on_the_wire(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
@@ -166,6 +169,7 @@ def test_status_registers_and_bad_requests_are_refused_on_the_wire(mock, tmp_pat
     run(scenario())
 
 
+@pytest.mark.slow
 def test_unit_mode_changes_in_idle_and_is_refused_in_execute(slow_mock, tmp_path):
     async def scenario() -> None:
         async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
@@ -194,6 +198,7 @@ def test_unit_mode_changes_in_idle_and_is_refused_in_execute(slow_mock, tmp_path
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_pressed_estop_reads_1_and_refuses_reset_and_start(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, journal, plc):
@@ -219,6 +224,7 @@ def test_a_pressed_estop_reads_1_and_refuses_reset_and_start(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_the_heartbeat_advances_every_second(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (_, _, plc):
@@ -232,6 +238,7 @@ def test_the_heartbeat_advances_every_second(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_drive_fault_reads_stop_reason_2_until_reset(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
@@ -253,6 +260,7 @@ def test_a_drive_fault_reads_stop_reason_2_until_reset(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_refused_move_reads_stop_reason_1(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
@@ -266,6 +274,7 @@ def test_a_refused_move_reads_stop_reason_1(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_restart_reads_stop_reason_7(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, journal, plc):
@@ -299,6 +308,7 @@ def test_plc_tags_follow_the_config_table(tmp_path):
     journal.close()
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_a_plc_error_naming_it(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path) as (ctl, _, plc):
@@ -312,6 +322,7 @@ def test_a_port_in_use_is_a_plc_error_naming_it(mock, tmp_path):
 
 
 # ----- the doors -----
+@pytest.mark.slow
 def test_an_address_outside_the_allow_list_is_not_served(mock, tmp_path):
     """The tag server took writes from anyone who could reach it: a write did a Reset."""
 
@@ -333,6 +344,7 @@ def test_an_address_outside_the_allow_list_is_not_served(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_network_in_the_allow_list_admits_its_addresses(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path, allow=["127.0.0.0/30"]) as (_, _, plc):
@@ -347,6 +359,7 @@ def test_a_network_in_the_allow_list_admits_its_addresses(mock, tmp_path):
     run(scenario())
 
 
+@pytest.mark.slow
 def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path, read_only=True) as (ctl, _, plc):
@@ -364,15 +377,18 @@ def test_read_only_tags_refuse_every_write_and_still_answer_reads(mock, tmp_path
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_bad_allow_entry_is_a_config_error_naming_the_key(mock, tmp_path):
     config = parse_config({"machine": MACHINE, "plc": {"allow": "127.0.0.1 plc-3"}}, "bwsd.toml")
     with pytest.raises(ConfigError, match=r"\[plc\.allow\]: 'plc-3' is not an IP address"):
+        # no controller: the config is refused before one is needed
         plc_tags(SimpleNamespace(), config)  # type: ignore[arg-type]
 
 
 ABORT = 8
 
 
+@pytest.mark.slow
 def test_an_aborted_part_resumes_from_the_plc_with_command_resume(slow_mock, tmp_path):
     async def scenario() -> None:
         async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
@@ -399,6 +415,7 @@ def test_an_aborted_part_resumes_from_the_plc_with_command_resume(slow_mock, tmp
 LOADED = "YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nTAKEUP 1\n"
 
 
+@pytest.mark.slow
 def test_the_plc_loads_a_stored_program_by_its_id_and_is_refused_as_rest_is(slow_mock, tmp_path):
     async def scenario() -> None:
         async with rig(slow_mock, tmp_path) as (ctl, journal, plc):
@@ -432,6 +449,7 @@ def test_the_plc_loads_a_stored_program_by_its_id_and_is_refused_as_rest_is(slow
     run(scenario())
 
 
+@pytest.mark.slow
 def test_a_read_only_tap_cannot_load(mock, tmp_path):
     async def scenario() -> None:
         async with rig(mock, tmp_path, read_only=True) as (ctl, _, plc):

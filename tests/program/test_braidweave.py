@@ -42,6 +42,7 @@ def caught_and_connected(gen: Generated) -> list[Weft]:
     return [i for i in program.instructions if isinstance(i, Weft)]
 
 
+@pytest.mark.slow
 def test_every_angle_goes_in_caught_and_the_braid_stays_one_preform():
     gen = braid_weave(3, 3, cycles=8, weft_every=2)
     wefts = caught_and_connected(gen)
@@ -52,6 +53,7 @@ def test_every_angle_goes_in_caught_and_the_braid_stays_one_preform():
     assert all(state == states[0] for state in states)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("shape", "flange", "web"), [("L", (2, 6), (4, 2)), ("T", (2, 8), (4, 2))])
 def test_shaped_braid_weaves_take_wefts_across_the_junction(shape, flange, web):
     gen = braid_weave(shape=shape, flange=flange, web=web, cycles=4, weft_every=2, angles=(0, 90))
@@ -73,6 +75,7 @@ def _layers(program: Program) -> list[tuple[int, list[Weft]]]:
     return found
 
 
+@pytest.mark.slow
 def test_each_layer_lies_at_one_height_and_each_weft_is_held_twice():
     """A weaver's layer: one plane, every weft held by at least two contacts. Before this
     rule the median weft had one contact and the wefts of a layer spread over 14 mm."""
@@ -107,6 +110,7 @@ def _shed_of(gen: Generated, placer: Placer, weft: Weft) -> Shed:
     return min(lines, key=lambda pair: pair[0])[1]
 
 
+@pytest.mark.slow
 def test_each_layer_sits_at_the_lowest_height_that_holds_it():
     """Replayed on a twin: one grid step lower, some weft of the layer is not let in, a
     closing move jams, or some weft is held fewer than twice."""
@@ -133,6 +137,7 @@ def test_each_layer_sits_at_the_lowest_height_that_holds_it():
     assert checked >= 1
 
 
+@pytest.mark.slow
 def test_any_angle_goes_in():
     gen = braid_weave(3, 3, cycles=6, weft_every=2, angles=(30, -30, 60))
     program = _parsed(gen)
@@ -158,6 +163,7 @@ def test_the_lines_of_an_angle():
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("call", "message"),
     [
@@ -188,6 +194,7 @@ def test_what_cannot_be_woven_is_refused_saying_why(call, message):
         call()
 
 
+@pytest.mark.slow
 def test_a_weft_the_twin_refuses_is_never_written():
     """Every WEFT of a generated program passes the exact shed check on its own twin."""
     gen = braid_weave(3, 3, cycles=4, weft_every=2, angles=(45, -45))
@@ -200,6 +207,7 @@ def test_a_weft_the_twin_refuses_is_never_written():
             pytest.fail(f"{item}: {exc}")
 
 
+@pytest.mark.slow
 def test_the_command_line_prints_what_the_generator_makes(tmp_path):
     assert BWSD
     done = subprocess.run(

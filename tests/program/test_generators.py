@@ -52,6 +52,7 @@ def _parsed(gen: Generated) -> Program:
     return program
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_valid_and_occupancy_restored_every_cycle(name: str):
     gen = CASES[name]()
@@ -63,6 +64,7 @@ def test_valid_and_occupancy_restored_every_cycle(name: str):
     assert all(state == states[0] for state in states)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_config_text_loads_back_to_the_machine(name: str):
     gen = CASES[name]()
@@ -127,6 +129,7 @@ SECTIONS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("shape", "flange", "web", "segments", "carriers", "period", "k"), SECTIONS
 )
@@ -134,7 +137,9 @@ def test_shaped_rules_mix_every_carrier_through_every_zone(
     shape, flange, web, segments, carriers, period, k
 ):
     sec = section(shape, flange=flange, web=web)
-    rule, check = find_rule(sec, segments)
+    found = find_rule(sec, segments)
+    assert found is not None
+    rule, check = found
     assert (len(rule.carriers), check.legal, check.periodic) == (carriers, True, True)
     assert check.mixed and (check.period, check.k) == (period, k)
     assert rule.partial == segments
@@ -208,12 +213,16 @@ def test_every_shaped_braid_is_one_preform_by_its_k_cycles(shape, flange, web, s
         with pytest.raises(ValueError, match="an I section needs a machine with corner segments"):
             braid4(shape=shape, flange=flange, web=web, segments=False)
         return
-    k = find_rule(section(shape, flange=flange, web=web), segments)[1].k
+    found = find_rule(section(shape, flange=flange, web=web), segments)
+    assert found is not None
+    k = found[1].k
+    assert k is not None  # find_rule answers rules that mix
     gen = braid4(shape=shape, flange=flange, web=web, segments=segments, cycles=k)
     sk = simulate(gen.machine, _parsed(gen)).skeleton()
     assert contact_groups(sk) == [list(range(len(sk.yarns)))]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("shape", "flange", "web", "segments", "message"),
     [
@@ -262,6 +271,7 @@ def test_bad_parameters_are_refused(call):
         call()
 
 
+@pytest.mark.slow
 def test_every_weft_is_caught_and_each_weave_is_one_preform():
     """Each weft passed the exact shed check where the generator put it (else simulate
     raises) and the move closing its shed caught it."""
@@ -273,20 +283,22 @@ def test_every_weft_is_caught_and_each_weave_is_one_preform():
         assert contact_groups(sk) == [list(range(len(sk.yarns)))], name
 
 
+@pytest.mark.slow
 def test_every_warp_line_sheds_in_every_pick():
     gen = weave_3d(3, 4, cycles=1)
     program = _parsed(gen)
     items = program.instructions
     opens = [s for s, nxt in itertools.pairwise(items) if isinstance(nxt, Weft)]
-    opens = [s for s in opens if isinstance(s, Shift)]
-    assert len(opens) == 4
+    sheds = [s for s in opens if isinstance(s, Shift)]
+    assert len(sheds) == 4
     warp_rows = {r for r, _ in program.fill}
     warp_cols = {c for _, c in program.fill}
-    for shed in opens:
+    for shed in sheds:
         lines = {m.line for m in shed.moves}
         assert lines == (warp_rows if shed.axis == "row" else warp_cols)
 
 
+@pytest.mark.slow
 def test_u_section_wefts_stop_at_the_opening():
     gen = weave_3d(5, 6, cycles=1, shape="U", leg=2, base=2)
     wefts = [w for w in _parsed(gen).instructions if isinstance(w, Weft)]
@@ -314,7 +326,7 @@ def test_twist_takes_up_after_every_turn():
     gen = twist(3, takeup=2.5)
     program = _parsed(gen)
     takeups = [i for i in program.instructions if not isinstance(i, Shift)]
-    assert [t.length for t in takeups] == [2.5] * 3  # type: ignore[union-attr]
+    assert [t.length for t in takeups] == [2.5] * 3
     assert program.cycle_length == 5
     assert "--takeup 2.5" in gen.command
     assert simulate(gen.machine, program).skeleton().takeup == 7.5

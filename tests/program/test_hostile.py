@@ -89,6 +89,7 @@ WORDS = [
 lines = st.lists(st.sampled_from(WORDS), max_size=6).map(" ".join)
 
 
+@pytest.mark.slow
 @settings(max_examples=500, deadline=None)
 @given(st.lists(lines, max_size=12).map("\n".join) | st.text(max_size=200))
 def test_any_program_parses_or_is_a_program_error(text):

@@ -153,6 +153,7 @@ def test_errors_point_at_the_fault(text: str, line: int, column: int, message: s
     assert str(err).startswith(f"t.bws:{line}:{column}: ")
 
 
+@pytest.mark.slow
 def test_expansion_at_the_bound_is_accepted():
     side = 1000
     assert side * side == MAX_INSTRUCTIONS
@@ -186,6 +187,7 @@ def _text(item: Shift | TakeUp | Weft) -> str:
     )
 
 
+@pytest.mark.slow
 @given(st.lists(_instruction, min_size=1, max_size=20), st.integers(1, 4))
 def test_round_trip(instructions: list[Shift | TakeUp | Weft], count: int):
     body = "\n".join(_text(i) for i in instructions)

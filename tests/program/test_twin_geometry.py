@@ -64,6 +64,7 @@ GENERATED = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", GENERATED)
 def test_generated_every_yarn_interlaces(name: str):
     gen: Generated = GENERATED[name]()

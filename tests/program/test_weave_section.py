@@ -4,11 +4,14 @@ between the fell's and the guides' (docs/program.md, "Where the wefts go")."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from bwsd.export.crossings import crossings
 from bwsd.program import parse_program
 from bwsd.program.weave import weave_3d
 from bwsd.twin import simulate
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 LAYERS, WARPS, LEG, BASE = 5, 6, 2, 2
 

@@ -7,8 +7,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from bwsd.relax import Options, relax
 from tests.relax.conftest import ROOT, twin_of
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 WEAVE = ROOT / "examples" / "weave-plain.bws"
 

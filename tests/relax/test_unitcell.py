@@ -12,6 +12,8 @@ from bwsd.program.generators import braid4
 from bwsd.program.parser import parse_program
 from bwsd.relax.unitcell import compare, interior_fraction, jammed_spacing, section_fraction
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 D = 1.0
 
 

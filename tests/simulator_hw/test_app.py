@@ -11,7 +11,7 @@ import pytest
 from bwsd.config import parse_config
 from bwsd.errors import ConfigError
 from simulator_hw.app import MockLoom, canopen_ids_problem, canopen_installed
-from tests.fieldbus.conftest import ROOT, toml
+from tests.support.fieldbus import ROOT, toml
 
 pytestmark = pytest.mark.skipif(not canopen_installed(), reason="needs the canopen extra")
 MACHINE = {"rows": 20, "cols": 20, "pitch_x": 1, "pitch_y": 1, "d_mat": 10, "c_mat": 0.5}
@@ -45,6 +45,7 @@ def test_a_machine_with_more_axes_than_node_ids_is_served_over_modbus_only():
         MockLoom(over, [], canopen=True)
 
 
+@pytest.mark.slow
 def test_the_mock_loom_says_when_it_serves_modbus_only(tmp_path: Path):
     config = tmp_path / "mock.toml"
     config.write_text(

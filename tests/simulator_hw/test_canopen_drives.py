@@ -32,7 +32,12 @@ class Rig:
     heartbeats: list[tuple[int, int]] = field(default_factory=list)  # (node id, NMT state)
 
     def drive(self, axis: int) -> canopen.RemoteNode:
-        return self.network[NODE_BASE + axis]
+        return self.remote(NODE_BASE + axis)
+
+    def remote(self, node_id: int) -> canopen.RemoteNode:
+        node = self.network[node_id]
+        assert isinstance(node, canopen.RemoteNode)  # the rig adds remote nodes only
+        return node
 
     async def get(self, node: canopen.RemoteNode, index: int) -> Any:
         return await asyncio.to_thread(lambda: node.sdo[index].raw)
@@ -99,7 +104,7 @@ async def until(condition: Callable[[], bool], limit: float = 5.0) -> None:
 def test_objects_read_and_write_by_sdo():
     async def scenario() -> None:
         async with rig() as r:
-            drive, io = r.drive(TAKEUP), r.network[IO_NODE]
+            drive, io = r.drive(TAKEUP), r.remote(IO_NODE)
             assert await r.get(drive, 0x1017) == 20
             assert await r.get(drive, 0x6041) == 0x0440  # switch-on disabled, target reached
             await r.set(drive, 0x607A, -1234)
@@ -124,7 +129,7 @@ def test_objects_read_and_write_by_sdo():
 def test_enable_needs_nmt_start_then_a_stroke_moves_the_cases():
     async def scenario() -> None:
         async with rig() as r:
-            row0, io = r.drive(ROW0), r.network[IO_NODE]
+            row0, io = r.drive(ROW0), r.remote(IO_NODE)
             await r.set(row0, 0x6060, 1)
             await r.enable(row0)
             assert await r.state(row0) is Cia402.SWITCHED_ON  # NMT still pre-operational

@@ -12,7 +12,11 @@ import sys
 import time
 from pathlib import Path
 
-from tests.fieldbus.conftest import MACHINE, PROGRAM, toml
+import pytest
+
+from tests.support.fieldbus import MACHINE, PROGRAM, toml
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 LINE = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} (DEBUG|INFO|WARNING|ERROR) [\w.]+: ")
 
@@ -26,13 +30,20 @@ def test_garbage_on_the_modbus_port_is_logged_in_lines_without_frames(tmp_path):
     bwsd = shutil.which("bwsd", path=str(Path(sys.executable).parent))
     assert bwsd
     command = [bwsd, "mock", "--config", str(config), "--program", str(program)]
-    pipes = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "stdin": subprocess.DEVNULL}
-    mock = subprocess.Popen(command, text=True, **pipes)
+    mock = subprocess.Popen(
+        command,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+    )
     try:
         assert mock.stdout is not None
         ready = mock.stdout.readline()
         assert ready.startswith("ready modbus="), ready
-        port = int(re.search(r"modbus=(\d+)", ready)[1])  # type: ignore[index]
+        found = re.search(r"modbus=(\d+)", ready)
+        assert found is not None, ready
+        port = int(found[1])
         with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
             sock.sendall(bytes.fromhex("000100000006010300deadbeef0011223344556677"))
             sock.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")

@@ -168,6 +168,7 @@ def test_absolute_axes_read_back_signed_positions():
     on_loom(Loom(MACHINE, [], Speeds()), test)
 
 
+@pytest.mark.slow
 def test_every_read_advances_the_loom_to_now():
     async def test(client: AsyncModbusTcpClient) -> None:
         await set_point(client, ROW0, CELL_UM, 1)  # out and back, 10 mm each way at 40 mm/s
@@ -263,6 +264,7 @@ def test_a_configured_unit_answers():
     asyncio.run(scenario())
 
 
+@pytest.mark.slow
 def test_a_muted_loom_does_not_answer_and_keeps_the_connection():
     loom = Loom(MACHINE, [(0, 0)], Speeds())
 
@@ -298,6 +300,7 @@ def test_a_drop_closes_every_connection_and_new_ones_work():
     asyncio.run(scenario())
 
 
+@pytest.mark.slow
 def test_a_request_right_after_a_drop_is_not_answered():
     loom = Loom(MACHINE, [], Speeds())
 

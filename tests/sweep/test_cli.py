@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pyarrow.parquet as pq
+import pytest
 
 from bwsd.cli import main
 from tests.sweep.conftest import ROOT, bwsd, write
@@ -34,6 +35,7 @@ def test_csv_beside_an_output_named_csv_is_refused(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == [spec]
 
 
+@pytest.mark.slow
 def test_the_shipped_example_runs_by_name(tmp_path):
     run = bwsd(
         "sweep",
@@ -58,6 +60,7 @@ def test_the_shipped_example_runs_by_name(tmp_path):
     assert "examples/nothing.toml is not shipped" in missing.stderr
 
 
+@pytest.mark.slow
 def test_without_the_sweep_extra_the_command_names_it_and_writes_nothing(tmp_path):
     folder = tmp_path / "site"
     folder.mkdir()

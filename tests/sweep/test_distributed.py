@@ -21,6 +21,8 @@ from bwsd.sweep.candidate import evaluate
 from bwsd.sweep.spec import load_spec
 from tests.sweep.conftest import BRAID_SPEC, WEAVE_SPEC, bwsd, without_timing, write
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 DASK = str(Path(sys.executable).parent / "dask")
 
 

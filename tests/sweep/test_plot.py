@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
@@ -22,7 +24,7 @@ def results(tmp_path_factory):
     return output
 
 
-def _rows(**change):
+def _rows(**change: Any) -> dict[str, Any]:
     base = {"status": "ok", "takeup": 1.0, "c_mat": 0.3, "angle_warp": 10.0}
     return {**base, **change}
 
@@ -48,6 +50,7 @@ def test_one_line_per_hue_value_through_the_mean_of_each_point():
     )
 
 
+@pytest.mark.slow
 def test_the_png_has_a_line_of_each_colour(results, tmp_path):
     png = tmp_path / "angle.png"
     assert plot(results, png, "takeup", "angle_warp", "c_mat") == 2
@@ -60,6 +63,7 @@ def test_the_png_has_a_line_of_each_colour(results, tmp_path):
     assert len(fig.axes[0].get_lines()) == 2
 
 
+@pytest.mark.slow
 def test_plot_command_and_its_errors(results, tmp_path):
     run = bwsd(
         "sweep",

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow.parquet as pq
+import pytest
 
 from bwsd.program.generators import GENERATORS
 from bwsd.sweep.candidate import evaluate, flatten, relaxed_columns
@@ -24,6 +25,8 @@ from tests.sweep.conftest import (
     without_timing,
     write,
 )
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 # Two small braids, each long enough for a formed zone once relaxed.
 BRAID_RELAX = """

@@ -9,8 +9,10 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 
 from bwsd.sweep.runner import Options, run_sweep
 from bwsd.sweep.spec import load_spec
@@ -32,7 +34,7 @@ c_mat = [0.3, 0.6]
 """
 
 
-def _complete_lines(path) -> int:
+def _complete_lines(path: Path) -> int:
     try:
         return path.read_bytes().count(b"\n")
     except FileNotFoundError:
@@ -52,6 +54,7 @@ def _kill_when_rows(proc: subprocess.Popen[bytes], log, rows: int) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_resumes_without_redoing_finished_candidates(tmp_path):
     spec_path = write(tmp_path, SLOW_SPEC)
     output = tmp_path / "slow.parquet"

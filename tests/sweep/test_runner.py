@@ -14,6 +14,7 @@ from bwsd.sweep.store import log_path
 from tests.sweep.conftest import BRAID_SPEC, WEAVE_SPEC, reference, without_timing, write
 
 
+@pytest.mark.slow
 def test_a_sweep_on_a_local_cluster_equals_the_candidates_run_one_by_one(tmp_path):
     spec = load_spec(write(tmp_path, BRAID_SPEC))
     output = tmp_path / "results.parquet"
@@ -35,6 +36,7 @@ def test_a_sweep_on_a_local_cluster_equals_the_candidates_run_one_by_one(tmp_pat
     ]
 
 
+@pytest.mark.slow
 def test_refused_candidates_are_rows_of_the_table_not_a_failed_sweep(tmp_path):
     spec = load_spec(write(tmp_path, WEAVE_SPEC))
     output = tmp_path / "weave.parquet"
@@ -58,6 +60,7 @@ def test_an_unfinished_sweep_is_not_overwritten_without_resume(tmp_path):
         run_sweep(spec, tmp_path / "nowhere" / "r.parquet", Options(workers=1))
 
 
+@pytest.mark.slow
 def test_a_finished_sweep_resumed_runs_nothing_and_keeps_its_rows(tmp_path):
     spec = load_spec(write(tmp_path, WEAVE_SPEC))
     output = tmp_path / "w.parquet"

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from fractions import Fraction
+from typing import overload
 
 from bwsd.twin.instructions import Shift, TakeUp, Weft
 from bwsd.twin.machine import Machine
@@ -39,6 +40,15 @@ MAX_CONTACTS_PER_SWEEP = 100_000  # a guard against a sweep that never ends (not
 
 Point = tuple[int, int, int]
 FPoint = tuple[Fraction, Fraction, Fraction]
+# What run() saves and restores: nodes, yarns, contacts, take-up, cell_of and case_at.
+_State = tuple[
+    list[Point],
+    list[list[int]],
+    list[tuple[int, int, int, int, int]],
+    Fraction,
+    dict[int, tuple[int, int]],
+    dict[tuple[int, int], int],
+]
 
 
 class ShedClosed(ValueError):
@@ -94,6 +104,10 @@ def _sub(a: Sequence[int], b: Sequence[int]) -> Point:
     return a[0] - b[0], a[1] - b[1], a[2] - b[2]
 
 
+@overload
+def _dot(a: Sequence[int], b: Sequence[int]) -> int: ...
+@overload
+def _dot(a: Sequence[int | Fraction], b: Sequence[int | Fraction]) -> int | Fraction: ...
 def _dot(a: Sequence[int | Fraction], b: Sequence[int | Fraction]) -> int | Fraction:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -150,7 +164,8 @@ def rest_point(y: Sequence[int], m: Sequence[int], u: Sequence[int], d: Fraction
     if d == 0 or n2 == 0:
         return _checked(y[0]), _checked(y[1]), _checked(y[2])
     dd = d * SCALE  # d in grid units
-    return tuple(_checked(_round_shifted(y[k], dd * n[k], n2)) for k in range(3))  # type: ignore[return-value]
+    x0, x1, x2 = (_checked(_round_shifted(y[k], dd * n[k], n2)) for k in range(3))
+    return x0, x1, x2
 
 
 def restart_point(a1: Point, a2: Point, t: Fraction) -> Point:
@@ -183,7 +198,8 @@ def crossing(b: Point, a1: Point, a2: Point, c: Point, d: Point) -> tuple[Fracti
         return None  # same side (a degenerate triangle puts every point on the zero side)
     # sc and sd differ (one is negative, the other not): P = C + sc / (sc - sd) (D - C).
     lam = Fraction(sc, sc - sd)
-    p = tuple(c[k] + lam * (d[k] - c[k]) for k in range(3))
+    px, py, pz = (c[k] + lam * (d[k] - c[k]) for k in range(3))
+    p = (px, py, pz)
     # Barycentric weights: solve P - B = wA1 e1 + wA2 e2 in the coordinate plane where the
     # triangle's projection is largest (drop the axis of the largest normal component).
     drop = max(range(3), key=lambda k: abs(normal[k]))
@@ -196,7 +212,7 @@ def crossing(b: Point, a1: Point, a2: Point, c: Point, d: Point) -> tuple[Fracti
     sign = _sign(w_b)
     if sign == 0 or _sign(w_a2) != sign or _sign(w_a1) not in (0, sign):
         return None
-    return w_a2 / (w_a1 + w_a2), p  # type: ignore[return-value]
+    return w_a2 / (w_a1 + w_a2), p
 
 
 def _point_segment_distance2(p: Sequence[int], q0: Sequence[int], q1: Sequence[int]) -> Fraction:
@@ -317,7 +333,7 @@ class RefTwin:
         x, y, z = self.nodes[node]
         return math.ldexp(x, -32), math.ldexp(y, -32), math.ldexp(z, -32)
 
-    def _state(self) -> tuple:
+    def _state(self) -> _State:
         return (
             list(self.nodes),
             [list(y) for y in self.yarns],
@@ -327,7 +343,7 @@ class RefTwin:
             dict(self.case_at),
         )
 
-    def _restore(self, state: tuple) -> None:
+    def _restore(self, state: _State) -> None:
         (
             self.nodes,
             self.yarns,

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from bwsd.errors import JamError, ShedClosedError
 from bwsd.twin import Machine, Shift, TakeUp, Weft
+from bwsd.twin.instructions import Axis, MoveEntry
 from bwsd.twin.machine import Segment
 from tests.twin.conftest import BRAID_CYCLE, BRAID_FILL, assert_same, run_both
 from tests.twin.reference import Jam, ShedClosed
@@ -23,7 +24,9 @@ SETTINGS = settings(
 )
 
 
-def _valid(occupied: set[tuple[int, int]], machine: Machine, ins: Shift) -> set | None:
+def _valid(
+    occupied: set[tuple[int, int]], machine: Machine, ins: Shift
+) -> set[tuple[int, int]] | None:
     """Occupancy after ``ins``, or None if a case would leave the matrix, its segment or
     collide."""
     occ = set(occupied)
@@ -48,10 +51,11 @@ def _valid(occupied: set[tuple[int, int]], machine: Machine, ins: Shift) -> set 
 def segments(draw, machine: Machine) -> Machine:
     """``machine`` with a segment on some of its lines (cells first..last along the line)."""
     found = []
-    for axis, lines, along in (
+    sides: list[tuple[Axis, int, int]] = [
         ("row", machine.rows, machine.cols),
         ("col", machine.cols, machine.rows),
-    ):
+    ]
+    for axis, lines, along in sides:
         for line in range(lines):
             if draw(st.booleans()):
                 lo = draw(st.integers(0, along - 2))
@@ -59,7 +63,7 @@ def segments(draw, machine: Machine) -> Machine:
     return dataclasses.replace(machine, segments=tuple(found))
 
 
-def _entry(draw, machine: Machine, axis: str, line: int) -> tuple[int, ...]:
+def _entry(draw, machine: Machine, axis: str, line: int) -> MoveEntry:
     """A move of ``line``: the whole line, or its segment when it has one (half the time)."""
     k = draw(st.sampled_from([-1, 1, -1, 1, -2, 2]))
     mine = [s for s in machine.segments if (s.axis, s.line) == (axis, line)]
@@ -104,7 +108,7 @@ def programs(draw, degenerate: bool):
         )
     )
     occupied = set(fill)
-    instructions: list = []
+    instructions: list[Shift | TakeUp | Weft] = []
     target = draw(st.integers(2, 12))
     for _ in range(40):
         if len(instructions) >= target:
@@ -165,12 +169,14 @@ def _compare(case) -> int:
     return jams
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(programs(degenerate=False))
 def test_random_programs_match_reference(case):
     _compare(case)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(programs(degenerate=True))
 def test_degenerate_programs_match_reference(case):
@@ -232,6 +238,7 @@ FLAT_CROSSING = (
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(braids())
 @example(FLAT_CROSSING)
@@ -256,6 +263,7 @@ def kernel_path(request, monkeypatch):
     return request.param
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel_path", ["exact-only", "one-cell", "fine-cells"], indirect=True)
 @settings(
     max_examples=15,

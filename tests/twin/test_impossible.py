@@ -132,6 +132,7 @@ def _jam_prone(seed: int) -> tuple[Machine, list[tuple[int, int]], float, list[I
     return machine, fill, diameter, instructions
 
 
+@pytest.mark.slow
 def test_kernel_and_reference_refuse_the_same_jams_on_random_programs():
     """Jam-prone programs: each instruction agrees until both refuse the same jam, and both
     stop in the same state."""

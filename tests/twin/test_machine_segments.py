@@ -9,11 +9,11 @@ import pytest
 
 from bwsd.twin.machine import Machine, Segment, first_overlap
 
-SIZE = {"pitch_x": 1.0, "pitch_y": 1.0, "d_mat": 10.0, "c_mat": 0.5}
-
 
 def machine(*segments: Segment, rows: int = 8, cols: int = 8) -> Machine:
-    return Machine(rows=rows, cols=cols, segments=segments, **SIZE)
+    return Machine(
+        rows=rows, cols=cols, pitch_x=1.0, pitch_y=1.0, d_mat=10.0, c_mat=0.5, segments=segments
+    )
 
 
 def row(line: int, lo: int, hi: int) -> Segment:

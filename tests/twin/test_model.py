@@ -6,6 +6,7 @@ import itertools
 import sys
 import threading
 from dataclasses import FrozenInstanceError
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,11 +17,12 @@ from bwsd.errors import MoveError, ShedClosedError, TwinError
 from bwsd.program import parse_program
 from bwsd.program.generators import braid4
 from bwsd.twin import Machine, Program, Shift, Snapshot, TakeUp, Twin, Weft, replay, simulate
+from bwsd.twin._kernel import Kernel
 from bwsd.twin.model import Twin as TwinClass
 from tests.twin.conftest import WORKED_CYCLE, WORKED_FILL, WORKED_MACHINE
 
 
-def _bits(twin: Twin) -> list:
+def _bits(twin: Twin) -> list[object]:
     sk = twin.skeleton()
     return [(y.node_ids.tobytes(), y.nodes.tobytes()) for y in sk.yarns] + [
         sk.contacts,
@@ -107,7 +109,7 @@ def test_a_prediction_is_immutable():
     twin.apply(WORKED_CYCLE[0])
     pred = twin.predict(WORKED_CYCLE[1])
     with pytest.raises(FrozenInstanceError):
-        pred.index = 3  # type: ignore[misc]
+        pred.index = 3  # type: ignore[misc]  # frozen: the assignment must raise
     for table in (
         pred.occupancy,
         pred.contact_table,
@@ -283,6 +285,7 @@ def test_every_coordinate_lies_on_the_grid():
 
 
 # One warp sweeping the triangle (0,0,0), (0,0,100), (10,0,100) in the plane y = 0.
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(
     z=st.floats(1.0, 99.0),
@@ -312,14 +315,14 @@ def _big_twin() -> tuple[Twin, Program]:
 class _Spy:
     """Forwards to the kernel; says whether a thread is inside its ``shift`` right now."""
 
-    def __init__(self, kernel):
+    def __init__(self, kernel: Kernel) -> None:
         self._kernel = kernel
         self.inside = False
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         return getattr(self._kernel, name)
 
-    def shift(self, *args):
+    def shift(self, *args: Any) -> Any:
         self.inside = True
         try:
             return self._kernel.shift(*args)
@@ -341,7 +344,8 @@ def test_predict_releases_the_interpreter_while_the_kernel_runs():
         try:
             for _ in range(10):
                 twin, program = _big_twin()
-                spy = twin._kernel = _Spy(twin._kernel)
+                spy = _Spy(twin._kernel)
+                twin._kernel = spy  # type: ignore[assignment]  # a spy in the kernel's place
                 current[:] = [spy]
                 for ins in program.instructions:
                     twin.apply(ins)

@@ -5,13 +5,15 @@ from __future__ import annotations
 import math
 import random
 import re
+from collections.abc import Callable, Sequence
 from decimal import Decimal, localcontext
 from fractions import Fraction
 from pathlib import Path
+from typing import overload
 
 import pytest
 
-from bwsd.twin.instructions import Shift, TakeUp, Weft
+from bwsd.twin.instructions import Axis, Shift, TakeUp, Weft
 from bwsd.twin.machine import Machine
 from tests.twin.conftest import BRAID_CYCLE as BRAID_SHIFTS
 from tests.twin.conftest import BRAID_FILL
@@ -19,6 +21,7 @@ from tests.twin.reference import (
     LIMIT,
     SCALE,
     MoveRefused,
+    Point,
     RefTwin,
     ShedClosed,
     crossing,
@@ -32,9 +35,19 @@ from tests.twin.reference import (
 S = SCALE
 
 
+@overload
+def g(x: float | Fraction, y: float | Fraction, z: float | Fraction, /) -> Point: ...
+@overload
+def g(*mm: float | Fraction) -> tuple[int, ...]: ...
 def g(*mm: float | Fraction) -> tuple[int, ...]:
     """Grid coordinates of a point given in mm (exact inputs)."""
     return tuple(round_grid(exact(v) if not isinstance(v, Fraction) else v) for v in mm)
+
+
+def _point(rng: random.Random, span: int) -> Point:
+    """A random grid point with coordinates in [-span, span]."""
+    x, y, z = (rng.randint(-span, span) for _ in range(3))
+    return x, y, z
 
 
 # --- independence -------------------------------------------------------------------------
@@ -60,7 +73,7 @@ def test_exact_reads_floats_as_the_decimal_they_print_as():
     with pytest.raises(ValueError):
         exact(float("inf"))
     with pytest.raises(TypeError):
-        exact("1")  # type: ignore[arg-type]
+        exact("1")  # type: ignore[arg-type]  # a str on purpose
 
 
 def test_round_grid_is_nearest_with_ties_to_even():
@@ -216,6 +229,7 @@ def test_rest_point_against_brute_force_on_random_input():
         _check_rest_point(y, m, u, d)
 
 
+@pytest.mark.slow
 def test_rest_point_on_small_random_input_rich_in_exact_ties():
     rng = random.Random(1)
     ties = 0
@@ -241,7 +255,7 @@ def test_rest_point_on_small_random_input_rich_in_exact_ties():
 # --- exact predicates: the contact test -----------------------------------------------------
 
 
-def _volume(p, q, r, s):
+def _volume(p: Point, q: Point, r: Point, s: Point) -> int:
     a = [q[k] - p[k] for k in range(3)]
     b = [r[k] - p[k] for k in range(3)]
     c = [s[k] - p[k] for k in range(3)]
@@ -252,7 +266,9 @@ def _volume(p, q, r, s):
     )
 
 
-def _crossing_by_orientations(b, a1, a2, c, d):
+def _crossing_by_orientations(
+    b: Point, a1: Point, a2: Point, c: Point, d: Point
+) -> tuple[Fraction, tuple[Fraction, ...]] | None:
     """The same rule, formulated with orientations of C-D against the triangle's edges."""
     sc, sd = _volume(b, a1, a2, c), _volume(b, a1, a2, d)
     if (sc >= 0) == (sd >= 0):
@@ -271,7 +287,7 @@ def test_crossing_agrees_with_an_orientation_formulation_on_degenerate_and_rando
     hits = 0
     for trial in range(6000):
         span = 2 if trial < 4000 else 1000  # a tiny grid: coplanar, collinear, shared points
-        pts = [tuple(rng.randint(-span, span) for _ in range(3)) for _ in range(5)]
+        pts = [_point(rng, span) for _ in range(5)]
         got = crossing(*pts)
         want = _crossing_by_orientations(*pts)
         assert got == want, pts
@@ -287,13 +303,16 @@ TB, TA1, TA2 = g(0, 0, 0), g(0, 0, 100), g(10, 0, 100)
 
 
 def test_crossing_in_the_middle():
-    t, p = crossing(TB, TA1, TA2, g(5, -10, 80), g(5, 10, 80))
+    found = crossing(TB, TA1, TA2, g(5, -10, 80), g(5, 10, 80))
+    assert found is not None
+    t, p = found
     assert t == Fraction(5, 8)
     assert p == tuple(Fraction(v) for v in g(5, 0, 80))
 
 
 def test_crossing_on_the_final_edge_counts_and_on_the_initial_edge_or_apex_does_not():
-    assert crossing(TB, TA1, TA2, g(5, -10, 50), g(5, 10, 50))[0] == 1  # on B-A2
+    on_final_edge = crossing(TB, TA1, TA2, g(5, -10, 50), g(5, 10, 50))
+    assert on_final_edge is not None and on_final_edge[0] == 1  # on B-A2
     assert crossing(TB, TA1, TA2, g(0, -10, 50), g(0, 10, 50)) is None  # on B-A1: t = 0
     assert crossing(TB, TA1, TA2, g(0, -10, 0), g(0, 10, 0)) is None  # through the apex
     assert crossing(TB, TA1, TA2, g(5, -10, 100), g(5, 10, 100)) is None  # on the path A1-A2
@@ -321,11 +340,12 @@ def test_coplanar_segment_and_degenerate_triangle_are_never_a_contact():
 # --- exact predicates: the distance between segments ----------------------------------------
 
 
-def _f(p0, p1, q0, q1, s, t):
+def _f(pts: Sequence[Point], s: float | Fraction, t: float | Fraction) -> float | Fraction:
+    p0, p1, q0, q1 = pts
     return sum((p0[k] + s * (p1[k] - p0[k]) - q0[k] - t * (q1[k] - q0[k])) ** 2 for k in range(3))
 
 
-def _ternary(fn, iters=60):
+def _ternary(fn: Callable[[float], float], iters: int = 60) -> float:
     lo, hi = 0.0, 1.0
     for _ in range(iters):
         a, b = lo + (hi - lo) / 3, hi - (hi - lo) / 3
@@ -336,11 +356,11 @@ def _ternary(fn, iters=60):
     return fn((lo + hi) / 2)
 
 
-def _numeric_distance2(pts) -> float:
+def _numeric_distance2(pts: list[Point]) -> float:
     """min over s of (min over t of f): nested ternary searches of a convex function."""
 
     def inner(s: float) -> float:
-        return _ternary(lambda t: _f(*pts, s, t))
+        return _ternary(lambda t: float(_f(pts, s, t)))
 
     return _ternary(inner)
 
@@ -358,19 +378,21 @@ def test_segment_distance_on_simple_cases():
     assert segment_distance2((0, 0, 0), (1, 1, 0), (0, 1, 1), (1, 0, 1)) == 1
 
 
+@pytest.mark.slow
 def test_segment_distance_against_a_numeric_minimum_and_exact_bounds():
     rng = random.Random(11)
     for trial in range(80):
         span = 5 if trial < 40 else 10**6
-        pts = [tuple(rng.randint(-span, span) for _ in range(3)) for _ in range(4)]
+        pts = [_point(rng, span) for _ in range(4)]
         if trial % 10 == 0:  # parallel segments
-            pts[3] = tuple(pts[2][k] + 2 * (pts[1][k] - pts[0][k]) for k in range(3))
+            x, y, z = (pts[2][k] + 2 * (pts[1][k] - pts[0][k]) for k in range(3))
+            pts[3] = (x, y, z)
         got = segment_distance2(*pts)
         numeric = _numeric_distance2(pts)
         assert math.isclose(float(got), numeric, rel_tol=1e-9, abs_tol=1e-9 * span * span)
         for _ in range(20):  # never above any point of the square
             s, t = Fraction(rng.randint(0, 64), 64), Fraction(rng.randint(0, 64), 64)
-            assert got <= _f(*pts, s, t)
+            assert got <= _f(pts, s, t)
 
 
 # --- the twin: worked example ---------------------------------------------------------------
@@ -468,16 +490,16 @@ def _line(diameter, *wefts: Weft) -> RefTwin:
     return ref
 
 
-def _spy(ref: RefTwin) -> list[tuple]:
+def _spy(ref: RefTwin) -> list[tuple[Point, Point, Point, tuple[int, int]]]:
     """Record the triangles (B, A1, A2) the sweep asks about."""
-    calls: list[tuple] = []
+    calls: list[tuple[Point, Point, Point, tuple[int, int]]] = []
     inner = ref._first_contact
 
     def spy(moving, b, a1, a2, skip):
         calls.append((b, a1, a2, skip))
         return inner(moving, b, a1, a2, skip)
 
-    ref._first_contact = spy  # type: ignore[method-assign]
+    ref._first_contact = spy  # type: ignore[method-assign]  # the spy records each call
     return calls
 
 
@@ -726,14 +748,16 @@ def test_random_programs_keep_the_bookkeeping_consistent():
         cells = sorted(rng.sample([(r, c) for r in range(4) for c in range(4)], 7))
         ref = RefTwin(machine, cells, rng.choice([0, 0.5, 1.2]))
         ran = 0
+        axes: list[Axis] = ["row", "col"]
         while ran < 25:
+            ins: Shift | TakeUp | Weft
             kind = rng.random()
             if kind < 0.15:
                 ins = TakeUp(rng.choice([1, 2.5]))
             elif kind < 0.25:
                 ins = Weft(x=rng.uniform(0, 22), y=rng.uniform(0, 18), z=3, angle=30, length=8)
             else:
-                axis = rng.choice(["row", "col"])
+                axis = rng.choice(axes)
                 ins = Shift(axis, ((rng.randrange(4), rng.choice([-1, 1])),))
             try:
                 ref.run(ins)

@@ -18,7 +18,7 @@ import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
 
 from tests.api.conftest import WAIT, Live, live, mock, start_live
-from tests.fieldbus.conftest import slow_mock
+from tests.support.fieldbus import slow_mock
 
 __all__ = ["Browsing", "browser", "live", "mock", "page", "slow_live", "slow_mock"]
 

@@ -15,7 +15,7 @@ import httpx
 from bwsd.api.auth import TokenStore
 from simulator_hw.control import request
 from tests.api.conftest import WAIT, Live
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 
 ROOT = Path(__file__).resolve().parents[2]

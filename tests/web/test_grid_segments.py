@@ -13,9 +13,11 @@ from typing import Any
 import pytest
 
 from bwsd.api.auth import TokenStore
-from tests.fieldbus.conftest import BUS, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 MACHINE = {
     "rows": 4,

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 WEB = Path(__file__).resolve().parents[2] / "bwsd" / "web"
 BIN = WEB / "node_modules" / ".bin"
 

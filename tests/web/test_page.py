@@ -7,11 +7,15 @@ from typing import Any
 
 import matplotlib.image as mpimg
 import numpy as np
+import pytest
+from playwright.sync_api import FilePayload
 
 from bwsd.controller.packml import State
 from tests.api.conftest import BRAID, BRAID_STEPS, Live
 from tests.api.skeletons import yarns_of
 from tests.web.conftest import MS, Browsing
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 # Every yarn shown, as the tests' skeleton reading has it: id -> node ids and coordinates.
 DUMP = """() => Object.fromEntries(window.bwsd.dump().map(
@@ -130,10 +134,8 @@ def test_a_bad_program_shows_its_error_line_and_a_good_one_its_dry_run(live: Liv
     result.get_by_text("line 8").wait_for(timeout=MS)
     assert "COL 1:+1 2:?1" in result.inner_text()  # the line itself, quoted
     assert live.controller.program is None
-    page.page.set_input_files(
-        "#program-file",
-        files=[{"name": "braid.bws", "mimeType": "text/plain", "buffer": BRAID.encode()}],
-    )
+    braid: FilePayload = {"name": "braid.bws", "mimeType": "text/plain", "buffer": BRAID.encode()}
+    page.page.set_input_files("#program-file", files=[braid])
     page.page.wait_for_function(
         "t => document.querySelector('#program-text').value === t", arg=BRAID, timeout=MS
     )

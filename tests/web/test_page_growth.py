@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 
 from tests.api.skeletons import yarns_of
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 CYCLES = 30
 

@@ -18,14 +18,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from playwright.sync_api import Browser, Page
+from playwright.sync_api import Browser, Page, Request
 
 from bwsd.api.doors import Doors
 from bwsd.controller import resting
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, loom_control
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 ROOT = Path(__file__).resolve().parents[2]
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
@@ -186,7 +188,12 @@ def test_abort_and_stop_ask_first(slow_live: Live, page: Browsing):
     live = slow_live
     _watch_a_long_run(live, page)
     sent: list[str] = []
-    page.page.on("request", lambda r: "/commands/" in r.url and sent.append(r.url))
+
+    def sending(request: Request) -> None:
+        if "/commands/" in request.url:
+            sent.append(request.url)
+
+    page.page.on("request", sending)
     dialog = page.page.locator("#confirm")
     for command, dismiss in (("abort", "cancel"), ("abort", "Escape"), ("stop", "cancel")):
         page.page.wait_for_function(

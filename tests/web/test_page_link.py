@@ -21,9 +21,11 @@ from websockets.sync.client import ClientConnection, connect
 
 from bwsd.api.doors import DEFAULT_DOORS
 from tests.api.conftest import WAIT, Live, start_live
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.web.conftest import ARGS, MS, Browsing
 from tests.web.serving import again, example, free_port, serve
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 ROOT = Path(__file__).resolve().parents[2]
 SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-crowded-1024.png there
@@ -64,7 +66,7 @@ def restartable(tmp_path: Path) -> Iterator[dict[str, Any]]:
     the 2x2 braid loaded: {"served", "mock", "token"}; the test may restart it."""
     text, machine = example("braid-2x2")
     served, mock, token = serve(tmp_path, machine, text, port=free_port())
-    daemon = {"served": served, "mock": mock, "token": token}
+    daemon: dict[str, Any] = {"served": served, "mock": mock, "token": token}
     try:
         served.http.post("/programs", json={"name": "braid.bws", "text": text}).raise_for_status()
         yield daemon

@@ -26,9 +26,11 @@ from bwsd.api.auth import TokenStore
 from bwsd.config import load_config
 from simulator_hw.control import request
 from tests.api.conftest import BRAID, WAIT
-from tests.fieldbus.conftest import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served
 from tests.web.conftest import MS, Browsing
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 ROOT = Path(__file__).resolve().parents[2]
 # A shed open from the start (rows 0 and 2 full, row 1 empty): the first instruction is a WEFT.
@@ -114,10 +116,12 @@ class Loom:
     def bus_until(self, test: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
         """The daemon's last reading of the machine (`/state`'s `bus`) once ``test`` holds."""
         deadline = time.monotonic() + WAIT
-        while not test(bus := self.served.state()["bus"]):
+        while True:
+            bus: dict[str, Any] = self.served.state()["bus"]
+            if test(bus):
+                return bus
             assert time.monotonic() < deadline, bus
             time.sleep(0.1)
-        return bus
 
     def open(self, page: Browsing) -> None:
         page.page.goto(f"{self.served.urls['api']}/#token={self.token}")

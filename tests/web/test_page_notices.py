@@ -21,9 +21,11 @@ from playwright.sync_api import Route
 
 from bwsd.controller import resting
 from tests.api.conftest import BRAID, Live
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, example, free_port, loom_control, restart, serve
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 ROOT = Path(__file__).resolve().parents[2]
 SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-<name>-1024.png there
@@ -125,7 +127,7 @@ def restartable(tmp_path: Path) -> Iterator[dict[str, Any]]:
     loaded and reset: {"served", "token"}; the test may restart it."""
     text, machine = example("braid-2x2")
     served, mock, token = serve(tmp_path, machine, text, port=free_port())
-    daemon = {"served": served, "token": token}
+    daemon: dict[str, Any] = {"served": served, "token": token}
     try:
         served.http.post("/programs", json={"name": "braid.bws", "text": text}).raise_for_status()
         served.command("reset")

@@ -18,13 +18,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from playwright.sync_api import Browser
+from playwright.sync_api import Browser, Response
 
 from bwsd.controller import resting
 from tests.api.conftest import BRAID, BRAID_STEPS, Live, start_live
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
 from tests.web.serving import api_client, loom_control
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
 ENABLED = """() => [...document.querySelectorAll('button[data-command]')]
@@ -56,7 +58,7 @@ def _in_step(page: Browsing, live: Live, name: str) -> list[str]:
     deadline = time.monotonic() + MS / 1000
     while True:
         allowed = viewer.get("/state").json()["allowed"]
-        enabled = page.page.evaluate(ENABLED)
+        enabled: list[str] = page.page.evaluate(ENABLED)
         if sorted(enabled) == sorted(allowed):
             return enabled
         assert time.monotonic() < deadline, f"{name}: page enables {enabled}, daemon {allowed}"
@@ -114,7 +116,12 @@ def test_a_viewer_never_sees_an_enabled_button(live: Live, page: Browsing):
     _load(live)
     api_client(live, "operator").post("/commands/reset").raise_for_status()
     refused: list[str] = []
-    page.page.on("response", lambda r: r.status == 403 and refused.append(r.url))
+
+    def forbidden(response: Response) -> None:
+        if response.status == 403:
+            refused.append(response.url)
+
+    page.page.on("response", forbidden)
     page.page.add_init_script(WATCH_ENABLED)
     page.open(live, live.tokens["viewer"])
     page.ready()
@@ -216,7 +223,11 @@ def _watch(live: Live) -> Callable[[], None]:
     """Start the daemon's watch task (reading the machine at rest, as `bwsd serve` does) on
     the live loop; the function that cancels it."""
     task = asyncio.run_coroutine_threadsafe(resting.watch(live.controller), live.loop)
-    return lambda: live.loop.call_soon_threadsafe(task.cancel)
+
+    def stop() -> None:
+        live.loop.call_soon_threadsafe(task.cancel)
+
+    return stop
 
 
 @pytest.fixture

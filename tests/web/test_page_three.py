@@ -18,6 +18,8 @@ from playwright.sync_api import Browser
 from bwsd.api.web import WEB_ROOT, install
 from tests.web.conftest import MS
 
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
 
 @contextlib.contextmanager
 def serving(root: Path) -> Iterator[str]:

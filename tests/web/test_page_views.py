@@ -20,10 +20,12 @@ import pytest
 from bwsd.export.crossings import crossings
 from bwsd.export.skeleton_json import skeleton_from_dict
 from bwsd.program.sections import parse_section
-from tests.fieldbus.conftest import Mock
+from tests.support.fieldbus import Mock
 from tests.test_daemon import Served
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 SHOTS = os.environ.get("BWSD_SCREENSHOTS")  # a directory: write preview-view-*.png there
 
@@ -151,7 +153,9 @@ def test_axes_and_a_millimetre_scale_with_sensible_labels(runs: Runs, page: Brow
     text = page.page.locator(".scale-text").inner_text()
     length = float(text.removesuffix(" mm"))
     assert length / 10 ** math.floor(math.log10(length)) in (1, 2, 5)
-    width = page.page.locator(".scale-bar").bounding_box()["width"]
+    bar = page.page.locator(".scale-bar").bounding_box()
+    assert bar is not None  # it is visible
+    width = bar["width"]
     mm = _mm_per_px(page, [20.0, 20.0, 50.0])
     assert abs(width * mm - length) < 0.02 * length, (width, mm, length)
     z_ticks = [e for e in _view(page, "v => v.axes.describe()") if e["axis"] == "z"]
@@ -392,6 +396,7 @@ def _clear_spot(page: Browsing, skeleton: dict[str, Any]) -> tuple[int, list[flo
         pts, screen = screen[: len(yarn["nodes"])], screen[len(yarn["nodes"]) :]
         segments += [(yarn["id"], a, b) for a, b in itertools.pairwise(pts)]
     box = page.page.locator("#view").bounding_box()
+    assert box is not None
     for yarn, a, b in segments:
         p = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2]
         if not (20 < p[0] < box["width"] - 20 and 20 < p[1] < box["height"] - 20):
@@ -417,6 +422,7 @@ def test_clicking_a_yarn_picks_it_and_highlight_dims_the_others(runs: Runs, page
     )
     yarn, (x, y) = _clear_spot(page, run.skeleton)
     box = page.page.locator("#view").bounding_box()
+    assert box is not None
     page.page.mouse.click(box["x"] + x, box["y"] + y)
     page.page.mouse.click(box["x"] + 4, box["y"] + 4)  # empty space, in a corner
     page.page.mouse.move(box["x"] + 200, box["y"] + 200)
@@ -474,7 +480,7 @@ def _weft_height(skeleton: dict[str, Any]) -> float | None:
     wefts = [y for y in skeleton["yarns"] if y["kind"] == "weft"]
     if not wefts:
         return None
-    return float(wefts[len(wefts) // 2]["nodes"][0][2]) + 0.2 * skeleton["diameter"]
+    return float(wefts[len(wefts) // 2]["nodes"][0][2]) + 0.2 * float(skeleton["diameter"])
 
 
 def _pixels(png: bytes) -> Any:

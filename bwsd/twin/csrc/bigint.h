@@ -2,7 +2,7 @@
  *
  * Magnitude in 64-bit limbs, least significant first, plus a sign. Every operation checks
  * its capacity and sets BIG_OVERFLOW in the context instead of overflowing; the callers'
- * proven bounds (bwsd/twin/csrc/exact.c) stay far below it.
+ * proven bounds (exact.c) stay far below it.
  */
 #ifndef BWSD_BIGINT_H
 #define BWSD_BIGINT_H
@@ -12,8 +12,8 @@
 #define BIG_LIMBS 16 /* 1024 bits */
 
 typedef struct {
-    int neg;                  /* 1 when negative (never for zero) */
-    int n;                    /* limbs in use; 0 for zero */
+    int neg; /* 1 when negative (never for zero) */
+    int n;   /* limbs in use; 0 for zero */
     uint64_t d[BIG_LIMBS];
 } big;
 

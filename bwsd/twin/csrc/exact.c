@@ -43,8 +43,8 @@ static inline void diff3(const int64_t *p, const int64_t *o, int64_t *out) {
 }
 
 /* det[p1 - p0, p2 - p0, p3 - p0] as u . (a x b): a, b, u the differences */
-static void orient_setup(const int64_t *p0, const int64_t *p1, const int64_t *p2,
-                         const int64_t *p3, Cross *x, int64_t *u) {
+static void orient_setup(const int64_t *p0, const int64_t *p1, const int64_t *p2, const int64_t *p3,
+                         Cross *x, int64_t *u) {
     int64_t a[3], b[3];
     diff3(p1, p0, a);
     diff3(p2, p0, b);
@@ -110,7 +110,7 @@ int plane_big(Plane *pl, const int64_t *x, big *out) {
 static int round_float(double v, double err, int64_t *out) {
     if (exact_only) return 0;
     double r = rint(v);
-    if (!(fabs_(v - r) + err < 0.5)) return 0; /* also refuses NaN */
+    if (!(fabs_(v - r) + err < 0.5)) return 0;      /* also refuses NaN */
     if (!(fabs_(r) < 4503599627370496.0)) return 0; /* 2^52: let the exact path report it */
     *out = (int64_t)r;
     return 1;
@@ -139,8 +139,8 @@ int round_ratio(const big *num, const big *den, int64_t *out) {
 
 static void big_abs(big *x) { x->neg = 0; }
 
-int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b,
-               ExactPair exact, const void *ctx, int64_t *out) {
+int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b, ExactPair exact,
+               const void *ctx, int64_t *out) {
     if (a->s == 0) {
         for (int k = 0; k < 3; k++) out[k] = p[k];
         return E_OK;
@@ -235,8 +235,7 @@ static int rest_exact(int64_t yk, const big *nvk, const big *S, const Diam *d, i
     return E_OK;
 }
 
-int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d,
-               int64_t *out) {
+int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d, int64_t *out) {
     for (int k = 0; k < 3; k++) out[k] = y[k];
     if (d->zero) return E_OK;
     i128 c[3];
@@ -257,7 +256,8 @@ int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam 
         double err_w = d->f * (e_nv / norm) * (1 + 32 * EPS) + 12 * EPS * d->f + 3 * EPS * fabs_(w);
         double v = (double)y[k] - w;
         double err = 2.0 * (err_w + EPS * fabs_(v));
-        done[k] = nv == 0 && c[i] == 0 && c[j] == 0 ? (out[k] = y[k], 1) : round_float(v, err, &out[k]);
+        done[k] =
+            nv == 0 && c[i] == 0 && c[j] == 0 ? (out[k] = y[k], 1) : round_float(v, err, &out[k]);
     }
     if (done[0] && done[1] && done[2]) return E_OK;
     big ub[3], cb[3], uu, cc, S, t1, t2, nvk;
@@ -275,8 +275,7 @@ int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam 
     for (int k = 0; k < 3; k++) {
         if (done[k]) continue;
         int i = (k + 1) % 3, j = (k + 2) % 3;
-        if (big_mul(&t1, &ub[i], &cb[j]) || big_mul(&t2, &ub[j], &cb[i]) ||
-            big_sub(&nvk, &t1, &t2))
+        if (big_mul(&t1, &ub[i], &cb[j]) || big_mul(&t2, &ub[j], &cb[i]) || big_sub(&nvk, &t1, &t2))
             return E_ARITH;
         int err = rest_exact(y[k], &nvk, &S, d, &out[k]);
         if (err) return err;

@@ -21,13 +21,13 @@
 /* Error codes shared by the kernel (0 is success). */
 enum {
     E_OK = 0,
-    E_LIMIT = 1,    /* a coordinate at or beyond 2^20 mm */
-    E_ARITH = 2,    /* an exact fallback ran out of its capacity (a bug) */
+    E_LIMIT = 1, /* a coordinate at or beyond 2^20 mm */
+    E_ARITH = 2, /* an exact fallback ran out of its capacity (a bug) */
     E_NOMEM = 3,
     E_CONTACTS = 4, /* too many contacts in one sweep */
     E_MOVE_OUT = 5,
     E_MOVE_BUSY = 6,
-    E_LINE = 7,     /* a line index outside the matrix */
+    E_LINE = 7,      /* a line index outside the matrix */
     E_MOVE_SPAN = 8, /* a case would leave the segment it is moved on */
     E_JAM = 9,       /* a contact node within one diameter of the guide plane, or above it */
 };
@@ -77,11 +77,10 @@ int plane_big(Plane *pl, const int64_t *x, big *out);
 /* round(p + A / (A + B) * (q - p)) per coordinate, A = |a|, B = |b| (a, b nonzero, or
  * one of them zero); exact values are recomputed by the callbacks only when needed. */
 typedef int (*ExactPair)(const void *ctx, big *a, big *b);
-int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b,
-               ExactPair exact, const void *ctx, int64_t *out);
+int lerp_round(const int64_t *p, const int64_t *q, const Sgn *a, const Sgn *b, ExactPair exact,
+               const void *ctx, int64_t *out);
 /* X = round(y - d n / |n|), n = m with its component along u removed. */
-int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d,
-               int64_t *out);
+int rest_round(const int64_t *y, const int64_t *m, const int64_t *u, const Diam *d, int64_t *out);
 /* Whether gap <= d exactly (gap in grid units, |gap| < 2^53; d the diameter). */
 int within_diameter(int64_t gap, const Diam *d, int *out);
 /* Compare the ratios |a1| / (|a1| + |b1|) and |a2| / (|a2| + |b2|) exactly: -1, 0, 1. */
@@ -92,8 +91,8 @@ int round_ratio(const big *num, const big *den, int64_t *out);
  * times the permanent (differences rounded); ours are exact, so the bound holds with room. */
 #define ERRBOUND 8.0e-16
 
-int dot_sign(const int64_t *u, const i128 *n); /* the exact sign of u . n */
-void cross_exact(Cross *x);                    /* the exact a x c */
+int dot_sign(const int64_t *u, const i128 *n);       /* the exact sign of u . n */
+void cross_exact(Cross *x);                          /* the exact a x c */
 int cross_big(Cross *x, const int64_t *u, big *out); /* the exact u . (a x c) */
 
 static inline void cross_init(Cross *x, const int64_t *a, const int64_t *c) {

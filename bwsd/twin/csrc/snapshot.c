@@ -23,8 +23,8 @@ static void dump_into(Buf *b, const State *s, const unsigned char *dnum, size_t 
     double df = s->d.f;
     int64_t dbits;
     memcpy(&dbits, &df, sizeof dbits);
-    int64_t head[NHEAD] = {MAGIC, s->rows, s->cols, s->shift, s->gz, s->nn, s->ny, s->nw,
-                           s->nc, dbits, (int64_t)ldnum, (int64_t)ldden, s->d.zero};
+    int64_t head[NHEAD] = {MAGIC, s->rows, s->cols, s->shift,       s->gz,          s->nn,    s->ny,
+                           s->nw, s->nc,   dbits,   (int64_t)ldnum, (int64_t)ldden, s->d.zero};
     put(b, head, sizeof head);
     put(b, s->gx, sizeof(int64_t) * (size_t)s->cols);
     put(b, s->gy, sizeof(int64_t) * (size_t)s->rows);
@@ -95,8 +95,8 @@ static const char *check(const State *s) {
         if (s->occ[i] < -1 || s->occ[i] >= s->nw) return "occupancy names no warp";
     for (int64_t i = 0; i < s->nc; i++) {
         const int32_t *c = s->contacts + 5 * i;
-        if (c[1] < 0 || c[1] >= s->nw || c[3] < 0 || c[3] >= s->ny || c[2] < 0 ||
-            c[2] >= s->nn || c[4] < 0 || c[4] >= s->nn)
+        if (c[1] < 0 || c[1] >= s->nw || c[3] < 0 || c[3] >= s->ny || c[2] < 0 || c[2] >= s->nn ||
+            c[4] < 0 || c[4] >= s->nn)
             return "a contact names no yarn or node";
     }
     return NULL;
@@ -159,15 +159,15 @@ int state_load(State *s, const unsigned char *buf, size_t len, const char **why)
     *why = "bad sizes";
     if (rows < 1 || cols < 1 || rows * cols > ((int64_t)1 << 31) || h[3] < 1 || h[3] > 60 ||
         nn < 0 || nn >= INT32_MAX || ny < 0 || ny > nn || nw < 0 || nw > ny || nc < 0 ||
-        nc >= INT32_MAX || h[10] < 0 || h[10] > 8 * BIG_LIMBS || h[11] < 1 ||
-        h[11] > 8 * BIG_LIMBS)
+        nc >= INT32_MAX || h[10] < 0 || h[10] > 8 * BIG_LIMBS || h[11] < 1 || h[11] > 8 * BIG_LIMBS)
         return E_ARITH;
     size_t need = sizeof(int64_t) * (size_t)(rows + cols + 3 * nn) +
                   sizeof(int32_t) * (size_t)(3 * nn + 2 * ny + 2 * nw + rows * cols + 5 * nc) +
                   sizeof(double) * (size_t)ny + (size_t)(h[10] + h[11]);
     *why = "truncated";
     if (len - b.at != need) return E_ARITH;
-    int64_t *gx = malloc(sizeof(int64_t) * (size_t)cols), *gy = malloc(sizeof(int64_t) * (size_t)rows);
+    int64_t *gx = malloc(sizeof(int64_t) * (size_t)cols),
+            *gy = malloc(sizeof(int64_t) * (size_t)rows);
     if (!gx || !gy) return free(gx), free(gy), E_NOMEM;
     take(&b, gx, sizeof(int64_t) * (size_t)cols);
     take(&b, gy, sizeof(int64_t) * (size_t)rows);

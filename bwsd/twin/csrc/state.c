@@ -90,17 +90,18 @@ void state_free(State *s) {
         }
     if (s->fcells)
         for (size_t i = 0; i < ncell; i++) free(s->fcells[i].w);
-    void *all[] = {s->gx, s->gy, s->pos, s->next, s->prev, s->nyarn, s->stamp, s->head,
-                   s->tail, s->fixlen, s->wr, s->wc, s->frect, s->fbox, s->wstamp, s->wmark,
-                   s->occ, s->contacts, s->cells, s->fcells, s->rx0, s->rx1, s->log};
+    void *all[] = {s->gx,    s->gy,     s->pos,    s->next,   s->prev, s->nyarn,
+                   s->stamp, s->head,   s->tail,   s->fixlen, s->wr,   s->wc,
+                   s->frect, s->fbox,   s->wstamp, s->wmark,  s->occ,  s->contacts,
+                   s->cells, s->fcells, s->rx0,    s->rx1,    s->log};
     for (size_t i = 0; i < sizeof all / sizeof all[0]; i++) free(all[i]);
     memset(s, 0, sizeof *s);
 }
 
 /* ----- the log ----- */
 
-static int log_op(State *s, int32_t op, int32_t a, int64_t v0, int64_t v1, int64_t v2,
-                  int64_t v3, int64_t v4, int64_t v5) {
+static int log_op(State *s, int32_t op, int32_t a, int64_t v0, int64_t v1, int64_t v2, int64_t v3,
+                  int64_t v4, int64_t v5) {
     if (!s->logging) return E_OK;
     if (grow((void **)&s->log, sizeof(Op), s->nlog + 1, &s->clog)) return E_NOMEM;
     Op *o = &s->log[s->nlog++];
@@ -270,8 +271,8 @@ int raster(State *s, const int64_t *const *pts, int n, int32_t *iy0, int32_t *iy
     *iy1 = cidx(yhi, s->oy, s->shift, s->gny);
     for (int32_t iy = *iy0; iy <= *iy1; iy++) {
         double lower = iy == 0 ? -INFINITY : (double)(s->oy + ((int64_t)iy << s->shift));
-        double upper = iy == s->gny - 1 ? INFINITY
-                                        : (double)(s->oy + ((int64_t)(iy + 1) << s->shift));
+        double upper =
+            iy == s->gny - 1 ? INFINITY : (double)(s->oy + ((int64_t)(iy + 1) << s->shift));
         double xmin = INFINITY, xmax = -INFINITY, tol = 0;
         for (int i = 0; i < n; i++) {
             double y = (double)pts[i][1], x = (double)pts[i][0];

@@ -37,8 +37,20 @@ typedef struct {
     int32_t n, cap;
 } FCell;
 
-enum { OP_NODE = 1, OP_NEXT, OP_PREV, OP_POS, OP_CELL, OP_OCC, OP_CONTACT, OP_YARN, OP_FIXLEN,
-       OP_GRID, OP_FREE, OP_GZ };
+enum {
+    OP_NODE = 1,
+    OP_NEXT,
+    OP_PREV,
+    OP_POS,
+    OP_CELL,
+    OP_OCC,
+    OP_CONTACT,
+    OP_YARN,
+    OP_FIXLEN,
+    OP_GRID,
+    OP_FREE,
+    OP_GZ
+};
 
 typedef struct {
     int32_t op, a;

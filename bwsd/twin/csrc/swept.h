@@ -1,6 +1,8 @@
-/* Instructions on the state: the sweep of a free node, shifts, take-up, weft insertion. */
-#ifndef BWSD_SWEEP_H
-#define BWSD_SWEEP_H
+/* Instructions on the state: the sweep of a free node (the triangle its segment sweeps, hence
+ * the file's name; the design sweeps of bwsd/sweep are another thing), shifts, take-up, weft
+ * insertion. */
+#ifndef BWSD_SWEPT_H
+#define BWSD_SWEPT_H
 
 #include "state.h"
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from typing import Any
 
 import numpy as np
 import pytest
@@ -17,45 +16,26 @@ from bwsd.controller.plan import Limits
 from bwsd.controller.recovery import lines_left
 from bwsd.controller.status import Event, InstructionDone
 from bwsd.errors import ProgramError
-from bwsd.fieldbus import AxisMove, open_bus
-from bwsd.journal import Journal
+from bwsd.fieldbus import AxisMove
 from bwsd.program import parse_program
 from bwsd.twin import replay, simulate
 from simulator_hw.control import request
-from tests.fieldbus.conftest import client_config
+from tests.support.controller import TEXT, bits, controller, run, state_now
+from tests.support.fieldbus import client_config
 
-# The mock loom's fill (tests/fieldbus/conftest.py): cases at (1, 1), (1, 2), (2, 1), (2, 2).
-CYCLE = "ROW 1:+1 2:-1\nCOL 1:+1 2:-1\nROW 1:-1 2:+1\nCOL 1:-1 2:+1\nTAKEUP 2\n"
-TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 3\n{CYCLE}END\n"
-
-
-def run(scenario: Any) -> Any:
-    return asyncio.run(asyncio.wait_for(scenario, 120))
-
-
-async def controller(mock, tmp_path, **kw) -> tuple[Controller, Journal, list[dict]]:
-    config = client_config("modbus", mock.ports)
-    bus = open_bus(config)
-    await bus.connect()
-    journal = Journal.open(tmp_path / "journal.db")
-    events: list[dict] = []
-    return Controller(config.machine, bus, journal, publish=events.append, **kw), journal, events
-
-
-def bits(twin) -> list:
-    sk = twin.skeleton()
-    return [(y.node_ids.tobytes(), y.nodes.tobytes()) for y in sk.yarns] + list(sk.contacts)
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 
 def test_a_program_runs_to_complete_and_matches_simulate(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, events = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         assert ctl.packml.state is State.IDLE
         await ctl.command(Command.START)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE
+        assert state_now(ctl) is State.COMPLETE
         program = parse_program(TEXT)
         assert bits(ctl.twin) == bits(
             simulate(client_config("modbus", mock.ports).machine, program)
@@ -99,6 +79,7 @@ def test_a_drive_fault_aborts_without_committing(mock, tmp_path):
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         await request(
             "127.0.0.1", mock.ports["control"], {"cmd": "fault", "kind": "drive", "axis": "col2"}
@@ -119,6 +100,7 @@ def test_restart_resumes_to_the_same_skeleton(mock, tmp_path):
     async def scenario() -> None:
         first, journal, _ = await controller(mock, tmp_path)
         await first.load("braid.bws", TEXT)
+        assert first.twin is not None
         await first.command(Command.RESET)
         await first.command(Command.START)
         while first.twin.done < 7:
@@ -130,11 +112,12 @@ def test_restart_resumes_to_the_same_skeleton(mock, tmp_path):
         journal.close()
         second, journal, _ = await controller(mock, tmp_path)
         said = await second.recover()
+        assert second.twin is not None
         assert "resume with Unhold" in said and second.packml.state is State.HELD
         assert second.twin.done == done
         await second.command(Command.UNHOLD)
         await second.wait()
-        assert second.packml.state is State.COMPLETE
+        assert state_now(second) is State.COMPLETE
         whole = simulate(client_config("modbus", mock.ports).machine, parse_program(TEXT))
         assert bits(second.twin) == bits(whole)
         assert journal.program(1).done == 15
@@ -148,6 +131,7 @@ def test_restart_settles_a_pending_instruction_from_the_read_back(mock, tmp_path
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         # the daemon journaled "started" for instruction 1 and died before the move
         journal.set_outcome(pid, "running")
         journal.started(pid, 1, {})
@@ -162,6 +146,7 @@ def test_restart_settles_a_pending_instruction_from_the_read_back(mock, tmp_path
             await ctl.bus.execute(step)
         again = Controller(ctl.machine, ctl.bus, journal)
         said = await again.recover()
+        assert again.twin is not None
         assert "instruction 1 completed from the read-back" in said
         assert again.twin.done == 1 and journal.pending(pid) is None
         await again.command(Command.UNHOLD)
@@ -223,11 +208,13 @@ def test_a_silent_bus_refuses_start_and_consumes_nothing(mock, tmp_path):
             await ctl.command(Command.START)
         assert ctl.packml.state is State.IDLE
         assert journal.program(pid).outcome == "loaded" and journal.pending(pid) is None
-        assert ctl.status().bus.connected is False and "no answer" in ctl.status().bus.last_error
+        bus = ctl.status().bus
+        assert bus.connected is False and bus.last_error is not None
+        assert "no answer" in bus.last_error
         await request("127.0.0.1", mock.ports["control"], {"cmd": "clear"})
         await ctl.command(Command.START)
         await ctl.wait()
-        assert ctl.packml.state is State.COMPLETE
+        assert state_now(ctl) is State.COMPLETE
         assert ctl.status().bus.last_error is None  # cleared once the machine answered again
         await ctl.close()
 
@@ -248,7 +235,7 @@ def test_after_a_program_ends_every_command_still_lands_in_a_waiting_state(mock,
         assert await ctl.command(Command.RESET) is State.IDLE
         with pytest.raises(ControllerError, match="is complete: load a program"):
             await ctl.command(Command.START)
-        assert ctl.packml.state is State.IDLE
+        assert state_now(ctl) is State.IDLE
         assert journal.program(pid).outcome == "complete"  # an ended program stays ended
         await ctl.load("again.bws", TEXT.replace("REPEAT 3", "REPEAT 1"))
         await ctl.command(Command.START)
@@ -283,6 +270,7 @@ def test_every_injected_fault_stops_with_its_reason_and_no_unpredicted_move(
     async def scenario() -> None:
         ctl, journal, _ = await controller(slow_mock, tmp_path)
         await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         await ctl.command(Command.RESET)
         seen: list[int] = []
 
@@ -322,6 +310,7 @@ def test_a_shift_cut_between_its_lines_is_completed_line_by_line(mock, tmp_path)
     async def scenario() -> None:
         ctl, journal, _ = await controller(mock, tmp_path)
         pid = await ctl.load("braid.bws", TEXT)
+        assert ctl.twin is not None
         journal.set_outcome(pid, "running")
         journal.started(pid, 1, {})
         from bwsd.controller.plan import setpoints
@@ -396,6 +385,7 @@ def test_a_restart_replays_only_what_follows_the_last_snapshot(mock, tmp_path, c
         every = Settings(snapshot_every=4)
         first, journal, _ = await controller(mock, tmp_path, settings=every)
         pid = await first.load("braid.bws", TEXT)
+        assert first.twin is not None
         await first.command(Command.RESET)
         await first.command(Command.START)
         while first.twin.done < 10:

@@ -5,7 +5,7 @@
  * builds Y, X and the restart point on the grid. Candidate order never matters: the choice is
  * a total order decided exactly.
  */
-#include "sweep.h"
+#include "swept.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -118,8 +118,8 @@ static void try_segment(Search *q, int32_t seg, int32_t end, int32_t yarn) {
 }
 
 static inline int box_meets(const float *lo, const float *hi, const QBox *b) {
-    return hi[0] >= b->flo[0] && lo[0] <= b->fhi[0] && hi[1] >= b->flo[1] &&
-           lo[1] <= b->fhi[1] && hi[2] >= b->flo[2] && lo[2] <= b->fhi[2];
+    return hi[0] >= b->flo[0] && lo[0] <= b->fhi[0] && hi[1] >= b->flo[1] && lo[1] <= b->fhi[1] &&
+           hi[2] >= b->flo[2] && lo[2] <= b->fhi[2];
 }
 
 static void scan_cell(Search *q, int64_t ci, uint32_t st) {
@@ -131,8 +131,7 @@ static void scan_cell(Search *q, int64_t ci, uint32_t st) {
         int32_t end = c->n < (b + 1) * BLOCK ? c->n : (b + 1) * BLOCK;
         for (int32_t i = b * BLOCK; i < end; i++) {
             const Entry *e = &c->e[i];
-            if (!box_meets(&e->xlo, &e->xhi, &q->box))
-                continue;
+            if (!box_meets(&e->xlo, &e->xhi, &q->box)) continue;
             int32_t seg = e->seg;
             if (s->stamp[seg] == st) continue;
             s->stamp[seg] = st;
@@ -370,7 +369,8 @@ int64_t segments_near(State *s, const int64_t *lo, const int64_t *hi, int32_t **
     if (!res) return -1;
     uint32_t st = next_stamp(s);
     int32_t iy0, iy1;
-    int64_t corners[4][3] = {{lo[0], lo[1], 0}, {hi[0], lo[1], 0}, {hi[0], hi[1], 0}, {lo[0], hi[1], 0}};
+    int64_t corners[4][3] = {
+        {lo[0], lo[1], 0}, {hi[0], lo[1], 0}, {hi[0], hi[1], 0}, {lo[0], hi[1], 0}};
     const int64_t *quad[4] = {corners[0], corners[1], corners[2], corners[3]};
     raster(s, quad, 4, &iy0, &iy1);
     for (int32_t iy = iy0; iy <= iy1; iy++)
