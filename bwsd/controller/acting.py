@@ -89,9 +89,9 @@ async def _prepare(ctl: Controller, command: C, resume: bool) -> None:
     """Read the machine before a command that may lead to motion; settle a pending one."""
     if ctl.recovering or ctl.broken:
         return
-    state = await ctl.read_machine()
+    state = await ctl.read_machine(at_rest=True)
     if command is C.UNHOLD and await _clear_placing(ctl, state):
-        state = await ctl.read_machine()
+        state = await ctl.read_machine(at_rest=True)
     job = ctl.job
     if job is None or job.pending is None:
         return

@@ -353,12 +353,25 @@ class Controller:
             await self.supervisor.wait(name)
 
     # ----- the machine -----
-    async def read_machine(self) -> MachineState:
-        """Read the machine now (connecting if needed); ControllerError when it cannot."""
+    async def read_machine(self, *, at_rest: bool = False) -> MachineState:
+        """Read the machine now (connecting if needed); ControllerError when it cannot.
+        ``at_rest``: once no axis moves (an axis still on its way after a hold ends its
+        stroke first), as a command that moves next must see it."""
         try:
             state = await self.seen.read()
         except FieldbusError as exc:
             raise ControllerError(f"the machine cannot be read: {exc}") from exc
+        if at_rest and any(axis.busy for axis in state.axes):
+            moving = ", ".join(
+                a.name for a, s in zip(self.bus.axes, state.axes, strict=True) if s.busy
+            )
+            log.info("waiting for %s to end the stroke under way", moving)
+            try:
+                state = await self.bus.rest()
+            except FieldbusError as exc:
+                raise ControllerError(
+                    f"{exc}: nothing was moved; try again once they stand"
+                ) from exc
         self.seen.observe(state, self.at_rest())
         return state
 

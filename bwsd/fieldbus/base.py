@@ -298,6 +298,24 @@ class Fieldbus(ABC):
                 )
             await asyncio.sleep(0.002)
 
+    async def rest(self, timeout: float | None = None) -> MachineState:
+        """The machine once no axis moves: a drive takes no set-point while it moves, so a
+        command that moves after a stop (a resume) waits for a stroke still under way to end.
+        FieldbusTimeout names the axes still moving after ``timeout`` (the move timeout)."""
+        wait = self.settings.timeout if timeout is None else timeout
+        limit = time.monotonic() + wait
+        while True:
+            state = await self.state()
+            moving = [self.axes[i].name for i, axis in enumerate(state.axes) if axis.busy]
+            if not moving:
+                return state
+            if time.monotonic() > limit:
+                raise FieldbusTimeout(
+                    f"axes {', '.join(moving)} still move after {wait:g} s",
+                    lost=False,
+                )
+            await asyncio.sleep(0.002)
+
     async def execute(
         self, moves: Sequence[AxisMove], timeout: float | None = None
     ) -> MachineState:

@@ -215,6 +215,47 @@ def test_a_weft_axis_fault_holds_and_unhold_resumes_to_the_predicted_skeleton(
     asyncio.run(asyncio.wait_for(scenario(), 300))
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_unhold_while_a_placing_axis_still_travels_waits_for_it(tmp_path, backend):
+    """A stall of weft_z holds the run while weft_x still travels to the weft's place (a
+    drive takes no new set-point while it moves). Unhold at once waits for weft_x to come to
+    rest before it places the weft again: the run completes, every weft in once."""
+    generated = PROGRAMS["weave-3d U"]()
+    program = parse_program(generated.program)
+    later = moving(program, "weft_x")
+    slow = {"weft_travel_speed": 40.0}  # mm/s: 0.85 s to instruction 13's place, 1.9 s at most
+    mock = start_mock(tmp_path, slow, machine=machine_table(generated), program=generated.program)
+
+    async def scenario() -> None:
+        ctl = await controller(mock, tmp_path, backend, generated)
+        try:
+            await ctl.load("wefts.bws", generated.program)
+            await ctl.command(Command.RESET)
+            after(
+                ctl,
+                later - 1,
+                lambda: poke(mock, {"cmd": "fault", "kind": "stall", "axis": "weft_z"}),
+            )
+            await ctl.command(Command.START)
+            await ctl.wait()
+            assert ctl.packml.state is State.HELD, (ctl.packml.state, ctl.packml.reason)
+            assert (await loom_state(mock))["axes"]["weft_x"]["busy"]  # still on its way
+            poke(mock, {"cmd": "clear"})
+            await ctl.command(Command.UNHOLD)
+            await ctl.wait()
+            assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
+            assert bits(ctl.twin) == bits(simulate(ctl.machine, program))
+            assert ctl.twin is not None
+            assert same_wefts((await loom_state(mock))["wefts"], ctl.twin, program) > 0
+        finally:
+            await ctl.close()
+
+    try:
+        asyncio.run(asyncio.wait_for(scenario(), 300))
+    finally:
+        mock.stop()
+
+
 def later_wefts(program: Any, index: int) -> int:
     """Wefts among instructions 1 .. ``index``."""
     return sum(isinstance(ins, Weft) for ins in program.instructions[:index])

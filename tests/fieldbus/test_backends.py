@@ -140,6 +140,21 @@ class TestBackendContract:
         run(with_bus(slow_mock, backend, body))
 
     @pytest.mark.slow
+    def test_rest_waits_for_a_stroke_under_way_and_names_one_that_goes_on(self, slow_mock, backend):
+        """A stroke takes 0.2 s out and back (10 mm at 100 mm/s): ``rest`` returns once it
+        ended; with less time than it takes, FieldbusTimeout names the axis still moving."""
+
+        async def body(bus: Fieldbus) -> None:
+            await bus.move([stroke(bus, "row1", 1)])
+            with pytest.raises(FieldbusTimeout, match="axes row1 still move"):
+                await bus.rest(timeout=0.0)
+            state = await bus.rest()
+            assert not any(axis.busy for axis in state.axes)
+            assert state.occupancy[1].tolist() == [False, False, True, True]
+
+        run(with_bus(slow_mock, backend, body))
+
+    @pytest.mark.slow
     def test_a_mute_loom_is_a_timeout_or_a_lost_node(self, mock, backend):
         async def body(bus: Fieldbus) -> None:
             await control(mock, {"cmd": "fault", "kind": "mute"})
