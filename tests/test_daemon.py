@@ -41,6 +41,11 @@ TEXT = f"YARN diameter=1\nFILL row=1 col=0\n.XX.\n.XX.\nEND\nREPEAT 4\n{CYCLE}EN
 LONG = TEXT.replace("REPEAT 4", "REPEAT 80")  # 400 instructions: room for every kill
 LONG_STEPS = 400
 KILLS = int(os.environ.get("BWSD_CRASH_KILLS", "100"))
+# The kills in runs of their own, so that a parallel test run spreads them over its workers:
+# each run is its own daemon, journal and mock loom, with its own seed.
+KILL_RUNS = 4
+KILL_TEXT = TEXT.replace("REPEAT 4", "REPEAT 30")  # 150 instructions: room for a run's kills
+KILL_STEPS = 150
 
 
 def daemon_config(tmp: Path, mock: Mock, path: Path | None = None) -> Path:
@@ -199,39 +204,43 @@ def fire(served: Served, name: str, body: dict[str, Any]) -> None:
 
 
 @pytest.mark.slow
-def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig):
+@pytest.mark.parametrize("run", range(KILL_RUNS))
+def test_killed_anywhere_the_daemon_resumes_to_the_identical_skeleton(rig, run):
     """SIGKILL at random moments: while it runs (predicting, journaling, moving), inside an
-    Abort, and inside the resume that follows one."""
+    Abort, and inside the resume that follows one (KILLS in all, over KILL_RUNS runs)."""
     config, state, token, _ = rig
-    rng = random.Random(20261127)
+    rng = random.Random(20261127 + run)
     served = Served(config, state, token)
-    served.http.post("/programs", json={"name": "long.bws", "text": LONG}).raise_for_status()
+    served.http.post("/programs", json={"name": "long.bws", "text": KILL_TEXT}).raise_for_status()
     served.command("reset")
     served.command("start")
     try:
-        served = kill_anywhere(served, config, state, token, rng)
+        kills = KILLS // KILL_RUNS + (run < KILLS % KILL_RUNS)
+        served = kill_anywhere(served, config, state, token, rng, kills)
         final = served.wait_for({"Complete", "Held", "Aborted"})
-        assert final["name"] == "Complete" and final["index"] == LONG_STEPS, final
+        assert final["name"] == "Complete" and final["index"] == KILL_STEPS, final
         skeleton = served.http.get("/skeleton", params={"format": "json"}).json()
-        assert same_geometry(skeleton, expected_skeleton(LONG))
+        assert same_geometry(skeleton, expected_skeleton(KILL_TEXT))
     finally:
         served.stop()
     journal = sqlite3.connect(state / "journal.db")
     rows = journal.execute("SELECT idx, done IS NOT NULL FROM instructions ORDER BY idx").fetchall()
     journal.close()
-    assert rows == [(i, 1) for i in range(1, LONG_STEPS + 1)]  # each exactly once, all done
+    assert rows == [(i, 1) for i in range(1, KILL_STEPS + 1)]  # each exactly once, all done
 
 
 def kill_anywhere(
-    served: Served, config: Path, state: Path, token: str, rng: random.Random
+    served: Served, config: Path, state: Path, token: str, rng: random.Random, kills: int
 ) -> Served:
-    """KILLS kills at random moments, each followed by a restart and a resume; the daemon
-    serving at the end."""
-    for kill in range(KILLS):
+    """``kills`` kills at random moments, each followed by a restart and a resume; the
+    daemon serving at the end."""
+    for kill in range(kills):
         where = rng.choice(["running", "aborting", "resuming"])
         time.sleep(rng.uniform(0.0, 0.15))
         # A program that completes is no longer resumed: every kill must come before its end.
-        assert served.state()["index"] < LONG_STEPS - 10, f"LONG is too short for {KILLS} kills"
+        assert served.state()["index"] < KILL_STEPS - 10, (
+            f"KILL_TEXT is too short for {kills} kills"
+        )
         if where == "aborting":
             fire(served, "abort", {"reason": "operator"})
         elif where == "resuming":
