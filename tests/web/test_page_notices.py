@@ -12,6 +12,7 @@ import asyncio
 import json
 import os
 import re
+import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from bwsd.controller import resting
 from tests.api.conftest import BRAID, Live
 from tests.support.fieldbus import Mock
 from tests.web.conftest import MS, Browsing
-from tests.web.serving import api_client, example, free_port, loom_control, restart, serve
+from tests.web.serving import again, api_client, example, free_port, loom_control, restart, serve
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
@@ -249,3 +250,44 @@ def test_the_job_and_the_history_give_the_same_progress_mid_run(slow_live: Live,
     assert shown == "Execute" and 0 < index < count == 1000, both  # mid-run
     assert f" {index} / {count} " in history, both
     assert page.errors == []
+
+
+def test_a_restart_whose_program_cannot_be_restored_says_why(
+    restartable: dict[str, Any], page: Browsing
+):
+    """The journal's copy of the loaded program was edited while the daemon was down: the
+    restart cannot rebuild it, and the page says so with the daemon's reason and the fix."""
+    served, token = restartable["served"], restartable["token"]
+    text, _ = example("braid-2x2")
+    long = text.replace("REPEAT 10", "REPEAT 400")  # 2000 instructions: stopped long before
+    loaded = served.http.post("/programs", json={"name": "braid.bws", "text": long})
+    loaded.raise_for_status()  # in Idle, as the fixture left it
+    served.command("start")
+    page.page.goto(served.urls["api"] + f"/#token={token}")
+    page.ready()
+    page.until("() => window.bwsd.done >= 3")
+    served.stop()  # held after its instruction, its session closed; then the file is damaged
+    journal = sqlite3.connect(served.log.parent / "state" / "journal.db", isolation_level=None)
+    journal.executescript(
+        "BEGIN; DROP TRIGGER programs_fixed; UPDATE programs SET "
+        "text = text || '# edited' WHERE id = 2; COMMIT;"
+    )
+    journal.close()
+    restartable["served"] = served = again(served, token)
+    now = served.recovered()
+    assert now["name"] == "Held" and "recovery failed" in now["reason"], now
+    page.until(
+        "t => window.bwsd.notices().some(n => n.text.includes(t))",
+        "restore the journal from a backup",
+    )
+    notices = page.page.evaluate(NOTICES)
+    said = " ".join(n["text"] for n in notices)
+    assert "The daemon restarted" in said, notices
+    assert "recovery failed" in said and "braid.bws (#2)" in said, notices
+    banner = page.page.locator("#notice-banner").inner_text()
+    assert "restore the journal from a backup" in banner, banner
+    page.state("Held")
+    assert sorted(page.page.evaluate(ENABLED)) == ["abort", "stop"]  # the way on
+    _shot(page, "recovery-failed")
+    errors = [e for e in page.errors if "ERR_CONNECTION_REFUSED" not in e]
+    assert errors == []

@@ -106,13 +106,16 @@ function keep(samples, value) {
 // ----- what the page knows -----
 let live = fresh();
 
+const NO_PROGRAM = 'no program loaded';
+
 /**
  * What the page knows of the daemon and shows.
  * @typedef {object} Live
  * @property {State | null} state the last GET state answer
  * @property {number | null} programId the program whose skeleton is shown
  * @property {boolean} loaded a skeleton is shown
- * @property {boolean} noProgram the daemon has no program loaded
+ * @property {boolean} noProgram the daemon has no skeleton to show: no program, or no twin yet
+ * @property {string} emptyNote what the views say instead of a skeleton
  * @property {number} done instructions in the skeleton shown
  * @property {number} eventIndex the newest instruction index seen in an event since the last state
  * @property {Next | null} eventNext and the "next" it announced
@@ -125,7 +128,8 @@ function fresh() {
     state: null, // the last GET state answer
     programId: null, // the program whose skeleton is shown
     loaded: false, // a skeleton is shown
-    noProgram: false, // the daemon has no program loaded
+    noProgram: false, // the daemon has no skeleton to show: no program, or no twin yet
+    emptyNote: NO_PROGRAM, // what the views say instead of a skeleton
     done: 0, // instructions in the skeleton shown
     eventIndex: 0, // the newest instruction index seen in an event since the last state
     eventNext: null, // and the "next" it announced
@@ -372,6 +376,11 @@ async function fetchAll() {
     showNoProgram();
     return;
   }
+  const recovering = stateAnswer.body.recovering;
+  if (recovering) { // no twin to read while it is rebuilt, or when it cannot be: not asked
+    showNoProgram(`no skeleton: ${recovering}`);
+    return;
+  }
   const skeletonAnswer = await request('api/v1/skeleton', { timeoutMs: 0 }); // a large one takes its time
   if (asked !== generation) return;
   if (skeletonAnswer.status === 409) {
@@ -480,11 +489,17 @@ function showState(state) {
   scheduleFrame();
 }
 
-function showNoProgram() {
+/**
+ * No skeleton to show: no program loaded, or (``note``) why the loaded one's is not there.
+ * @param {string} [note]
+ */
+function showNoProgram(note = NO_PROGRAM) {
   view.clear();
   live.loaded = false;
   live.programId = null;
   live.noProgram = true;
+  live.emptyNote = note;
+  $('view-note').textContent = note;
   live.done = 0;
   selection.select(null);
   gridDirty = true;
@@ -521,7 +536,7 @@ function drawGrid() {
   gridDirty = false;
   const next = currentNext();
   if (!live.loaded || !view.occupancy) {
-    grid.showEmpty(live.noProgram ? 'no program loaded' : live.state ? 'waiting for the skeleton…' : 'not logged in');
+    grid.showEmpty(live.noProgram ? live.emptyNote : live.state ? 'waiting for the skeleton…' : 'not logged in');
     grid.setNext(null);
   } else {
     grid.setOccupancy(view.occupancy);
