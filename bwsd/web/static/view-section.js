@@ -1,6 +1,7 @@
 // @ts-check
 // The cross-section at a height z, drawn as `bwsd slice` draws it: a 2D view with x and y
-// in mm at equal scale (y up, as in the top view), every crossing a circle of the yarn
+// in mm at equal scale (x to the right, y down: row 0 of the matrix at the top, as the
+// Matrix panel, the top view and `bwsd slice` draw it), every crossing a circle of the yarn
 // diameter, filled with a dark rim where the yarn is laid (a fixed segment), open where it
 // is a warp's free segment (a dot and a cross when the model has no diameter); wefts lying
 // within half a diameter of the plane as strips. The section's nominal cells (the
@@ -86,7 +87,7 @@ export class SectionView {
     /** @type {ToScreen} */
     const sx = (x) => left + (x - (cx - half)) * scale;
     /** @type {ToScreen} */
-    const sy = (y) => top + side - (y - (cy - half)) * scale;
+    const sy = (y) => top + (y - (cy - half)) * scale;
     this.toScreen = { sx, sy, scale, found };
     g.save();
     g.beginPath();
@@ -201,7 +202,7 @@ export class SectionView {
     this.g.fillStyle = CELL_FILL;
     for (const [row, col] of cells) {
       const [x, y] = fellXY(machine, row, col);
-      this.g.fillRect(sx(x - hx), sy(y + hy), sx(x + hx) - sx(x - hx), sy(y - hy) - sy(y + hy));
+      this.g.fillRect(sx(x - hx), sy(y - hy), sx(x + hx) - sx(x - hx), sy(y + hy) - sy(y - hy));
     }
   }
 

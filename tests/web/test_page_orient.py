@@ -1,0 +1,156 @@
+"""One orientation: the Matrix panel, the top view, the section and `bwsd slice` show an L
+and a U the same way round, the way the program's FILL block writes them (x to the right,
+y down: row 0 at the top); and views that keep their word.
+
+Each shape is read back from what is drawn: the matrix's occupied cells on screen, the
+coloured pixels of the 3D view and of the section's canvas, the circles of the slice's
+figure. Runs are braid-L and weave-U to Complete through `bwsd serve` on the mock loom.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+from matplotlib.patches import Circle
+
+from bwsd.export.skeleton_json import skeleton_from_dict
+from bwsd.export.slice import slice_figure
+from tests.web.conftest import Browsing
+from tests.web.test_page_views import Run, Runs, _open, _preset, _view
+
+pytestmark = pytest.mark.slow  # every test here is in the slow tier
+
+Points = list[tuple[float, float]]
+
+
+def glyph(points: Points) -> str:
+    """The letter a set of points on screen (x right, y down) reads as: L, Γ, U, ∩...
+
+    The points' bounding box is cut in 3 x 3 cells. An L-like shape leaves one corner
+    empty (its notch): the bottom right for Γ, the top right for L, and so on; a U-like
+    shape fills the four corners and leaves the middle of one side empty: the top for U,
+    the bottom for ∩. Anything else reads as "?".
+    """
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    x0, y0 = min(xs), min(ys)
+    w, h = (max(xs) - x0) or 1.0, (max(ys) - y0) or 1.0
+    counts = [[0] * 3 for _ in range(3)]
+    for x, y in points:
+        counts[min(int(3 * (y - y0) / h), 2)][min(int(3 * (x - x0) / w), 2)] += 1
+    empty = {(r, c) for r in range(3) for c in range(3) if counts[r][c] <= 0.02 * len(points)}
+    corners = {(0, 0): "⅃", (0, 2): "L", (2, 0): "ꓶ", (2, 2): "Γ"}
+    notches = [letter for cell, letter in corners.items() if cell in empty]
+    if len(notches) == 1:
+        return notches[0]
+    if not notches and ((0, 1) in empty) != ((2, 1) in empty):
+        return "U" if (0, 1) in empty else "∩"
+    return "?"
+
+
+def _fill_cells(text: str) -> Points:
+    """(col, row) of every X of the program's FILL blocks: the shape as written."""
+    cells: Points = []
+    lines = iter(text.splitlines())
+    for line in lines:
+        if not line.startswith("FILL"):
+            continue
+        fields = dict(f.split("=") for f in line.split()[1:])
+        row, col = int(fields["row"]), int(fields["col"])
+        for body in lines:
+            if body.strip() == "END":
+                break
+            if body.lstrip().startswith("#"):
+                continue
+            cells += [(col + c, row) for c, ch in enumerate(body) if ch in "Xx"]
+            row += 1
+    return cells
+
+
+def _matrix_cells(page: Browsing) -> Points:
+    """The centres on screen of the Matrix panel's occupied cells."""
+    centres: Points = page.page.evaluate(
+        """() => [...document.querySelectorAll('#grid g.cell[data-yarn]')].map((g) => {
+             const r = g.getBoundingClientRect();
+             return [r.x + r.width / 2, r.y + r.height / 2];
+           })"""
+    )
+    return [(float(x), float(y)) for x, y in centres]
+
+
+def _coloured(rgb: np.ndarray[Any, Any], exclude: tuple[int, ...] = ()) -> Points:
+    """The pixels of an RGB image (0..1) in a saturated colour: the yarns, not the grey
+    ink, grid and shading (nor the colours ``exclude``s, 0xRRGGBB, that are no yarn's)."""
+    rgb = rgb[..., :3]
+    saturated = rgb.max(axis=2) - rgb.min(axis=2) > 0.25
+    for colour in exclude:
+        other = np.array([colour >> 16, (colour >> 8) & 0xFF, colour & 0xFF]) / 255
+        saturated &= np.abs(rgb - other).max(axis=2) > 0.08
+    ys, xs = np.nonzero(saturated)
+    return [(float(x), float(y)) for x, y in zip(xs[::3], ys[::3], strict=True)]
+
+
+def _canvas_pixels(page: Browsing, selector: str, exclude: tuple[int, ...] = ()) -> Points:
+    """The coloured pixels of a canvas as the screen shows it."""
+    page.page.evaluate("() => new Promise((done) => requestAnimationFrame(() => done()))")
+    shot = page.page.locator(selector).screenshot()
+    return _coloured(imread(io.BytesIO(shot), format="png"), exclude)
+
+
+def _slice_circles(run: Run, z: float) -> Points:
+    """The centres of the circles `bwsd slice` draws at z, in its image (x right, y down)."""
+    fig, count = slice_figure(skeleton_from_dict(run.skeleton), z)
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    height = fig.bbox.height
+    circles = [p for p in ax.patches if isinstance(p, Circle)]
+    assert len(circles) == count > 0
+    shown = ax.transData.transform([c.center for c in circles])
+    return [(float(x), float(height - y)) for x, y in shown]
+
+
+def _mid_height(run: Run) -> float:
+    """Half way up the finished preform: inside it, below every free segment."""
+    return round(float(run.skeleton["takeup"]) / 2, 1)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Runs]:
+    started = Runs(tmp_path_factory.mktemp("runs"))
+    try:
+        yield started
+    finally:
+        started.close()
+
+
+# The 3D view's colours that are no yarn's: the section plane's outline, the fell's.
+MARKS = (0x3182CE, 0xB7791F)
+
+
+@pytest.mark.parametrize(("stem", "letter"), [("braid-L", "Γ"), ("weave-U", "U")])
+def test_matrix_top_view_section_and_slice_read_the_shape_alike(
+    runs: Runs, page: Browsing, stem: str, letter: str
+):
+    run = runs(stem)
+    written = glyph(_fill_cells(run.text))
+    assert written == letter  # braid-L's flange is on rows 1-2, its web below; U's base below
+    _open(page, run)
+    assert glyph(_matrix_cells(page)) == written
+
+    z = _mid_height(run)
+    assert glyph(_slice_circles(run, z)) == written
+
+    page.page.uncheck("#show-axes")
+    page.page.check("#show-section")
+    page.page.fill("#section-z-value", str(z))
+    page.until("z => window.bwsd.view.tools.sectionView.shown?.z === z", z)
+    assert glyph(_canvas_pixels(page, "#section-view")) == written
+
+    _preset(page, "top")
+    assert _view(page, "v => v.tools.cut") is True
+    assert glyph(_canvas_pixels(page, "#view", exclude=MARKS)) == written
+    assert page.errors == []
