@@ -10,7 +10,9 @@ figure. Runs are braid-L and weave-U to Complete through `bwsd serve` on the moc
 from __future__ import annotations
 
 import io
+import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,6 +23,7 @@ from matplotlib.patches import Circle
 from bwsd.export.skeleton_json import skeleton_from_dict
 from bwsd.export.slice import slice_figure
 from tests.web.conftest import Browsing
+from tests.web.serving import example, serve
 from tests.web.test_page_views import Run, Runs, _open, _preset, _view
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
@@ -154,3 +157,63 @@ def test_matrix_top_view_section_and_slice_read_the_shape_alike(
     assert _view(page, "v => v.tools.cut") is True
     assert glyph(_canvas_pixels(page, "#view", exclude=MARKS)) == written
     assert page.errors == []
+
+
+# ----- views that keep their word -----
+
+
+def _extent(points: Points) -> tuple[float, float, float, float]:
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def test_top_then_3d_shows_the_whole_preform_again(runs: Runs, page: Browsing):
+    run = runs("braid-L")
+    _open(page, run)
+    page.page.uncheck("#show-axes")
+    _preset(page, "3d")
+    whole = _extent(_canvas_pixels(page, "#view", exclude=MARKS))
+    _preset(page, "top")
+    assert _view(page, "v => v.tools.cut") is True
+    _preset(page, "3d")
+    again = _extent(_canvas_pixels(page, "#view", exclude=MARKS))
+    assert again == pytest.approx(whole, abs=2)  # the top of the preform is drawn again
+    assert _view(page, "v => [v.tools.shown, v.tools.cut]") == [False, False]
+    assert not page.page.locator("#section-cut").is_checked()
+    assert page.errors == []
+
+
+def test_the_top_preset_cuts_at_the_same_height_whenever_the_page_is_opened(
+    tmp_path: Path, page: Browsing
+):
+    text, machine = example("braid-L")
+    served, mock, token = serve(tmp_path, machine, text, simulator={"stroke_speed": 100.0})
+    try:
+        assert served.http.post("/programs", json={"name": "L.bws", "text": text}).is_success
+        served.command("reset")
+        served.command("start")
+        url = f"{served.urls['api']}/#token={token}"
+
+        def preset_height() -> tuple[str, str]:
+            page.page.goto(url)
+            page.ready()
+            done = served.state()["index"]
+            page.until("n => window.bwsd.done >= n", done)
+            _preset(page, "top")
+            page.until("() => window.bwsd.view.tools.sectionView.shown !== null")
+            field = page.page.locator("#section-z-value")
+            label = page.page.locator("label.section-value").inner_text()
+            return field.input_value(), label
+
+        while served.state()["index"] < 12:
+            time.sleep(0.05)
+        early = preset_height()
+        served.wait_for({"Complete"}, limit=600)
+        late = preset_height()
+        assert early == late
+        assert float(early[0]) == float(machine["d_mat"]) / 2  # type: ignore[arg-type]
+        assert early[1].strip().startswith("z") and early[1].strip().endswith("mm")
+        assert page.errors == []
+    finally:
+        served.stop()
+        mock.stop()
