@@ -20,8 +20,10 @@ import pytest
 from matplotlib.image import imread
 from matplotlib.patches import Circle
 
+from bwsd.export.crossings import crossings
 from bwsd.export.skeleton_json import skeleton_from_dict
 from bwsd.export.slice import slice_figure
+from bwsd.program.sections import parse_section
 from tests.web.conftest import Browsing
 from tests.web.serving import example, serve
 from tests.web.test_page_views import Run, Runs, _open, _preset, _view
@@ -29,6 +31,7 @@ from tests.web.test_page_views import Run, Runs, _open, _preset, _view
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
 Points = list[tuple[float, float]]
+TIMES = "\u00d7"  # the multiplication sign the page writes
 
 
 def glyph(points: Points) -> str:
@@ -217,3 +220,30 @@ def test_the_top_preset_cuts_at_the_same_height_whenever_the_page_is_opened(
     finally:
         served.stop()
         mock.stop()
+
+
+def test_the_reference_section_names_its_height_and_the_yarns_spread(runs: Runs, page: Browsing):
+    run = runs("braid-L")
+    _open(page, run)
+    page.page.check("#show-section")
+    page.until("() => window.bwsd.view.tools.sectionView.key.length === 3")
+    z = float(page.page.locator("#section-z-value").input_value())
+    key: list[str] = _view(page, "v => v.tools.sectionView.key")
+    takeup = float(run.skeleton["takeup"])
+    assert f"L:2x6:4x2's cells at the fell, z = {takeup:g} mm (c_mat 0.4 {TIMES} pitch)" in key[1]
+    # The spread, from the daemon's skeleton: the crossings' extent over the cells' at the fell.
+    sk = skeleton_from_dict(run.skeleton)
+    found = crossings(sk, z)
+    cells = parse_section("L:2x6:4x2").cells
+    fell = [sk.machine.fell_xy(r, c) for r, c in cells]
+
+    def extent(points: list[tuple[float, float]]) -> float:
+        xs, ys = [p[0] for p in points], [p[1] for p in points]
+        return max(xs) - min(xs) + max(ys) - min(ys)
+
+    k = extent([(c.x, c.y) for c in found]) / extent(fell)
+    assert k > 1.5  # the yarns here lie far outside the shaded cells: the key says by how much
+    spread = f"the same {TIMES}{k:.2f} about the matrix centre, as the yarns spread at z = {z:g} mm"
+    assert spread in key[2]
+    assert f"({k * 0.4:.2f} of the guides' spread)" in key[2]
+    assert page.errors == []
