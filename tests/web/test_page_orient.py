@@ -247,3 +247,43 @@ def test_the_reference_section_names_its_height_and_the_yarns_spread(runs: Runs,
     assert spread in key[2]
     assert f"({k * 0.4:.2f} of the guides' spread)" in key[2]
     assert page.errors == []
+
+
+RELAXED = 0xD53F8C  # the relaxed preform's colour in the 3D view
+
+
+def _pixels(page: Browsing) -> np.ndarray[Any, Any]:
+    page.page.evaluate("() => new Promise((done) => requestAnimationFrame(() => done()))")
+    return np.asarray(imread(io.BytesIO(page.page.locator("#view").screenshot()), format="png"))
+
+
+def _of_colour(rgb: np.ndarray[Any, Any], colour: int) -> int:
+    want = np.array([colour >> 16, (colour >> 8) & 0xFF, colour & 0xFF]) / 255
+    return int((np.abs(rgb[..., :3] - want).max(axis=2) < 0.06).sum())
+
+
+def test_the_relaxed_toggle_draws_the_relaxed_preform_and_turns_off_cleanly(
+    runs: Runs, page: Browsing
+):
+    run = runs("braid-L")
+    # the first relaxation takes a while; the daemon keeps it for the page
+    relaxed = run.served.http.get("/skeleton", params={"relaxed": "true"}, timeout=600)
+    relaxed.raise_for_status()
+    nodes = {y["id"]: y["nodes"] for y in relaxed.json()["yarns"]}
+    predicted = {y["id"]: y["nodes"] for y in run.skeleton["yarns"]}
+    assert nodes.keys() == predicted.keys() and nodes != predicted  # another skeleton
+    _open(page, run)
+    page.page.uncheck("#show-axes")
+    before = _pixels(page)
+    assert _of_colour(before, RELAXED) == 0
+    page.page.check("#show-relaxed")
+    page.until("() => window.bwsd.view.tools.relaxed.nodes > 0")
+    assert _view(page, "v => v.tools.relaxed.nodes") == sum(len(n) for n in nodes.values())
+    drawn = _pixels(page)
+    assert _of_colour(drawn, RELAXED) > 500  # drawn, in its own colour
+    page.page.uncheck("#show-relaxed")
+    page.until("() => window.bwsd.view.tools.relaxed.nodes === 0")
+    after = _pixels(page)
+    assert _of_colour(after, RELAXED) == 0
+    assert np.abs(after - before).max() < 0.02  # the picture as it was
+    assert page.errors == []

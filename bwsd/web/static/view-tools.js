@@ -14,6 +14,7 @@ import { request } from './api.js';
 import { optionalById } from './dom.js';
 import { bands, crossings, fellXY } from './section.js';
 import { listenForClicks, pickYarn } from './view-pick.js';
+import { RelaxedLayer } from './view-relaxed.js';
 import { SectionMarks, SectionView } from './view-section.js';
 import { sectionFrom } from './view-zones.js';
 
@@ -41,6 +42,7 @@ export class ViewTools {
     this.found = [];
     /** @type {Band[]} */
     this.strips = [];
+    this.relaxed = new RelaxedLayer(view.layers.liveScene, () => view.invalidate(true));
     this.marks = new SectionMarks();
     for (const object of this.marks.objects) view.layers.liveScene.add(object);
     const canvas = optionalById('section-view', HTMLCanvasElement);
@@ -77,6 +79,7 @@ export class ViewTools {
     this.loads += 1;
     if (!this.userZ) this.z = this.defaultHeight();
     if (!this.sectionGiven) this.fetchSection(this.loads);
+    if (this.relaxed.shown) void this.relaxed.setShown(true); // the new skeleton's
     this.applyCut();
     this.syncControls();
   }
@@ -300,6 +303,7 @@ export class ViewTools {
     toggle('show-axes', (on) => view.setAxesVisible(on));
     toggle('show-section', (on) => view.setSectionShown(on));
     toggle('section-cut', (on) => view.setSectionCut(on));
+    toggle('show-relaxed', (on) => void this.relaxed.setShown(on));
     for (const id of ['section-z', 'section-z-value']) {
       const input = optionalById(id, HTMLInputElement);
       input?.addEventListener('input', () => {
