@@ -114,16 +114,17 @@ def _limits(ax: Axes, sk: SkeletonData, found: list[Crossing], strips: list[Band
     half = max(max(xs) - min(xs), max(ys) - min(ys)) / 2 + pad  # a square view, equal axes
     cx, cy = (max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2
     ax.set_xlim(cx - half, cx + half)
-    ax.set_ylim(cy - half, cy + half)
+    ax.set_ylim(cy + half, cy - half)  # y down: matrix row 0 at the top, as the FILL block
     ax.set_aspect("equal", adjustable="box")
 
 
-def draw_slice(sk: SkeletonData, z: float, path: str | Path) -> int:
-    """Draw the cross-section at z = Z (preform frame) to ``path``; returns the crossings.
+def slice_figure(sk: SkeletonData, z: float) -> tuple[Figure, int]:
+    """The cross-section at z = Z (preform frame) as a figure, and its crossings.
 
-    Filled circles of the yarn diameter: fixed segments; open circles: warps' free
-    segments; strips: wefts lying within half a diameter of the plane. The image
-    format follows the suffix (.png, .svg, .pdf, ...).
+    x to the right, y down (matrix row 0 at the top, column 0 on the left: the matrix as
+    the program's FILL block writes it). Filled circles of the yarn diameter: fixed
+    segments; open circles: warps' free segments; strips: wefts lying within half a
+    diameter of the plane.
     """
     found, strips = crossings(sk, z), bands(sk, z)
     fig = Figure(figsize=(6.4, 6.4), layout="constrained")
@@ -132,11 +133,20 @@ def draw_slice(sk: SkeletonData, z: float, path: str | Path) -> int:
     _draw(ax, sk, found, strips)
     _limits(ax, sk, found, strips)
     ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
+    ax.set_ylabel("y [mm] (down)")
     ax.set_title(f"z = {z:g} mm (preform frame, take-up {sk.takeup:g} mm): {len(found)} crossings")
     ax.grid(True, linewidth=0.3)
+    return fig, len(found)
+
+
+def draw_slice(sk: SkeletonData, z: float, path: str | Path) -> int:
+    """Draw the cross-section at z = Z (``slice_figure``) to ``path``; returns the crossings.
+
+    The image format follows the suffix (.png, .svg, .pdf, ...).
+    """
+    fig, count = slice_figure(sk, z)
     try:
         fig.savefig(str(path), dpi=150)
     except (OSError, ValueError) as exc:
         raise ExportError(f"cannot write the image: {exc}", path=str(path)) from exc
-    return len(found)
+    return count

@@ -6,10 +6,12 @@ import struct
 from collections.abc import Iterable
 
 import pytest
+from matplotlib.patches import Circle
 
 from bwsd.export.crossings import Crossing, crossings
 from bwsd.export.errors import ExportError
-from bwsd.export.slice import bands, draw_slice
+from bwsd.export.slice import bands, draw_slice, slice_figure
+from bwsd.twin.skeleton import SkeletonData
 
 from .conftest import build, warp
 
@@ -105,3 +107,16 @@ def test_bad_target(small, tmp_path):
         draw_slice(small, 5.0, tmp_path / "slice.nope")
     with pytest.raises(ExportError, match="cannot write the image"):
         draw_slice(small, 5.0, tmp_path / "missing" / "slice.png")
+
+
+def test_the_slice_shows_row_0_at_the_top(small: SkeletonData) -> None:
+    """x runs to the right and y down the image, as the FILL block writes the matrix: of
+    the crossings (2.5, 2.5), (7.5, 2.5) and (7.5, 7.5), the last is drawn lowest."""
+    fig, count = slice_figure(small, 5.0)
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    circles = sorted(p.center for p in ax.patches if isinstance(p, Circle))
+    assert count == len(circles) == 3
+    (ax0, ay0), (bx, by), (cx, cy) = ax.transData.transform(circles)  # display: y up
+    assert bx > ax0 + 10 and abs(by - ay0) < 1e-6  # (7.5, 2.5) right of (2.5, 2.5)
+    assert cy < by - 10 and abs(cx - bx) < 1e-6  # (7.5, 7.5) below (7.5, 2.5)

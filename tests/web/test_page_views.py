@@ -165,7 +165,7 @@ def test_axes_and_a_millimetre_scale_with_sensible_labels(runs: Runs, page: Brow
 
 # ----- preset views and the projection -----
 
-DIRECTIONS = {"top": (0, 0, -1), "front": (0, 1, 0), "side": (-1, 0, 0)}
+DIRECTIONS = {"top": (0, 0, 1), "front": (0, 1, 0), "side": (-1, 0, 0)}
 
 
 def test_each_preset_view_sets_the_camera(runs: Runs, page: Browsing):
@@ -179,15 +179,17 @@ def test_each_preset_view_sets_the_camera(runs: Runs, page: Browsing):
         assert math.dist(info["direction"], direction) < 1e-3, (name, info["direction"])
         assert page.page.locator(f'[data-view="{name}"]').get_attribute("aria-pressed") == "true"
         assert page.page.locator("#ortho").is_checked()
-        # Without pixels: the frame's axes on screen (y down): x right in top and front, y up
-        # in top and right in side, z up in front and side.
+        # Without pixels: the frame's axes on screen (y down): x right in top and front, y
+        # down in top (row 0 at the top, as the matrix) and right in side, z up in front and
+        # side.
         o, x, y, z = _project(
             page, [[30.0, 30.0, 40.0], [40.0, 30.0, 40.0], [30.0, 40.0, 40.0], [30.0, 30.0, 50.0]]
         )
         right = {"top": x, "front": x, "side": y}[name]
-        up = {"top": y, "front": z, "side": z}[name]
+        up = {"top": o, "front": z, "side": z}[name]  # what lies above o on screen
+        below = {"top": y, "front": o, "side": o}[name]
         assert right[0] - o[0] > 5 and abs(right[1] - o[1]) < 0.5, name
-        assert o[1] - up[1] > 5 and abs(up[0] - o[0]) < 0.5, name
+        assert below[1] - up[1] > 5 and abs(up[0] - below[0]) < 0.5, name
     _preset(page, "3d")
     info = _camera(page)
     assert info["type"] == "PerspectiveCamera"

@@ -2,9 +2,11 @@
 // The 3D view's camera: a perspective and an orthographic one sharing one orbit control,
 // and the preset views of a textile drawing.
 //
-// Presets look along an axis of the preform frame: "top" down -z (x to the right, y up,
-// as `bwsd slice` draws a section), "front" along +y (x to the right, z up), "side" along
-// -x (y to the right, z up); "3d" from the front right, a little above. Top, front and
+// Presets look along an axis of the preform frame: "top" along +z, up the preform from
+// its start (x to the right, y down: the matrix as the FILL block writes it, row 0 at the
+// top, as the Matrix panel, the section and `bwsd slice` draw it), "front" along +y (x to
+// the right, z up), "side" along -x (y to the right, z up); "3d" from the front right, a
+// little above. Top, front and
 // side are orthographic by default (a drawing's views: lengths read true on screen), the
 // 3D view in perspective; the orthographic toggle overrides either.
 
@@ -15,11 +17,11 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 /** @typedef {{s: number, tx: number, ty: number}} Soft a scale and shift of the picture (NDC) */
 
 const FOV = 35; // degrees, vertical, of the perspective camera
-const TILT = 1e-4; // the top view's tilt off the vertical, for a defined "up" (y) on screen
+const TILT = 1e-4; // the top view's tilt off the vertical, for a defined "up" (-y) on screen
 /** @type {Record<string, {direction: THREE.Vector3, orthographic: boolean}>} */
 export const PRESETS = {
   '3d': { direction: new THREE.Vector3(1.0, -1.5, 0.8).normalize(), orthographic: false },
-  top: { direction: new THREE.Vector3(0, -TILT, 1).normalize(), orthographic: true },
+  top: { direction: new THREE.Vector3(0, -TILT, -1).normalize(), orthographic: true },
   front: { direction: new THREE.Vector3(0, -1, 0), orthographic: true },
   side: { direction: new THREE.Vector3(1, 0, 0), orthographic: true },
 };

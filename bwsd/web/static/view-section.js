@@ -1,6 +1,7 @@
 // @ts-check
 // The cross-section at a height z, drawn as `bwsd slice` draws it: a 2D view with x and y
-// in mm at equal scale (y up, as in the top view), every crossing a circle of the yarn
+// in mm at equal scale (x to the right, y down: row 0 of the matrix at the top, as the
+// Matrix panel, the top view and `bwsd slice` draw it), every crossing a circle of the yarn
 // diameter, filled with a dark rim where the yarn is laid (a fixed segment), open where it
 // is a warp's free segment (a dot and a cross when the model has no diameter); wefts lying
 // within half a diameter of the plane as strips. The section's nominal cells (the
@@ -33,10 +34,11 @@ import { discTexture, mmPointsMaterial } from './view-batches.js';
  */
 /** @typedef {(mm: number) => number} ToScreen x or y in mm -> CSS pixels */
 
-const MARGIN = { left: 52, right: 14, top: 30, bottom: 78 }; // CSS px around the plot
+const MARGIN = { left: 52, right: 14, top: 30, bottom: 94 }; // CSS px around the plot
 const INK = '#1a202c';
 const GRID = '#dde2e8';
 const CELL_FILL = '#e6eaf0';
+const SPREAD_INK = '#8a94a6'; // the reference scaled to the yarns' spread
 const PLANE_COLOUR = 0x3182ce;
 const MIN_RADIUS_PX = 2.5; // a yarn never drawn smaller (a thin yarn in a wide view)
 
@@ -54,6 +56,10 @@ export class SectionView {
     this.shown = null;
     /** @type {{sx: ToScreen, sy: ToScreen, scale: number, found: Crossing[]} | null} */
     this.toScreen = null;
+    /** @type {string[]} the key's lines as last drawn (for tests and diagnostics) */
+    this.key = [];
+    /** @type {number | null} the reference's scale to the yarns' spread, as last drawn */
+    this.spread = null;
     new ResizeObserver(() => this.redraw()).observe(host);
   }
 
@@ -86,13 +92,14 @@ export class SectionView {
     /** @type {ToScreen} */
     const sx = (x) => left + (x - (cx - half)) * scale;
     /** @type {ToScreen} */
-    const sy = (y) => top + side - (y - (cy - half)) * scale;
+    const sy = (y) => top + (y - (cy - half)) * scale;
     this.toScreen = { sx, sy, scale, found };
     g.save();
     g.beginPath();
     g.rect(left, top, side, side);
     g.clip();
     this.drawGrid(left, top, side, cx, cy, half, sx, sy);
+    this.spread = spreadOf(shown);
     this.drawCells(shown, sx, sy);
     this.drawStrips(strips, shown.colour, sx, sy);
     this.drawCrossings(found, shown.colour, diameter, sx, sy, scale);
@@ -177,7 +184,7 @@ export class SectionView {
    * @param {number} y
    * @param {number} free the free crossings
    */
-  drawKey({ cells, spec, diameter }, left, y, free) {
+  drawKey({ cells, spec, diameter, machine, takeup, z }, left, y, free) {
     const g = this.g;
     g.font = '11px system-ui, sans-serif';
     g.textAlign = 'left';
@@ -185,7 +192,14 @@ export class SectionView {
     g.fillStyle = '#5a6473';
     const marks = diameter > 0 ? 'circles: the yarn diameter, filled on laid yarn' : 'dots: laid yarn';
     const lines = [`${marks}${free ? (diameter > 0 ? ', open on free segments' : ', crosses on free segments') : ''}`];
-    if (cells) lines.push(`shaded: ${spec ?? 'the section'}'s cells at the fell (c_mat × pitch)`);
+    if (cells && machine) {
+      lines.push(`shaded: ${spec ?? 'the section'}'s cells at the fell, z = ${num(takeup)} mm (c_mat ${num(machine.c_mat)} × pitch)`);
+      const k = this.spread;
+      if (k !== null) {
+        lines.push(`dashed: the same ×${k.toFixed(2)} about the matrix centre, as the yarns spread at z = ${num(z)} mm (${(k * machine.c_mat).toFixed(2)} of the guides' spread)`);
+      }
+    }
+    this.key = lines;
     lines.forEach((text, i) => g.fillText(text, left, y + 15 * i));
   }
 
@@ -197,12 +211,27 @@ export class SectionView {
    */
   drawCells({ cells, machine }, sx, sy) {
     if (!cells || !machine) return;
+    const g = this.g;
     const [hx, hy] = [(machine.c_mat * machine.pitch_x) / 2, (machine.c_mat * machine.pitch_y) / 2];
-    this.g.fillStyle = CELL_FILL;
+    g.fillStyle = CELL_FILL;
     for (const [row, col] of cells) {
       const [x, y] = fellXY(machine, row, col);
-      this.g.fillRect(sx(x - hx), sy(y + hy), sx(x + hx) - sx(x - hx), sy(y - hy) - sy(y + hy));
+      g.fillRect(sx(x - hx), sy(y - hy), sx(x + hx) - sx(x - hx), sy(y + hy) - sy(y - hy));
     }
+    const k = this.spread;
+    if (k === null) return;
+    // The same cells scaled by k about the matrix's centre O: where the yarns at this height lie.
+    const [ox, oy] = centreOf(machine);
+    g.save();
+    g.strokeStyle = SPREAD_INK;
+    g.lineWidth = 1;
+    g.setLineDash([4, 3]);
+    for (const [row, col] of cells) {
+      const [fx, fy] = fellXY(machine, row, col);
+      const [x, y] = [ox + k * (fx - ox), oy + k * (fy - oy)];
+      g.strokeRect(sx(x - k * hx), sy(y - k * hy), sx(x + k * hx) - sx(x - k * hx), sy(y + k * hy) - sy(y - k * hy));
+    }
+    g.restore();
   }
 
   /**
@@ -285,6 +314,33 @@ export class SectionView {
     }
     return best;
   }
+}
+
+/**
+ * The matrix's centre O, about which the yarns converge from the guides to the fell.
+ * @param {Machine} machine
+ */
+function centreOf(machine) {
+  return [((machine.cols - 1) / 2) * machine.pitch_x, ((machine.rows - 1) / 2) * machine.pitch_y];
+}
+
+/**
+ * How much wider the yarns at this height spread than the reference at the fell: the
+ * extent (width plus height) of the crossings over that of the section's cells at the
+ * fell, both about their centres; null without cells or crossings.
+ * @param {SectionShown} shown
+ */
+export function spreadOf({ cells, machine, found }) {
+  if (!cells || cells.length === 0 || !machine || found.length < 2) return null;
+  const fell = cells.map(([row, col]) => fellXY(machine, row, col));
+  /** @param {number[][]} points */
+  const extent = (points) => {
+    const xs = points.map((p) => p[0]);
+    const ys = points.map((p) => p[1]);
+    return Math.max(...xs) - Math.min(...xs) + Math.max(...ys) - Math.min(...ys);
+  };
+  const reference = extent(fell);
+  return reference > 0 ? extent(found.map((c) => [c.x, c.y])) / reference : null;
 }
 
 /**

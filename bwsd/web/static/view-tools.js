@@ -14,6 +14,7 @@ import { request } from './api.js';
 import { optionalById } from './dom.js';
 import { bands, crossings, fellXY } from './section.js';
 import { listenForClicks, pickYarn } from './view-pick.js';
+import { RelaxedLayer } from './view-relaxed.js';
 import { SectionMarks, SectionView } from './view-section.js';
 import { sectionFrom } from './view-zones.js';
 
@@ -28,8 +29,10 @@ export class ViewTools {
     this.view = view;
     this.shown = false;
     this.z = 0;
-    this.userZ = false; // the operator chose the height (kept over reloads)
+    this.userZ = false; // the operator chose the height (kept over reloads of the skeleton)
     this.cut = false;
+    /** @type {{shown: boolean, cut: boolean} | null} the section and cut before "top" changed them */
+    this.beforeTop = null;
     this.cutPlane = new THREE.Plane(new THREE.Vector3(0, 0, -1), 0); // keeps z <= constant
     this.dirty = true;
     this.lastAt = 0;
@@ -39,6 +42,7 @@ export class ViewTools {
     this.found = [];
     /** @type {Band[]} */
     this.strips = [];
+    this.relaxed = new RelaxedLayer(view.layers.liveScene, () => view.invalidate(true));
     this.marks = new SectionMarks();
     for (const object of this.marks.objects) view.layers.liveScene.add(object);
     const canvas = optionalById('section-view', HTMLCanvasElement);
@@ -73,8 +77,9 @@ export class ViewTools {
 
   loaded() {
     this.loads += 1;
-    if (!this.userZ || this.z > this.top()) this.z = this.defaultHeight();
+    if (!this.userZ) this.z = this.defaultHeight();
     if (!this.sectionGiven) this.fetchSection(this.loads);
+    if (this.relaxed.shown) void this.relaxed.setShown(true); // the new skeleton's
     this.applyCut();
     this.syncControls();
   }
@@ -89,20 +94,14 @@ export class ViewTools {
     return view.machine ? Math.max(view.bounds.max.z, view.machine.d_mat + view.takeup) : Math.max(view.bounds.max.z, 0);
   }
 
-  /** Half way up the zone where contacts were made, else half way to the fell, else to the guides. */
+  /**
+   * Until the operator sets one: half the distance from the fell to the guides (d_mat / 2), a
+   * property of the machine, so the same whenever the page is opened (not of the skeleton so
+   * far, which depends on when that is).
+   */
   defaultHeight() {
-    const { contactNodes, contactCount, nodes, takeup, machine } = this.view;
-    if (contactCount > 0) {
-      let [lo, hi] = [Infinity, -Infinity];
-      for (let i = 0; i < 2 * contactCount; i += 1) {
-        const z = nodes.xyz[3 * contactNodes[i] + 2];
-        lo = Math.min(lo, z);
-        hi = Math.max(hi, z);
-      }
-      return Number(((lo + hi) / 2).toFixed(1));
-    }
-    if (takeup > 0) return Number((takeup / 2).toFixed(1));
-    return machine ? machine.d_mat / 2 : 0;
+    const machine = this.view.machine;
+    return machine ? Number((machine.d_mat / 2).toFixed(1)) : 0;
   }
 
   // ----- the section -----
@@ -217,9 +216,19 @@ export class ViewTools {
    * @param {string} preset
    */
   presetChosen(preset) {
-    if (preset !== 'top') return;
-    if (!this.shown) this.setShown(true);
-    this.setCut(true);
+    if (preset === 'top') {
+      this.beforeTop ??= { shown: this.shown, cut: this.cut };
+      if (!this.shown) this.setShown(true);
+      this.setCut(true);
+      return;
+    }
+    // Leaving "top": the section and the cut as they were before it, so that no hidden cut
+    // keeps the other views from showing the whole preform.
+    const before = this.beforeTop;
+    this.beforeTop = null;
+    if (!before) return;
+    this.setCut(before.cut);
+    if (this.shown !== before.shown) this.setShown(before.shown);
   }
 
   // ----- zones -----
@@ -294,6 +303,7 @@ export class ViewTools {
     toggle('show-axes', (on) => view.setAxesVisible(on));
     toggle('show-section', (on) => view.setSectionShown(on));
     toggle('section-cut', (on) => view.setSectionCut(on));
+    toggle('show-relaxed', (on) => void this.relaxed.setShown(on));
     for (const id of ['section-z', 'section-z-value']) {
       const input = optionalById(id, HTMLInputElement);
       input?.addEventListener('input', () => {
