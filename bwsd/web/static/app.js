@@ -38,6 +38,8 @@ import { Session } from './session.js';
 import { PreformView } from './skeleton.js';
 import { StatusPanel } from './status.js';
 
+const NO_PROGRAM = 'no program loaded'; // what the views say with no program loaded
+
 /** @import { AuthEvent, CommandAnswer, DaemonEvent, HelloEvent, InstructionEvent, Next, Skeleton, State } from '../types/daemon' */
 /** @import { Answer, LinkDown } from './api.js' */
 
@@ -105,8 +107,6 @@ function keep(samples, value) {
 
 // ----- what the page knows -----
 let live = fresh();
-
-const NO_PROGRAM = 'no program loaded';
 
 /**
  * What the page knows of the daemon and shows.
