@@ -508,6 +508,7 @@ def test_pictures_of_each_view_and_colouring(runs: Runs, page: Browsing, stem: s
     for name in VIEWS:
         _preset(page, name)
         shots[name] = pane.screenshot()
+    page.page.check("#show-section")  # the top preset's section is put back when it is left
     page.until("() => window.bwsd.view.tools.sectionView.shown !== null")
     shots["section"] = page.page.locator("#section-pane").screenshot()
     page.page.uncheck("#show-section")
