@@ -10,6 +10,8 @@ One JSON object a line in, one a line out. Requests (``axis`` is an axis name su
   opposite of the truth (a dirty or broken sensor)
 - ``{"cmd": "estop", "pressed": true | false}``
 - ``{"cmd": "clear"}``: remove every injected fault (latched drive faults stay until a reset)
+- ``{"cmd": "speeds", "travel": MM_S, ...}``: travel at new speeds (the fields of
+  ``Speeds``: stroke, takeup, weft, travel; 0 instant) from now on
 - ``{"cmd": "state"}``: occupancy, e-stop, when the last quick stop came (the machine's
   ``time.monotonic()``), each axis's position, busy flag, fault and stroke count, and every
   weft put in since power-on (``wefts``: x, y, z, angle, length, takeup, as on the wire)
@@ -22,10 +24,10 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
 from typing import Any
 
-from simulator_hw.loom import Loom
+from simulator_hw.loom import Loom, Speeds
 
 AXIS_FAULTS = ("stall", "wrong_position", "drive")
 
@@ -53,7 +55,22 @@ def handle(loom: Loom, request: Any) -> dict[str, Any]:
         return {"ok": True}
     if cmd == "state":
         return {"ok": True, **state(loom)}
-    return {"ok": False, "error": f"unknown cmd {cmd!r} (fault, estop, clear, state)"}
+    if cmd == "speeds":
+        return _speeds(loom, request)
+    return {"ok": False, "error": f"unknown cmd {cmd!r} (fault, estop, clear, state, speeds)"}
+
+
+def _speeds(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:
+    """New travel speeds (the Speeds fields named; the others kept), from now on."""
+    names = [f.name for f in fields(Speeds)]
+    given = {k: v for k, v in request.items() if k != "cmd"}
+    for key, value in given.items():
+        if key not in names:
+            return {"ok": False, "error": f"unknown speed {key!r} ({', '.join(names)})"}
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
+            return {"ok": False, "error": f"{key} must be a number >= 0 (0: instant)"}
+    loom.set_speeds(replace(loom.speeds, **given), time.monotonic())
+    return {"ok": True, "speeds": asdict(loom.speeds)}
 
 
 def _fault(loom: Loom, request: dict[str, Any]) -> dict[str, Any]:

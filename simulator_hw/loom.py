@@ -207,6 +207,15 @@ class Loom:
                 if sim.busy:
                     self._stop(sim, FAULT_ESTOP)
 
+    def set_speeds(self, speeds: Speeds, now: float) -> None:
+        """Travel at ``speeds`` from now on: a move under way goes on from where it is."""
+        self.tick(now)
+        self.speeds = speeds
+        for sim in self.axes:
+            if sim.busy and sim.legs:
+                _, _, dst = sim.legs[0]
+                sim.legs[0] = (now, sim.position, dst)
+
     def reset_faults(self) -> None:
         for sim in self.axes:
             sim.fault = FAULT_NONE

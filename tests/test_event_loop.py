@@ -39,11 +39,13 @@ SLOW = 0.020  # s
 class SlowCallbacks:
     """Every callback of the loop that held it longer than SLOW by its own doing.
 
-    A callback's wall time counts when the loop's thread was not preempted meanwhile (no
-    involuntary context switch: the time was the callback's, computing or waiting on a disk),
-    or when its own CPU time passes SLOW. A callback the kernel preempted for another process
-    (the machine is shared: a test run, the mock loom, the client) is the machine's doing,
-    not the daemon's, and asyncio's wall-clock report alone cannot tell the two apart.
+    A callback's wall time counts when no thread of the daemon's process was preempted
+    meanwhile (no involuntary context switch: the time was the callback's, computing or
+    waiting on a disk), or when its own CPU time passes SLOW. A callback the kernel preempted
+    for another process (the machine is shared: a test run, the mock loom, the client) is the
+    machine's doing, not the daemon's; so is one that waited for the interpreter lock while
+    the thread holding it was preempted. asyncio's wall-clock report alone cannot tell these
+    apart.
     """
 
     def __init__(self) -> None:
@@ -52,12 +54,12 @@ class SlowCallbacks:
 
     def wrap(self, run: Callable[[asyncio.Handle], None]) -> Callable[[asyncio.Handle], None]:
         def timed(handle: asyncio.Handle) -> None:
-            before = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+            before = resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw
             start, cpu = time.perf_counter(), time.thread_time()
             run(handle)
             wall, used = time.perf_counter() - start, time.thread_time() - cpu
             if self.armed and wall > SLOW:
-                preempted = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw - before
+                preempted = resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw - before
                 if used > SLOW or not preempted:
                     self.seen.append(
                         f"{handle!r} took {wall * 1000:.1f} ms ({used * 1000:.1f}"

@@ -41,6 +41,7 @@ from simulator_hw.control import request
 from tests.controller.test_faults import after, poke
 from tests.support.controller import bits, state_now
 from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
+from tests.timing import scaled
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
@@ -223,37 +224,43 @@ def test_unhold_while_a_placing_axis_still_travels_waits_for_it(tmp_path, backen
     generated = PROGRAMS["weave-3d U"]()
     program = parse_program(generated.program)
     later = moving(program, "weft_x")
-    slow = {"weft_travel_speed": 40.0}  # mm/s: 0.85 s to instruction 13's place, 1.9 s at most
-    mock = start_mock(tmp_path, slow, machine=machine_table(generated), program=generated.program)
+    slow = {"cmd": "speeds", "travel": 10.0}  # mm/s: 3.4 s to instruction 13's place
+    loom = start_mock(tmp_path, SPEEDS, machine=machine_table(generated), program=generated.program)
+
+    def sluggish_then_stall() -> None:
+        poke(loom, slow)
+        poke(loom, {"cmd": "fault", "kind": "stall", "axis": "weft_z"})
 
     async def scenario() -> None:
-        ctl = await controller(mock, tmp_path, backend, generated)
+        config = client_config(
+            backend, loom.ports, machine=machine_table(generated), timeout=scaled(10.0)
+        )
+        bus = open_bus(config)
+        await bus.connect()
+        ctl = Controller(config.machine, bus, Journal.open(tmp_path / "journal.db"))
         try:
             await ctl.load("wefts.bws", generated.program)
             await ctl.command(Command.RESET)
-            after(
-                ctl,
-                later - 1,
-                lambda: poke(mock, {"cmd": "fault", "kind": "stall", "axis": "weft_z"}),
-            )
+            after(ctl, later - 1, sluggish_then_stall)
             await ctl.command(Command.START)
             await ctl.wait()
             assert ctl.packml.state is State.HELD, (ctl.packml.state, ctl.packml.reason)
-            assert (await loom_state(mock))["axes"]["weft_x"]["busy"]  # still on its way
-            poke(mock, {"cmd": "clear"})
-            await ctl.command(Command.UNHOLD)
+            assert (await loom_state(loom))["axes"]["weft_x"]["busy"]  # still on its way
+            poke(loom, {"cmd": "clear"})
+            await ctl.command(Command.UNHOLD)  # returns once weft_x is at rest and it moves
+            poke(loom, {"cmd": "speeds", "travel": SPEEDS["weft_travel_speed"]})
             await ctl.wait()
             assert state_now(ctl) is State.COMPLETE, ctl.packml.reason
             assert bits(ctl.twin) == bits(simulate(ctl.machine, program))
             assert ctl.twin is not None
-            assert same_wefts((await loom_state(mock))["wefts"], ctl.twin, program) > 0
+            assert same_wefts((await loom_state(loom))["wefts"], ctl.twin, program) > 0
         finally:
             await ctl.close()
 
     try:
         asyncio.run(asyncio.wait_for(scenario(), 300))
     finally:
-        mock.stop()
+        loom.stop()
 
 
 def later_wefts(program: Any, index: int) -> int:

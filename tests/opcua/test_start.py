@@ -1,5 +1,6 @@
 """`bwsd serve` with OPC UA on: the API answers while asyncua loads, which happens off the
-event loop (it takes seconds: the import, then the standard address space)."""
+event loop (it takes seconds: the import, then the standard address space). How soon and
+how fast it answers meanwhile is measured by bench/startup.py, not asserted here."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from bwsd.deploy.folder import init_folder
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
-LATE = 1.0  # s: the longest /healthz may take while OPC UA starts (issue: "within 1 s")
+MEANWHILE = 3  # /healthz answers that come back before OPC UA listens, at the least
 
 
 def _closed_port() -> int:
@@ -119,19 +120,14 @@ def test_serve_answers_healthz_while_opcua_starts(tmp_path):
             found = re.search(r"REST API and the page on (\S+)", line)
             if found:
                 break
-        listening = time.monotonic()
-        answers: list[tuple[float, float]] = []
+        before_ready = 0  # answers back while OPC UA was still starting
         with httpx.Client(base_url=found[1], timeout=30) as client:
-            while not ready.is_set() or not answers:
-                asked = time.monotonic()
+            while not ready.is_set():
                 assert client.get("/healthz").status_code in (200, 503)
-                answers.append((asked - listening, time.monotonic() - asked))
+                before_ready += not ready.is_set()
                 time.sleep(0.02)
         assert any("opcua=opc.tcp://127.0.0.1:" in line for line in lines), lines
-        first = answers[0][0] + answers[0][1]
-        assert first < LATE, answers[:5]
-        slowest = max(took for _, took in answers)
-        assert slowest < LATE, [a for a in answers if a[1] >= LATE]
+        assert before_ready >= MEANWHILE, before_ready
     finally:
         served.terminate()
         served.communicate(timeout=60)

@@ -86,3 +86,14 @@ def test_a_browsers_cross_origin_post_never_reaches_the_loom():
             await server.stop()
 
     asyncio.run(scenario())
+
+
+def test_speeds_change_what_is_named_and_refuse_what_is_not_a_speed():
+    loom = Loom(MACHINE, [], Speeds(stroke=100, travel=50))
+    answer = handle(loom, {"cmd": "speeds", "travel": 10})
+    assert answer == {"ok": True, "speeds": {"stroke": 100, "takeup": 0, "weft": 0, "travel": 10}}
+    assert loom.speeds == Speeds(stroke=100, travel=10)
+    assert "unknown speed 'warp'" in handle(loom, {"cmd": "speeds", "warp": 1})["error"]
+    assert ">= 0" in handle(loom, {"cmd": "speeds", "travel": -1})["error"]
+    assert ">= 0" in handle(loom, {"cmd": "speeds", "travel": True})["error"]
+    assert loom.speeds == Speeds(stroke=100, travel=10)  # a refusal changes nothing

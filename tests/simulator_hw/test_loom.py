@@ -152,3 +152,14 @@ def test_a_whole_line_stroke_carries_the_cases_of_its_segments_too():
     loom = Loom(SEGMENTED, [(1, 0), (1, 1), (1, 4)], Speeds())
     loom.command(ROW1, 10_000, 1, now=0.0)
     assert cells(loom) == {(1, 1), (1, 2), (1, 5)}
+
+
+def test_new_speeds_take_a_move_on_from_where_it_is():
+    loom = Loom(MACHINE, [], Speeds(takeup=10))  # 4 mm at 10 mm/s: 0.4 s
+    loom.command(TAKEUP, 4_000, 1, now=0.0)
+    loom.set_speeds(Speeds(takeup=100), now=0.1)  # 1 mm done, 3 mm left at 100 mm/s: 0.03 s
+    assert (loom.axes[TAKEUP].position, loom.axes[TAKEUP].busy) == (1_000, True)
+    loom.tick(0.12)
+    assert (loom.axes[TAKEUP].position, loom.axes[TAKEUP].busy) == (3_000, True)
+    loom.tick(0.131)
+    assert (loom.axes[TAKEUP].position, loom.axes[TAKEUP].done_seq) == (4_000, 1)
