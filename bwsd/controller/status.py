@@ -92,6 +92,7 @@ class StatusSnapshot:
     mode_requested: UnitMode = UnitMode.PRODUCTION  # the unit mode last asked for
     good: int = 0  # programs that reached Complete, since the daemon started
     defective: int = 0  # programs left unfinished after they ran (another loaded instead)
+    manual: str = ""  # why no manual move is taken now ("" when they are)
 
 
 # ----- the event stream -----
