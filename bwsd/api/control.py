@@ -81,6 +81,7 @@ async def get_state(ctx: Ctx) -> StateOut:
         allowed=command_names(st.allowed),
         recovering=st.recovering,
         resumable=st.resumable,
+        resume_allowed=st.resume_allowed,
         manual=st.manual,
         bus=BusHealth(
             connected=bus.connected,

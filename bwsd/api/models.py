@@ -86,6 +86,9 @@ class StateOut(BaseModel):
         description="start with resume continues the loaded "
         "program where an Abort or a Stop left it",
     )
+    resume_allowed: bool = Field(
+        False, description="start with resume will be accepted now (as allowed for the others)"
+    )
     manual: str = Field(
         "", description="why no manual move is taken now ('' when they are: POST /manual)"
     )

@@ -177,6 +177,15 @@ class Controller:
         blocked = job is not None and job.pending is not None and bool(job.pending.blocked)
         return job is not None and job.ended in ENDED and not blocked
 
+    def resume_allowed(self) -> bool:
+        """Start with resume will be accepted now (as far as the last read knows)."""
+        start = Command.START
+        return (
+            self.resumable()
+            and self.packml.accepts(start)
+            and refusal(self, start, resume=True) is None
+        )
+
     def status(self) -> StatusSnapshot:
         """The controller as it stands, in one value."""
         job = self.job
@@ -195,6 +204,7 @@ class Controller:
             recovering=self.recovering or self.broken,
             next=None if ended or job is None else job.next_step(),
             resumable=self.resumable(),
+            resume_allowed=self.resume_allowed(),
             mode_requested=self.mode_requested,
             good=self.good,
             defective=self.defective,

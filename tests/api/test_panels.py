@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import time
 from typing import Any
 
 import httpx
@@ -153,6 +154,7 @@ def test_a_program_run_part_of_the_way_refuses_strokes(live: Live):
     assert operator.post("/programs", json={"name": "braid.bws", "text": BRAID}).is_success
     assert operator.post("/commands/reset").is_success
     assert operator.post("/commands/start").is_success
+    _wait_for(viewer, lambda s: s["index"] >= 1)  # it has run part of the way
     assert operator.post("/commands/abort").is_success
     _wait_for(viewer, lambda s: s["name"] == "Aborted" and s["resumable"])
     _manual_mode(live)
@@ -168,7 +170,7 @@ def _wait_for(viewer: httpx.Client, ok: Any) -> dict[str, Any]:
         state: dict[str, Any] = viewer.get("/state").json()
         if ok(state):
             return state
-        asyncio.run(asyncio.sleep(0.05))
+        time.sleep(0.05)
     raise AssertionError(f"not reached: {state}")
 
 
@@ -212,3 +214,21 @@ def test_totals_count_programs_by_outcome_with_their_run_time(live: Live):
     assert totals["outcomes"]["complete"]["programs"] == 1
     assert totals["outcomes"]["complete"]["run_s"] == pytest.approx(ran)
     assert totals["run_s"] == pytest.approx(ran) and ran > 0
+
+
+def test_resume_allowed_says_when_start_with_resume_is_taken(live: Live):
+    operator, viewer = live.client("operator"), live.client("viewer")
+    assert viewer.get("/state").json()["resume_allowed"] is False
+    assert operator.post("/programs", json={"name": "braid.bws", "text": BRAID}).is_success
+    assert operator.post("/commands/reset").is_success
+    assert operator.post("/commands/start").is_success
+    _wait_for(viewer, lambda s: s["index"] >= 1)  # it has run part of the way
+    assert operator.post("/commands/abort").is_success
+    state = _wait_for(viewer, lambda s: s["name"] == "Aborted" and s["resumable"])
+    assert state["resume_allowed"] is False  # PackML takes no Start in Aborted
+    assert operator.post("/commands/clear").is_success
+    assert operator.post("/commands/reset").is_success
+    state = _wait_for(viewer, lambda s: s["name"] == "Idle")
+    assert state["resume_allowed"] is True and "start" not in state["allowed"]
+    answer = operator.post("/commands/start", json={"resume": True})
+    assert answer.status_code == 200 and answer.json()["name"] == "Execute"
