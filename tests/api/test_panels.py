@@ -18,6 +18,7 @@ from tests.api.conftest import BRAID, WAIT, Live
 
 pytestmark = pytest.mark.slow  # a daemon on the mock loom
 
+LONG = BRAID.replace("REPEAT 3", "REPEAT 200")  # 1000 instructions: a run that lasts
 # The mock loom's cases: (1, 1), (1, 2), (2, 1), (2, 2) of a 4 x 4 matrix.
 CASES = [[False] * 4, [False, True, True, False], [False, True, True, False], [False] * 4]
 
@@ -151,7 +152,7 @@ def test_a_faulted_axis_refuses_strokes_until_the_faults_are_reset(live: Live, m
 
 def test_a_program_run_part_of_the_way_refuses_strokes(live: Live):
     operator, viewer = live.client("operator"), live.client("viewer")
-    assert operator.post("/programs", json={"name": "braid.bws", "text": BRAID}).is_success
+    assert operator.post("/programs", json={"name": "braid.bws", "text": LONG}).is_success
     assert operator.post("/commands/reset").is_success
     assert operator.post("/commands/start").is_success
     _wait_for(viewer, lambda s: s["index"] >= 1)  # it has run part of the way
@@ -219,7 +220,7 @@ def test_totals_count_programs_by_outcome_with_their_run_time(live: Live):
 def test_resume_allowed_says_when_start_with_resume_is_taken(live: Live):
     operator, viewer = live.client("operator"), live.client("viewer")
     assert viewer.get("/state").json()["resume_allowed"] is False
-    assert operator.post("/programs", json={"name": "braid.bws", "text": BRAID}).is_success
+    assert operator.post("/programs", json={"name": "braid.bws", "text": LONG}).is_success
     assert operator.post("/commands/reset").is_success
     assert operator.post("/commands/start").is_success
     _wait_for(viewer, lambda s: s["index"] >= 1)  # it has run part of the way
