@@ -231,7 +231,6 @@ const panels = new OperatorPanels({
   may: mayCommand,
   operator: () => session.mayCommand(),
   refreshState: () => refreshState(),
-  answered,
   heard,
   unreachable,
   loggedOut: () => loggedOut(true),

@@ -9,7 +9,6 @@ import { JobsPanel } from './jobs.js';
 import { ManualPanel } from './manual.js';
 
 /** @import { DaemonEvent, State } from '../types/daemon' */
-/** @import { Answer } from './api.js' */
 
 /**
  * What the panels need of the page.
@@ -19,7 +18,6 @@ import { ManualPanel } from './manual.js';
  * @property {() => boolean} may the token may command and the daemon answers
  * @property {() => boolean} operator the token's role may command
  * @property {() => Promise<void>} refreshState
- * @property {(answer: Answer) => void} answered a refused answer (a 401 logs out)
  * @property {() => void} heard
  * @property {(error: unknown) => void} unreachable
  * @property {() => void} loggedOut
@@ -30,7 +28,9 @@ const JOB_EVENTS = new Set(['hello', 'program', 'state', 'dropped']);
 export class OperatorPanels {
   /** @param {PanelsPage} page */
   constructor(page) {
-    const reads = { answered: page.answered, unreachable: page.unreachable };
+    // A refused read says nothing more than the state's read: its 401 logs out, and the
+    // stream's refusal is told in the banner (a panel's own 401 would log out first).
+    const reads = { answered: () => page.heard(), unreachable: page.unreachable };
     this.manual = new ManualPanel({
       ...page,
       showMachine: (machine) => this.axes.show(machine),
