@@ -2,7 +2,8 @@
 range and the caller's current role, before the controller sees it.
 
 REST, the WebSocket, the PLC tags and OPC UA turn what they received into a call of
-``Gate.command``, ``Gate.set_mode``, ``Gate.load`` or ``Gate.load_stored`` with the values as
+``Gate.command``, ``Gate.set_mode``, ``Gate.manual``, ``Gate.load`` or ``Gate.load_stored``
+with the values as
 they came (an int, a name, a bool...), and a ``Caller``: which door, who, and the token to
 check again now (or the door's fixed role). The gate refuses a value of the wrong type, a
 number out of range, a caller whose token was removed or whose role does not suffice, with
@@ -10,8 +11,8 @@ number out of range, a caller whose token was removed or whose role does not suf
 controller's facade, whose own refusals (PackML, the machine) come back as they are. So a
 refusal means the same thing whatever the door, and is logged once, at INFO, here.
 
-What each request needs (docs/api.md, "Roles"): a command, a resume or a load: operator;
-a unit mode change: admin; a read: viewer.
+What each request needs (docs/api.md, "Roles"): a command, a resume, a manual move or a
+load: operator; a unit mode change: admin; a read: viewer.
 """
 
 from __future__ import annotations
@@ -24,10 +25,12 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
+from bwsd.controller.manual import MAX_TAKEUP_MM, FaultReset, ManualMove, Stroke, TakeUpMove
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.errors import BwsdError
-from bwsd.fieldbus.base import FieldbusError
+from bwsd.fieldbus.base import FieldbusError, MachineState
 from bwsd.journal import JournalError
+from bwsd.logs import REFUSAL
 from bwsd.tokens import RANK, Role, TokenStore
 
 if TYPE_CHECKING:
@@ -42,6 +45,7 @@ Kind = Literal["type", "range", "who", "role"]
 NEEDS: dict[str, Role] = {
     "command": "operator",
     "load": "operator",
+    "manual": "operator",
     "mode": "admin",
     "read": "viewer",
 }
@@ -119,7 +123,7 @@ class Gate:
                 raise Refused("range", "resume goes with start only", "resume")
             self.allow(caller, "command")
         except Refused as exc:
-            log.info("%s: command refused: %s", caller.said, exc)
+            log.info("%s: command refused: %s", caller.said, exc, extra=REFUSAL)
             raise
         return await self.controller.command(typed, said, caller.who, resume=wanted)
 
@@ -129,10 +133,47 @@ class Gate:
             typed = mode_of(mode)
             self.allow(caller, "mode")
         except Refused as exc:
-            log.info("%s: mode change refused: %s", caller.said, exc)
+            log.info("%s: mode change refused: %s", caller.said, exc, extra=REFUSAL)
             raise
         await self.controller.set_mode(typed, caller.who)
         return typed
+
+    async def manual(
+        self, caller: Caller, kind: Any, *, axis: Any = None, step: Any = None, length: Any = None
+    ) -> tuple[ManualMove, MachineState]:
+        """A manual move: ``stroke`` (a shift ``axis`` by name, ``step`` +1 or -1),
+        ``takeup`` (``length`` mm, either way) or ``reset_faults``; the move as typed and
+        the machine read back after it."""
+        try:
+            move = self._manual_of(kind, axis, step, length)
+            self.allow(caller, "manual")
+        except Refused as exc:
+            log.info("%s: manual move refused: %s", caller.said, exc, extra=REFUSAL)
+            raise
+        return move, await self.controller.manual(move, caller.who)
+
+    def _manual_of(self, kind: Any, axis: Any, step: Any, length: Any) -> ManualMove:
+        what = text_of(kind, "kind", 20, empty=False)
+        if what == "reset_faults":
+            return FaultReset()
+        if what == "takeup":
+            mm = number_of(length, "length", -MAX_TAKEUP_MM, MAX_TAKEUP_MM)
+            if mm == 0:
+                raise Refused("range", "length: 0 moves nothing", "length")
+            return TakeUpMove(mm)
+        if what != "stroke":
+            raise Refused(
+                "range", f"kind: {_shown(what)} is not one of stroke, takeup, reset_faults", "kind"
+            )
+        name = text_of(axis, "axis", 40, empty=False)
+        found = [a for a in self.controller.axes if a.name == name]
+        shifts = ", ".join(a.name for a in self.controller.axes if a.kind in ("row", "col"))
+        if not found or found[0].kind not in ("row", "col"):
+            raise Refused("range", f"axis: {_shown(name)} is not a shift axis ({shifts})", "axis")
+        cells = whole_of(step, "step", -1, 1)
+        if cells == 0:
+            raise Refused("range", "step: 0 moves nothing (+1 or -1)", "step")
+        return Stroke(found[0], cells)
 
     async def load(
         self, caller: Caller, name: Any, text: Any, cancel: threading.Event | None = None
@@ -143,7 +184,7 @@ class Gate:
             source = text_of(text, "text", MAX_PROGRAM_CHARS)
             self.allow(caller, "load")
         except Refused as exc:
-            log.info("%s: load refused: %s", caller.said, exc)
+            log.info("%s: load refused: %s", caller.said, exc, extra=REFUSAL)
             raise
         with _logged(caller, f"load of {program!r}"):
             return await self.controller.load(program, source, caller.who, cancel)
@@ -157,7 +198,7 @@ class Gate:
             source = text_of(text, "text", MAX_PROGRAM_CHARS)
             self.allow(caller, "load")
         except Refused as exc:
-            log.info("%s: check refused: %s", caller.said, exc)
+            log.info("%s: check refused: %s", caller.said, exc, extra=REFUSAL)
             raise
         with _logged(caller, f"check of {program!r}"):
             _, totals = await self.controller.check(program, source, cancel)
@@ -169,7 +210,7 @@ class Gate:
             number = whole_of(program_id, "program_id", 1, 2**31 - 1)
             self.allow(caller, "load")
         except Refused as exc:
-            log.info("%s: load refused: %s", caller.said, exc)
+            log.info("%s: load refused: %s", caller.said, exc, extra=REFUSAL)
             raise
         with _logged(caller, f"load of program {number}"):
             loaded: int = await self.controller.load_stored(number, caller.who)
@@ -186,7 +227,7 @@ def _logged(caller: Caller, what: str) -> Iterator[None]:
         log.error("%s: %s failed: %s", caller.said, what, exc)
         raise
     except BwsdError as exc:
-        log.info("%s: %s refused: %s", caller.said, what, exc)
+        log.info("%s: %s refused: %s", caller.said, what, exc, extra=REFUSAL)
         raise
 
 
@@ -198,6 +239,15 @@ def whole_of(value: Any, field: str, low: int, high: int) -> int:
     if not low <= value <= high:
         raise Refused("range", f"{field}: {value} is out of range ({low} to {high})", field)
     return value
+
+
+def number_of(value: Any, field: str, low: float, high: float) -> float:
+    """A finite number (an int or a float, not a bool) in [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise Refused("type", f"{field}: {_shown(value)} is not a number", field)
+    if not low <= value <= high:  # a NaN is out of every range
+        raise Refused("range", f"{field}: {value} is out of range ({low:g} to {high:g})", field)
+    return float(value)
 
 
 E = TypeVar("E", bound=IntEnum)  # Command, UnitMode

@@ -17,6 +17,9 @@ import sys
 import time
 
 FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+# ``extra=REFUSAL`` marks a record as a request refused (by the gate or the controller): the
+# page's console tells refusals apart by this mark, never by the words of the line.
+REFUSAL = {"refusal": True}
 QUIET = ("pymodbus", "canopen", "can.")
 
 

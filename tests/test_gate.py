@@ -19,7 +19,7 @@ from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, State, UnitMode
 from bwsd.errors import BwsdError
 from bwsd.fieldbus import open_bus
-from bwsd.gate import Caller, Gate, Refused, command_of, mode_of
+from bwsd.gate import Caller, Gate, Refused, command_of, mode_of, number_of
 from bwsd.journal import Journal
 from bwsd.tokens import TokenStore
 from tests.support.fieldbus import client_config, mock
@@ -174,3 +174,18 @@ def test_a_load_through_the_gate_is_a_load_and_its_caller_is_journaled(mock, tmp
             assert caller.who == "opcua:eng"
 
     run(scenario())
+
+
+@pytest.mark.parametrize(
+    ("wire", "kind"),
+    [(True, "type"), ("1", "type"), (None, "type"), (50.5, "range"), (float("nan"), "range")],
+)
+def test_a_number_of_a_wrong_type_or_out_of_range_is_refused(wire: Any, kind: str):
+    with pytest.raises(Refused) as refused:
+        number_of(wire, "length", -50.0, 50.0)
+    assert (refused.value.kind, refused.value.field) == (kind, "length")
+
+
+def test_a_number_is_taken_as_a_float():
+    assert number_of(-50, "length", -50.0, 50.0) == -50.0
+    assert number_of(2.5, "length", -50.0, 50.0) == 2.5

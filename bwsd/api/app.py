@@ -6,6 +6,7 @@ fan-out share that loop), e.g. with ``server(app, host, port).serve()``.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import re
 from collections.abc import AsyncIterator, Callable, Iterable
@@ -23,6 +24,7 @@ from bwsd.gate import Gate
 
 from . import control, data, problems, stream, web
 from .auth import Auth, TokenStore, refused_token, require
+from .console import Console
 from .context import Context
 from .doors import DEFAULT_DOORS, BodyDeadline, Crowding, Doors, TokenFirst, server_config
 from .events import QUEUE_SIZE, EventHub
@@ -63,7 +65,8 @@ def create_app(
     hub = EventHub(queue_size, on_drop=metrics.dropped.inc)
     metrics.clients.set_function(lambda: float(hub.clients))
     view = SkeletonView(controller)
-    ctx = Context(controller, view, metrics, hub, RelaxedView(view, *tensions))
+    console = Console(hub.publish)
+    ctx = Context(controller, view, metrics, hub, RelaxedView(view, *tensions), console)
     # No /docs or /redoc: FastAPI's pages load their scripts from a public CDN at a floating
     # version, on the origin that holds the tokens. /openapi.json serves the schema.
     app = FastAPI(
@@ -164,7 +167,9 @@ def _redact_server_logs() -> None:
 def _lifespan(ctx: Context) -> Callable[[FastAPI], AbstractAsyncContextManager[None]]:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        ctx.console.start(asyncio.get_running_loop())  # the daemon's log lines, to readers
         yield
+        ctx.console.stop()
         ctx.uninstall()
         ctx.relaxed.close()
 

@@ -13,6 +13,7 @@ from bwsd.controller.facade import Controller
 from bwsd.controller.packml import State
 from bwsd.controller.status import Event, Fault, StateChanged
 
+from .console import Console
 from .events import EventHub
 from .metrics import Metrics
 from .view import RelaxedView, SkeletonView
@@ -27,6 +28,7 @@ class Context:
     metrics: Metrics
     hub: EventHub
     relaxed: RelaxedView
+    console: Console
     last_fault: str | None = None
     # Which start of the daemon this is: a client that sees another knows it restarted.
     boot: str = field(default_factory=lambda: uuid.uuid4().hex)

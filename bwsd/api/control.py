@@ -11,7 +11,7 @@ from bwsd.controller.errors import ControllerError
 from bwsd.controller.facade import Controller
 from bwsd.controller.packml import Command, InvalidCommand, PackMLError, State
 from bwsd.controller.programs import instruction_dict, step_dict
-from bwsd.fieldbus.base import FAULT_NAMES
+from bwsd.fieldbus.base import FAULT_NAMES, FieldbusError, MachineState
 from bwsd.gate import Caller, Gate, Refused
 from bwsd.journal import JournalError
 from bwsd.twin import Prediction
@@ -33,6 +33,8 @@ from .models import (
     FreeNodeOut,
     LengthOut,
     MachineOut,
+    ManualIn,
+    ManualOut,
     ModeIn,
     ModeOut,
     NextOut,
@@ -79,6 +81,8 @@ async def get_state(ctx: Ctx) -> StateOut:
         allowed=command_names(st.allowed),
         recovering=st.recovering,
         resumable=st.resumable,
+        resume_allowed=st.resume_allowed,
+        manual=st.manual,
         bus=BusHealth(
             connected=bus.connected,
             last_error=bus.last_error,
@@ -106,17 +110,23 @@ async def get_whoami(who: Viewer) -> WhoOut:
 )
 async def get_machine(ctx: Ctx) -> MachineOut:
     """The axes, occupancy sensors and e-stop as the bus reports them now."""
-    ctl = ctx.controller
     try:
-        state = await ctl.read_machine()
+        state = await ctx.controller.read_machine()
     except ControllerError as exc:
         raise ApiError(503, str(exc)) from None
+    return await _machine_out(ctx, state)
+
+
+async def _machine_out(ctx: Ctx, state: MachineState) -> MachineOut:
+    ctl = ctx.controller
     axes = [
         AxisOut(
             index=axis.index,
             name=axis.name,
             kind=axis.kind,
             position=got.position,
+            setpoint=ctl.bus.setpoint(axis.index),
+            relative=axis.relative,
             busy=got.busy,
             fault=got.fault,
             fault_name=FAULT_NAMES.get(got.fault, f"fault {got.fault}"),
@@ -174,6 +184,35 @@ async def put_mode(body: ModeIn, ctx: Ctx, who: Admin, request: Request) -> Mode
         raise ApiError(409, str(exc)) from None
     mode = ctl.status().mode
     return ModeOut(mode=int(mode), mode_name=mode.label)
+
+
+@router.post(
+    "/manual",
+    response_model=ManualOut,
+    responses={
+        **AUTH_ERRORS,
+        **INVALID,
+        **BODY_ERRORS,
+        409: {"model": Error},
+        503: {"model": Error},
+    },
+)
+async def post_manual(body: ManualIn, ctx: Ctx, who: Operator, request: Request) -> ManualOut:
+    """A manual move: one stroke of a shift axis, a take-up or a fault reset, in unit mode
+    Manual or Maintenance with the machine at rest (``manual`` in the state says why not)."""
+    gate: Gate = request.app.state.gate
+    caller = Caller("rest", who.name, who.token, who.role)
+    try:
+        move, state = await gate.manual(
+            caller, body.kind, axis=body.axis, step=body.step, length=body.length
+        )
+    except Refused as exc:
+        raise refused(exc) from None
+    except FieldbusError as exc:
+        raise ApiError(503 if exc.lost else 409, f"the manual move failed: {exc}") from None
+    except (ControllerError, JournalError) as exc:
+        raise ApiError(409, describe(exc)) from None
+    return ManualOut(done=move.text(), machine=await _machine_out(ctx, state))
 
 
 def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError:

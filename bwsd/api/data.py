@@ -35,11 +35,15 @@ from .models import (
     HistoryOut,
     InvalidOut,
     LoadedOut,
+    LogLineOut,
+    LogOut,
+    OutcomeTotal,
     ProgramDetailOut,
     ProgramErrorOut,
     ProgramIn,
     ProgramOut,
     StateRecordOut,
+    TotalsOut,
 )
 from .problems import ApiError, refused
 from .routing import RouteTable
@@ -135,6 +139,28 @@ async def get_programs(
     """Programs loaded, newest first; page with ``before`` (the last id seen)."""
     records = await ctx.controller.history(limit, before)
     return [ProgramOut(**asdict(r)) for r in records]
+
+
+@router.get("/programs/totals", response_model=TotalsOut, dependencies=READ, responses=AUTH_ERRORS)
+async def get_totals(ctx: Ctx) -> TotalsOut:
+    """The journal's programs counted by outcome, with their run time."""
+    found = await asyncio.to_thread(ctx.controller.journal.totals)
+    outcomes = {k: OutcomeTotal(programs=n, run_s=s) for k, (n, s) in found.items()}
+    return TotalsOut(
+        outcomes=outcomes,
+        programs=sum(n for n, _ in found.values()),
+        run_s=sum(s for _, s in found.values()),
+    )
+
+
+@router.get("/log", response_model=LogOut, dependencies=READ, responses={**AUTH_ERRORS, **INVALID})
+async def get_log(
+    ctx: Ctx, after: Annotated[int, Query(ge=0, le=MAX_ID)] = 0, limit: Limit = 500
+) -> LogOut:
+    """The daemon's recent log lines (the last 500 kept), oldest first, numbered after
+    ``after``; the same lines come as ``log`` events on the stream."""
+    lines, last = ctx.console.lines(after, limit)
+    return LogOut(lines=[LogLineOut(**asdict(line)) for line in lines], last=last)
 
 
 @router.get(

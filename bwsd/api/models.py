@@ -86,6 +86,12 @@ class StateOut(BaseModel):
         description="start with resume continues the loaded "
         "program where an Abort or a Stop left it",
     )
+    resume_allowed: bool = Field(
+        False, description="start with resume will be accepted now (as allowed for the others)"
+    )
+    manual: str = Field(
+        "", description="why no manual move is taken now ('' when they are: POST /manual)"
+    )
     bus: BusHealth
     last_fault: str | None = Field(description="the controller's last fault report, if any")
     next: NextOut | None = Field(description="the instruction to run next; null if none")
@@ -96,6 +102,12 @@ class AxisOut(BaseModel):
     name: str
     kind: str
     position: int = Field(description="micrometres (millidegrees for weft_angle)")
+    setpoint: int | None = Field(
+        None,
+        description="the last set-point the daemon wrote (a stroke for a relative axis, a "
+        "position for an absolute one; 0 after homing); null: none since it started",
+    )
+    relative: bool = Field(False, description="a relative axis: strokes that end back home")
     busy: bool
     fault: int
     fault_name: str
@@ -140,6 +152,35 @@ class ProgramOut(BaseModel):
     reason: str
 
 
+class OutcomeTotal(BaseModel):
+    programs: int
+    run_s: float = Field(description="seconds from their first start to their end (holds included)")
+
+
+class TotalsOut(BaseModel):
+    """The journal's programs counted by outcome, with their run time."""
+
+    outcomes: dict[str, OutcomeTotal] = Field(
+        description="by outcome: loaded, running, held, suspended, complete, aborted, stopped"
+    )
+    programs: int
+    run_s: float
+
+
+class LogLineOut(BaseModel):
+    seq: int = Field(description="1, 2, ... since the daemon started")
+    at: float
+    level: str = Field(description="INFO, WARNING, ERROR or CRITICAL")
+    logger: str
+    message: str = Field(description="the record's first line, at most 2000 characters")
+    refusal: bool = Field(description="a request refused by the gate or the controller")
+
+
+class LogOut(BaseModel):
+    lines: list[LogLineOut]
+    last: int = Field(description="the number of the newest line the daemon has logged")
+
+
 class ProgramDetailOut(ProgramOut):
     text: str
 
@@ -155,6 +196,18 @@ class CommandIn(BaseModel):
 
 class ModeIn(BaseModel):
     mode: ModeName
+
+
+class ManualIn(BaseModel):
+    kind: Literal["stroke", "takeup", "reset_faults"]
+    axis: str | None = Field(None, max_length=40, description="stroke: a row, column or segment")
+    step: int | None = Field(None, description="stroke: +1 or -1 cell")
+    length: float | None = Field(None, description="takeup: mm, -50 to 50, not 0")
+
+
+class ManualOut(BaseModel):
+    done: str = Field(description="what was done (stroke row1 +1, take-up +2 mm, fault reset)")
+    machine: MachineOut = Field(description="the machine as read back after it")
 
 
 class WhoOut(BaseModel):

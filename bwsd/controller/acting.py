@@ -28,6 +28,7 @@ from bwsd.errors import BwsdError
 from bwsd.fieldbus.axes import POSITIONING
 from bwsd.fieldbus.base import FieldbusError, MachineState
 from bwsd.journal import ABORTED, COMPLETE, HELD, RUNNING, STOPPED, SUSPENDED, JournalError
+from bwsd.logs import REFUSAL
 
 if TYPE_CHECKING:
     from bwsd.controller.facade import Controller
@@ -75,7 +76,8 @@ async def _take(ctl: Controller, command: C, reason: str, who: str, resume: bool
         state = ctl.packml.command(command, reason)
     except BwsdError as exc:  # a refusal is routine (INFO); a bus or journal fault is not
         failed = isinstance(exc, FieldbusError | JournalError)
-        log.log(logging.ERROR if failed else logging.INFO, "command %s refused: %s", text, exc)
+        level, extra = (logging.ERROR, None) if failed else (logging.INFO, REFUSAL)
+        log.log(level, "command %s refused: %s", text, exc, extra=extra)
         raise
     if command in (C.HOLD, C.SUSPEND):
         ctl.stop_cause = StopCause.OPERATOR
@@ -214,7 +216,7 @@ async def end_now(
     try:
         state = ctl.packml.command(command, reason)
     except InvalidCommand as exc:
-        log.info("command %s refused: %s", text, exc)
+        log.info("command %s refused: %s", text, exc, extra=REFUSAL)
         raise
     ctl.stop_cause = cause
     loop = ctl.loop

@@ -18,10 +18,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from bwsd.controller import acting, resting
+from bwsd.controller import acting, manual, resting
 from bwsd.controller.errors import Busy, Cancelled, ControllerError
 from bwsd.controller.job import Job, Preview
 from bwsd.controller.machine import MachineView
+from bwsd.controller.manual import ManualMove, manual_refusal
 from bwsd.controller.packml import Command, PackML, State, UnitMode
 from bwsd.controller.plan import Limits
 from bwsd.controller.programs import DryRun, check_program
@@ -52,6 +53,7 @@ from bwsd.journal import (
     ProgramRecord,
     StateRecord,
 )
+from bwsd.logs import REFUSAL
 from bwsd.twin import Machine, Program, Twin
 
 log = logging.getLogger("bwsd.controller")
@@ -175,6 +177,15 @@ class Controller:
         blocked = job is not None and job.pending is not None and bool(job.pending.blocked)
         return job is not None and job.ended in ENDED and not blocked
 
+    def resume_allowed(self) -> bool:
+        """Start with resume will be accepted now (as far as the last read knows)."""
+        start = Command.START
+        return (
+            self.resumable()
+            and self.packml.accepts(start)
+            and refusal(self, start, resume=True) is None
+        )
+
     def status(self) -> StatusSnapshot:
         """The controller as it stands, in one value."""
         job = self.job
@@ -193,9 +204,11 @@ class Controller:
             recovering=self.recovering or self.broken,
             next=None if ended or job is None else job.next_step(),
             resumable=self.resumable(),
+            resume_allowed=self.resume_allowed(),
             mode_requested=self.mode_requested,
             good=self.good,
             defective=self.defective,
+            manual=manual_refusal(self) or "",
         )
 
     def next_step(self) -> dict[str, Any] | None:
@@ -325,6 +338,12 @@ class Controller:
         async with self.lock:
             return await acting.take(self, command, reason, who, resume)
 
+    async def manual(self, move: ManualMove, who: str = "") -> MachineState:
+        """A manual move (``bwsd.controller.manual``), under the command lock: the machine as
+        read back after it."""
+        async with self.lock:
+            return await manual.manual(self, move, who)
+
     async def set_mode(self, mode: UnitMode, who: str = "") -> None:
         """Change the unit mode (where PackML allows it), journaled and published."""
         self.mode_requested = mode
@@ -333,7 +352,7 @@ class Controller:
             try:
                 self.packml.set_mode(mode)
             except BwsdError as exc:
-                log.info("mode %s from %s refused: %s", mode.label, who or "?", exc)
+                log.info("mode %s from %s refused: %s", mode.label, who or "?", exc, extra=REFUSAL)
                 raise
             if mode is not old:
                 log.info("mode %s -> %s by %s", old.label, mode.label, who or "?")

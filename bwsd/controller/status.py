@@ -89,9 +89,11 @@ class StatusSnapshot:
     recovering: str  # why commands wait ("" when they do not)
     next: dict[str, Any] | None  # the instruction that runs next, with its line
     resumable: bool = False  # Start with resume continues the program where it stopped
+    resume_allowed: bool = False  # and Start with resume is accepted now
     mode_requested: UnitMode = UnitMode.PRODUCTION  # the unit mode last asked for
     good: int = 0  # programs that reached Complete, since the daemon started
     defective: int = 0  # programs left unfinished after they ran (another loaded instead)
+    manual: str = ""  # why no manual move is taken now ("" when they are)
 
 
 # ----- the event stream -----

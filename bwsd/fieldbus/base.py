@@ -161,6 +161,7 @@ class Fieldbus(ABC):
         self.axes = machine_axes(machine)
         self._seq = [0] * len(self.axes)
         self._expected: dict[int, int] = {}
+        self._setpoints: dict[int, int] = {}  # the last set-point written, by axis
         self._connected = False
         self._seeded = False
         self._known = [AxisState(0, False, 0, 0, 0)] * len(self.axes)
@@ -273,6 +274,7 @@ class Fieldbus(ABC):
             axis = self.axes[move.axis]
             self._seq[move.axis] = (self._seq[move.axis] + 1) % 0x8000 or 1
             self._expected[move.axis] = 0 if axis.relative else move.target
+            self._setpoints[move.axis] = move.target
             setpoints.append((axis, move.target, self._seq[move.axis]))
         await self._write_setpoints(setpoints)
 
@@ -323,6 +325,11 @@ class Fieldbus(ABC):
         await self.move(moves)
         return await self.wait([m.axis for m in moves], timeout)
 
+    def setpoint(self, axis: int) -> int | None:
+        """The last set-point this client wrote to axis ``axis`` (a stroke for a relative
+        axis, a position for an absolute one; 0 after homing); None when it wrote none."""
+        return self._setpoints.get(axis)
+
     def known(self, axis: int) -> AxisState:
         """What axis ``axis`` reported at the last read (nothing is read now)."""
         return self._known[axis]
@@ -349,6 +356,7 @@ class Fieldbus(ABC):
         for i in homed:
             self._seq[i] = 0
             self._expected[i] = 0
+            self._setpoints[i] = 0
         return await self.wait(homed, timeout)
 
     def _merge(self, read: dict[int, AxisState], occupancy: BoolGrid, estop: bool) -> MachineState:

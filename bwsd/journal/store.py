@@ -90,6 +90,17 @@ class Journal(EventLog):
             ).fetchall()
         return [ProgramRecord(*row) for row in rows]
 
+    def totals(self) -> dict[str, tuple[int, float]]:
+        """Per outcome: how many programs, and their seconds from the first start to the end
+        (to now for one that has not ended; none for one that never ran)."""
+        with self._read() as conn:
+            rows = conn.execute(
+                "SELECT outcome, COUNT(*), TOTAL(COALESCE(finished, ?) - started) "
+                "FROM programs GROUP BY outcome ORDER BY outcome",
+                (self._clock(),),
+            ).fetchall()
+        return {outcome: (count, max(0.0, seconds)) for outcome, count, seconds in rows}
+
     def latest_program(self) -> ProgramRecord | None:
         """The newest program (the one loaded when the daemon stopped), if any."""
         with self._read() as conn:

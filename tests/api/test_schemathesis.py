@@ -38,7 +38,7 @@ def test_no_operation_answers_a_server_error(live: Live):
     for result in schema.get_all_operations():
         assert isinstance(result, Ok), result.err()
         operations.append(result.ok())
-    assert len(operations) == 14  # GET /api/v1/whoami and POST /programs/{id}/load among them
+    assert len(operations) == 17  # GET /whoami, POST /programs/{id}/load, POST /manual among them
     spec = httpx.get(f"{live.base}/openapi.json", timeout=WAIT).json()
     seen: dict[str, set[int]] = {}
     for operation in operations:

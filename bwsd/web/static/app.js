@@ -32,6 +32,7 @@ import { HistoryPanel } from './history.js';
 import { JobPanel } from './job.js';
 import { say } from './message.js';
 import { Notices } from './notices.js';
+import { OperatorPanels } from './panels.js';
 import { ProgramPanel } from './program.js';
 import { Selection } from './selection.js';
 import { Session } from './session.js';
@@ -73,6 +74,7 @@ const RUNNING_STATES = new Set(['Starting', 'Execute', 'Unholding', 'Unsuspendin
  * @property {{ms: number, nodes: number}[]} work
  * @property {() => ReturnType<PreformView['dump']>} dump
  * @property {() => ReturnType<Notices['shown']>} notices
+ * @property {() => ReturnType<OperatorPanels['consoleShown']>} console
  */
 /** @type {Hooks} */
 const hooks = {
@@ -92,6 +94,7 @@ const hooks = {
   work: [], // per frame that applied instructions: {ms: applying and drawing, nodes: shown}
   dump: () => view.dump(), // every yarn shown: [{id, node_ids, nodes}], as the skeleton JSON
   notices: () => notices.shown(), // the notes of the banner: [{cause, text}]
+  console: () => panels.consoleShown(), // the console's entries shown: [{kind, mark, text}]
 };
 window.bwsd = hooks;
 
@@ -224,6 +227,17 @@ const commands = new Commands({
   unreachable,
   loggedOut: () => loggedOut(true),
   forbidden,
+});
+// The axes, manual moves, resume, console and job history (panels.js).
+const panels = new OperatorPanels({
+  state: () => live.state,
+  active: () => link.wanted && online() === true,
+  may: mayCommand,
+  operator: () => session.mayCommand(),
+  refreshState: () => refreshState(),
+  heard,
+  unreachable,
+  loggedOut: () => loggedOut(true),
 });
 const colourBy = $('colour-by', HTMLSelectElement);
 colourBy.value = colourMode;
@@ -611,6 +625,7 @@ function drawButtons() {
     load: may && loadable,
     loadWhy: may ? 'a program is loaded only in Stopped, Idle, Complete or Aborted' : 'needs an operator token and a daemon that answers',
   });
+  panels.draw();
   session.draw();
 }
 
@@ -654,6 +669,7 @@ function drawLegend() {
 /** @param {DaemonEvent} event */
 function onEvent(event) {
   heard();
+  panels.event(event);
   switch (event.event) {
     case 'hello':
       noteBoot(/** @type {HelloEvent} */ (event)); // its `event` says what it is
@@ -842,6 +858,7 @@ function clearPicture() {
   job.clear();
   record.clear();
   programs.clear();
+  panels.clear();
   $('reason-input', HTMLInputElement).value = '';
   $('mode-message').textContent = '';
   Object.assign(hooks, { ready: false, done: 0, nodes: 0, yarns: 0, contacts: 0, state: null, allowed: [] });

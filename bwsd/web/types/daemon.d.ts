@@ -111,6 +111,8 @@ export interface State {
   allowed: string[];
   recovering?: string;
   resumable?: boolean;
+  resume_allowed?: boolean; // Start with resume will be accepted now
+  manual?: string; // why no manual move is taken now ('' when they are)
   bus?: Bus;
   next?: Next | null;
 }
@@ -153,4 +155,41 @@ export interface CommandAnswer {
   name: string;
   reason?: string;
   allowed: string[];
+}
+
+/** One axis of `GET /api/v1/machine`: micrometres (the weft angle: millidegrees). */
+export interface AxisRead {
+  index: number;
+  name: string;
+  kind: string;
+  position: number;
+  setpoint: number | null; // the last set-point the daemon wrote; null: none yet
+  relative: boolean; // strokes that end back home (the set-point is a stroke)
+  busy: boolean;
+  fault: number;
+  fault_name: string;
+}
+
+/** `GET /api/v1/machine`, and the machine a manual move's answer carries. */
+export interface MachineRead {
+  axes: AxisRead[];
+  occupancy: boolean[][];
+  estop: boolean;
+}
+
+/** A line of the daemon's log (`GET /api/v1/log`, and the `log` event). */
+export interface LogLine {
+  seq: number;
+  at: number; // seconds (Unix time)
+  level: string; // INFO, WARNING, ERROR, CRITICAL
+  logger: string;
+  message: string;
+  refusal: boolean; // a request refused by the gate or the controller
+}
+
+/** `GET /api/v1/programs/totals`. */
+export interface Totals {
+  outcomes: Record<string, { programs: number; run_s: number }>;
+  programs: number;
+  run_s: number;
 }
