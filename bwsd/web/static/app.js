@@ -177,7 +177,7 @@ let panelsDrawn = 0; // time the matrix and the status were last drawn while upd
 const PANEL_MS = 200;
 
 // ----- the parts of the page -----
-let colourMode = 'family';
+let colourMode = 'yarn'; // neighbours apart; a choice kept in the browser wins
 try {
   const kept = localStorage.getItem(COLOUR_KEY);
   if (kept !== null && COLOUR_MODES.includes(kept)) colourMode = kept;
@@ -527,6 +527,8 @@ function drawGrid() {
     grid.setOccupancy(view.occupancy);
     grid.setNext(next?.instruction ?? null);
   }
+  document.body.style.setProperty('--matrix-cols', String(grid.cols)); // a wide window's matrix column
+  grid.setRunning(RUNNING_STATES.has(live.state?.name ?? '') && online() !== false);
   const instruction = next?.instruction;
   if (typeof grid.setNextWeft === 'function') grid.setNextWeft(instruction?.kind === 'weft' && live.loaded ? instruction : null);
   if (typeof grid.setMachine === 'function') {

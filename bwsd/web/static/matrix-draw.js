@@ -76,7 +76,7 @@ export function span(row, line, first, last, inset = 0) {
  * @param {number} last
  */
 export function band(row, line, first, last) {
-  return svg('rect', { ...span(row, line, first, last, 1.5), class: 'moving', 'data-line': line, 'data-first': first, 'data-last': last });
+  return svg('rect', { ...span(row, line, first, last, 1.5), class: 'moving', 'data-axis': row ? 'row' : 'col', 'data-line': line, 'data-first': first, 'data-last': last });
 }
 
 /** A faulted shift axis over the cells it drives ({axis, line, first, last} of axisCells);
