@@ -201,7 +201,8 @@ def test_ids_too_small_at_fit_show_when_zoomed_in(
 MARKED = """() => {
   const frame = document.querySelector('#grid .matrix-frame');
   const bands = [...document.querySelectorAll('#grid .layer-highlights .moving')]
-    .map((b) => [+b.dataset.line, +b.dataset.first, +b.dataset.last, b.dataset.axis]);
+    .map((b) => [+b.dataset.line, +b.dataset.first, +b.dataset.last, b.dataset.axis
+      ?? (+b.getAttribute('width') > +b.getAttribute('height') ? 'row' : 'col')]);
   const cells = [...document.querySelectorAll('#grid .cell[data-yarn]')].map((cell) => {
     const box = cell.querySelector('rect').getBoundingClientRect();
     return { row: +cell.dataset.row, col: +cell.dataset.col,
