@@ -336,6 +336,33 @@ def test_yarn_colouring_by_default_neighbours_apart_a_stored_choice_wins(
         mock.stop()
 
 
+def test_while_it_runs_the_yarn_colours_wait_and_the_image_is_not_drawn_whole_again(
+    running: Callable[[int], Running], browser: Browser
+):
+    """Between two instructions on a slow loom the updates pause; recolouring the yarns
+    there would draw the whole preform's image again each time (the incremental drawing of
+    a large preform undone). The colours catch up once the machine stands."""
+    loom = running(26)
+    deadline = time.monotonic() + 6 * WAIT
+    while loom.served.state()["index"] < 60:  # over 10,000 nodes: the settled image in use
+        assert time.monotonic() < deadline
+        time.sleep(1)
+    page = loom.open(browser, 1024, 768)
+    try:
+        assert page.page.input_value("#colour-by") == "yarn"
+        page.until("() => window.bwsd.view.layers.layered")
+        done, drawn = page.page.evaluate(WHOLE)
+        page.until("n => window.bwsd.done >= n", done + 8)  # eight pauses at least
+        assert loom.served.state()["name"] == "Execute"
+        assert page.page.evaluate(WHOLE)[1] - drawn <= 2
+        assert page.errors == []
+    finally:
+        page.page.context.close()
+
+
+WHOLE = "() => [window.bwsd.done, window.bwsd.view.layers.stats.images.length]"
+
+
 def _fills(page: Page) -> dict[int, str]:
     """The matrix's yarns and the colours their cells are filled with ("#rrggbb")."""
     fills: list[list[Any]] = (

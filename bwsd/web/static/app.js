@@ -274,7 +274,9 @@ function frame(now) {
     scheduleFrame();
   } else if (lastTick) {
     lastTick = 0;
-    view.settleTails(); // the updates paused: draw the grown tails into the settled layer
+    // the updates paused: draw the grown tails into the settled layer (the colours wait
+    // until the machine stands)
+    view.settleTails(!RUNNING_STATES.has(live.state?.name ?? ''));
   }
 }
 
@@ -470,6 +472,7 @@ function showState(state) {
   }
   if (!sameProgram) refreshHistory();
   if (live.state?.name !== state.name || !RUNNING_STATES.has(state.name)) panelsNow();
+  if (live.state && RUNNING_STATES.has(live.state.name) && !RUNNING_STATES.has(state.name)) view.settleTails();
   live.state = state;
   status.readFaultNames(state.bus?.faulted ?? [], () => {
     statusDirty = true;
