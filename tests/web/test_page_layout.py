@@ -27,7 +27,7 @@ from bwsd.program.braid import braid4
 from tests.api.conftest import WAIT
 from tests.support.fieldbus import Mock
 from tests.test_daemon import Served
-from tests.web.conftest import MS, Browsing
+from tests.web.conftest import MS, Browsing, watched
 from tests.web.serving import example, serve
 from tests.web.test_page_views import _neighbours
 
@@ -47,11 +47,10 @@ class Running:
     served: Served
     mock: Mock
     token: str
-    size: int
 
     def open(self, browser: Browser, width: int, height: int) -> Browsing:
         context = browser.new_context(viewport={"width": width, "height": height})
-        page = Browsing(context.new_page())
+        page = watched(context.new_page())
         page.page.goto(f"{self.served.urls['api']}/#token={self.token}")
         page.ready()
         page.state("Execute")
@@ -77,7 +76,7 @@ def running(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[[int]
             machine, text = _braid(n, cycles=100)
             folder = tmp_path_factory.mktemp(f"loom{n}")
             served, mock, token = serve(folder, machine, text, simulator=SLOW)
-            started[n] = Running(served, mock, token, n)
+            started[n] = Running(served, mock, token)
             loaded = served.http.post("/programs", json={"name": f"braid-{n}.bws", "text": text})
             assert loaded.status_code == 201, loaded.text
             served.command("reset")
