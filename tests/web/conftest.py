@@ -77,10 +77,9 @@ class Browsing:
         self.page.wait_for_selector(f'#state[data-state="{name}"]', timeout=MS)
 
 
-@pytest.fixture
-def page(browser: Browser) -> Iterator[Browsing]:
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
-    browsing = Browsing(context.new_page())
+def watched(page: Page) -> Browsing:
+    """``page``, its console's errors and warnings and its uncaught errors kept."""
+    browsing = Browsing(page)
 
     def console(message: ConsoleMessage) -> None:
         if message.type == "warning" and _DRIVER_NOTE.match(message.text):
@@ -88,8 +87,15 @@ def page(browser: Browser) -> Iterator[Browsing]:
         if message.type in ("error", "warning"):
             browsing.errors.append(f"{message.type}: {message.text} ({message.location})")
 
-    browsing.page.on("console", console)
-    browsing.page.on("pageerror", lambda exc: browsing.errors.append(f"page error: {exc}"))
+    page.on("console", console)
+    page.on("pageerror", lambda exc: browsing.errors.append(f"page error: {exc}"))
+    return browsing
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Browsing]:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    browsing = watched(context.new_page())
     yield browsing
     context.close()
 

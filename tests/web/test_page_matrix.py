@@ -461,8 +461,10 @@ def test_a_26x26_loom_fits_the_panel_with_cells_of_14_px(
         assert yarns == {
             (r, c): y for r, row in enumerate(occupancy) for c, y in enumerate(row) if y >= 0
         }
-        # 3-digit ids do not fit a 14 px cell: hidden, and named on hover.
-        assert page.page.locator("#grid .matrix-frame.ids-hidden").count() == 1
+        # 3-digit ids do not fit a 14 px cell: hidden, and named on hover. At 1600 px the
+        # matrix has a column of its own, where they do.
+        hidden = page.page.locator("#grid .matrix-frame.ids-hidden").count()
+        assert hidden == (1 if size[0] < 1400 else 0)
         assert _hover_text(page, "#grid", 12, 7) == f"row 12, col 7: yarn {occupancy[12][7]}"
     finally:
         context.close()

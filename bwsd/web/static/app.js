@@ -184,7 +184,7 @@ let panelsDrawn = 0; // time the matrix and the status were last drawn while upd
 const PANEL_MS = 200;
 
 // ----- the parts of the page -----
-let colourMode = 'family';
+let colourMode = 'yarn'; // neighbours apart; a choice kept in the browser wins
 try {
   const kept = localStorage.getItem(COLOUR_KEY);
   if (kept !== null && COLOUR_MODES.includes(kept)) colourMode = kept;
@@ -292,7 +292,9 @@ function frame(now) {
     scheduleFrame();
   } else if (lastTick) {
     lastTick = 0;
-    view.settleTails(); // the updates paused: draw the grown tails into the settled layer
+    // the updates paused: draw the grown tails into the settled layer (the colours wait
+    // until the machine stands)
+    view.settleTails(!RUNNING_STATES.has(live.state?.name ?? ''));
   }
 }
 
@@ -493,6 +495,7 @@ function showState(state) {
   }
   if (!sameProgram) refreshHistory();
   if (live.state?.name !== state.name || !RUNNING_STATES.has(state.name)) panelsNow();
+  if (live.state && RUNNING_STATES.has(live.state.name) && !RUNNING_STATES.has(state.name)) view.settleTails();
   live.state = state;
   status.readFaultNames(state.bus?.faulted ?? [], () => {
     statusDirty = true;
@@ -556,6 +559,8 @@ function drawGrid() {
     grid.setOccupancy(view.occupancy);
     grid.setNext(next?.instruction ?? null);
   }
+  document.body.style.setProperty('--matrix-cols', String(grid.cols)); // a wide window's matrix column
+  grid.setRunning(RUNNING_STATES.has(live.state?.name ?? '') && online() !== false);
   const instruction = next?.instruction;
   if (typeof grid.setNextWeft === 'function') grid.setNextWeft(instruction?.kind === 'weft' && live.loaded ? instruction : null);
   if (typeof grid.setMachine === 'function') {

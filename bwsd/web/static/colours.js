@@ -17,8 +17,9 @@
 //   fewest any yarn has to the most.
 //
 // Contacts made while a program runs do not change colours at once (a yarn keeps its
-// colour while it is watched): `refresh()`, called when the updates pause, recolours the
-// yarns that came to share a colour with a new neighbour and updates the contact counts.
+// colour while it is watched): `refresh()`, called when the updates pause with the machine
+// standing, recolours the yarns that came to share a colour with a new neighbour and
+// updates the contact counts.
 
 import { zoneOf } from './view-zones.js';
 

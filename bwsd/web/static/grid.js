@@ -6,7 +6,7 @@
 // report a fault, and the path of the next weft. Zoom (wheel, pinch, +/−), pan (drag,
 // arrow keys) and fit; a click picks the yarn in a cell.
 
-import { css, textOn } from './colours.js';
+import { css, mix, textOn } from './colours.js';
 import { CELL, arrow, band, differMark, faultMark, rulers, svg, weftPath } from './matrix-draw.js';
 import { axisCells, differingCells, movesByLine, weftInCells } from './matrix-geometry.js';
 import { describeWeft, panel, statusLine } from './matrix-panel.js';
@@ -30,8 +30,10 @@ const FIT_CELL_PX = 44; // a small matrix stops growing at this cell size
 const TOP = 14; // px: the column numbers
 const BOTTOM = 28; // px: room under the matrix for the columns' arrows
 const ARROWS = 40; // px: room right of the matrix for the rows' arrows...
-const ROOMY_CELL_PX = 24; // ...kept while the cells stay at least this big
+const ROOMY_CELL_PX = 20; // ...kept while the cells stay at least this big
 const ID_PX = 8.5; // the smallest id worth printing in a cell
+const CALM = 0.6; // while the machine runs, the cells' colours this far towards white
+const TALLEST_LESS = 280; // px of the window's height left to the bar and the panel's other lines
 let grids = 0; // numbers each grid's hatch patterns
 
 export class MatrixGrid {
@@ -58,6 +60,7 @@ export class MatrixGrid {
     this.machine = null;
     /** @type {number | null} the highlighted yarn id */
     this.picked = null;
+    this.running = false; // the machine runs: calm cells under the moving lines' outlines
     /** @type {((yarnId: number | null) => void) | null} set by the page */
     this.onPick = null;
     /** @type {{x: number, y: number} | null} the pointer over the frame, px */
@@ -193,7 +196,8 @@ export class MatrixGrid {
       cell.title.textContent = `row ${r}, col ${c}: empty${sensor}`;
       return;
     }
-    const colour = this.palette.colour(yarn);
+    const own = this.palette.colour(yarn);
+    const colour = this.running && yarn !== this.picked ? mix(own, 0xffffff, CALM) : own;
     cell.group.setAttribute('class', yarn === this.picked ? 'cell picked' : 'cell');
     cell.group.setAttribute('data-yarn', String(yarn));
     cell.rect.style.fill = css(colour);
@@ -205,6 +209,18 @@ export class MatrixGrid {
   /** The colours changed (colour mode): repaint every cell. */
   repaint() {
     this.cells.forEach((row, r) => row.forEach((cell, c) => this.paint(cell, r, c)));
+  }
+
+  /**
+   * Whether the machine runs: then the cells are drawn in calm tints of their colours, so
+   * that the outlined lines of the instruction under way stand out.
+   * @param {boolean} running
+   */
+  setRunning(running) {
+    if (running === this.running) return;
+    this.running = running;
+    this.frame.classList.toggle('running', running);
+    this.repaint();
   }
 
   // ----- the next instruction -----
@@ -404,7 +420,7 @@ export class MatrixGrid {
     const width = this.frame.clientWidth;
     if (!this.rows || !width) return;
     const left = this.rows > 100 ? 20 : 14; // px: the row numbers (9 px digits)
-    const tallest = Math.max(220, Math.min(560, 0.7 * window.innerHeight));
+    const tallest = Math.max(220, window.innerHeight - TALLEST_LESS); // the panel's other lines in view too
     // Room right of the matrix for the rows' arrows, unless the cells would be too small for it.
     const right = (width - left - ARROWS) / this.cols >= ROOMY_CELL_PX ? ARROWS : 0;
     const px = Math.min(FIT_CELL_PX, (width - left - right) / this.cols, (tallest - TOP - BOTTOM) / this.rows);

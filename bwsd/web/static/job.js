@@ -9,6 +9,7 @@ import { download, errorText, request } from './api.js';
 import { byId as $ } from './dom.js';
 import { RateWindow, clock, duration } from './eta.js';
 import { messageOf } from './message.js';
+import { showRun } from './run-summary.js';
 
 /** @import { InstructionEvent, Next, State } from '../types/daemon' */
 /** @import { Answer } from './api.js' */
@@ -74,6 +75,7 @@ export class JobPanel {
     $('progress-text').textContent = '0 / 0';
     $('job-note').textContent = 'no program loaded';
     $('eta').textContent = '';
+    showRun(0, 0, '');
     for (const button of formatButtons()) button.disabled = true;
   }
 
@@ -109,7 +111,9 @@ export class JobPanel {
     $('progress', HTMLProgressElement).value = Math.min(index, count);
     $('progress-text').textContent = `${index} / ${count}`;
     $('job-note').textContent = this.note(state, index, next);
-    $('eta').textContent = this.eta(state, index);
+    const left = this.timeLeft(state, index);
+    $('eta').textContent = left?.text ?? '';
+    showRun(index, count, left?.short ?? '');
     this.mark(next?.line ?? null);
     for (const button of formatButtons()) button.disabled = !online;
   }
@@ -131,18 +135,19 @@ export class JobPanel {
   }
 
   /**
-   * The time left, from the recent rate (eta.js), while the machine runs.
+   * The time left, from the recent rate (eta.js), while the machine runs: `text` for the
+   * job, `short` for the bar; null while the machine stands.
    * @param {State} state
    * @param {number} index
    */
-  eta(state, index) {
-    if (!RUNNING.has(state.name) || index >= state.count) return '';
+  timeLeft(state, index) {
+    if (!RUNNING.has(state.name) || index >= state.count) return null;
     const estimate = this.rate.estimate(state.count - index);
-    if (!estimate) return 'time left: estimating…';
+    if (!estimate) return { text: 'time left: estimating…', short: 'time left: estimating…' };
     const end = new Date(Date.now() + estimate.seconds * 1000);
     const rate = estimate.rate >= 10 ? estimate.rate.toFixed(0) : estimate.rate.toPrecision(2);
-    return `time left: about ${duration(estimate.seconds)}, done at about ${clock(end)} ` +
-      `(${rate} instructions/s over the last ${estimate.over})`;
+    const short = `time left: about ${duration(estimate.seconds)}`;
+    return { text: `${short}, done at about ${clock(end)} (${rate} instructions/s over the last ${estimate.over})`, short };
   }
 
   /**

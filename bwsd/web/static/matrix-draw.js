@@ -69,14 +69,15 @@ export function span(row, line, first, last, inset = 0) {
 }
 
 /**
- * The highlight of a line's cells first..last that move next (two segments: two bands).
+ * The outline of a line's cells first..last that move next (two segments: two bands), on
+ * the cells' edges: neighbouring lines that both move share one stroke.
  * @param {boolean} row
  * @param {number} line
  * @param {number} first
  * @param {number} last
  */
 export function band(row, line, first, last) {
-  return svg('rect', { ...span(row, line, first, last, 1.5), class: 'moving', 'data-line': line, 'data-first': first, 'data-last': last });
+  return svg('rect', { ...span(row, line, first, last), class: 'moving', 'data-axis': row ? 'row' : 'col', 'data-line': line, 'data-first': first, 'data-last': last });
 }
 
 /** A faulted shift axis over the cells it drives ({axis, line, first, last} of axisCells);

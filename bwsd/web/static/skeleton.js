@@ -318,10 +318,14 @@ export class PreformView {
     return true;
   }
 
-  /** The updates paused: settle long tails, and let the colours catch up with the contacts. */
-  settleTails() {
+  /**
+   * The updates paused: settle long tails, and (`recolour`, once the machine stands) let the
+   * colours catch up with the contacts; a recolour draws the whole image again, too much at
+   * every pause between two instructions of a run.
+   */
+  settleTails(recolour = true) {
     if (this.following && this.rig.isSoft) this.fit(); // a real camera again, the image drawn whole
-    if (this.palette.refresh()) {
+    if (recolour && this.palette.refresh()) {
       this.changed(true);
       this.onColoursChanged?.();
       return;
