@@ -385,7 +385,9 @@ def test_after_stop_progress_and_next_line_are_what_the_daemon_says(
     page.page.wait_for_function(
         "t => document.querySelector('#job-note').textContent.startsWith(t)", arg=ended, timeout=MS
     )
-    assert page.page.locator("#next").inner_text() == "next: — (the run has ended)"
+    assert state["resumable"]  # it moved: a resume continues it, and the page says so
+    said = "next: — (the run has ended; start with resume continues it)"
+    assert page.page.locator("#next").inner_text() == said
     assert page.page.locator("#job-text .current").count() == 0
     assert page.errors == []
 

@@ -14,7 +14,10 @@ import { signed } from './grid.js';
 export function describeNext(state, next, index) {
   if (!state) return 'next: —';
   if (state.program_id === null || state.program_id === undefined) return 'next: — (no program loaded)';
-  if (!next) return index >= state.count ? 'next: — (program done)' : 'next: — (the run has ended)';
+  if (!next) {
+    if (index >= state.count) return 'next: — (program done)';
+    return state.resumable ? 'next: — (the run has ended; start with resume continues it)' : 'next: — (the run has ended)';
+  }
   const where = next.line ? `line ${next.line}` : `instruction ${next.index}`;
   return `next: ${where} — ${describeInstruction(next.instruction ?? {})}`;
 }
