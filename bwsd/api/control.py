@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable
 from typing import Annotated, Any
 
-from fastapi import Depends, Request
+from fastapi import Depends, Query, Request
 
 from bwsd.controller.errors import ControllerError
 from bwsd.controller.facade import Controller
@@ -108,16 +109,28 @@ async def get_whoami(who: Viewer) -> WhoOut:
     dependencies=READ,
     responses={**AUTH_ERRORS, 503: {"model": Error}},
 )
-async def get_machine(ctx: Ctx) -> MachineOut:
-    """The axes, occupancy sensors and e-stop as the bus reports them now."""
+async def get_machine(
+    ctx: Ctx,
+    last: Annotated[
+        bool, Query(description="the last read (no request on the bus; a lost bus too)")
+    ] = False,
+) -> MachineOut:
+    """The axes, occupancy sensors and e-stop as the bus reports them now, or (``last``) as
+    it last reported them: what a display polls, adding nothing to the bus's traffic."""
+    ctl = ctx.controller
+    state, at = ctl.seen.last, ctl.seen.last_at
+    if last and state is not None and at is not None:  # none yet: it is read now
+        return await _machine_out(ctx, state, at, ctl.seen.status.connected is True)
     try:
-        state = await ctx.controller.read_machine()
+        state = await ctl.read_machine()
     except ControllerError as exc:
         raise ApiError(503, str(exc)) from None
-    return await _machine_out(ctx, state)
+    return await _machine_out(ctx, state, ctl.seen.last_at or time.time(), True)
 
 
-async def _machine_out(ctx: Ctx, state: MachineState) -> MachineOut:
+async def _machine_out(
+    ctx: Ctx, state: MachineState, read_at: float, connected: bool
+) -> MachineOut:
     ctl = ctx.controller
     axes = [
         AxisOut(
@@ -139,6 +152,8 @@ async def _machine_out(ctx: Ctx, state: MachineState) -> MachineOut:
         occupancy=state.occupancy.tolist(),
         estop=state.estop,
         twin_occupancy=sk.occupancy.tolist() if sk is not None else None,
+        read_at=read_at,
+        connected=connected,
     )
 
 
@@ -212,7 +227,7 @@ async def post_manual(body: ManualIn, ctx: Ctx, who: Operator, request: Request)
         raise ApiError(503 if exc.lost else 409, f"the manual move failed: {exc}") from None
     except (ControllerError, JournalError) as exc:
         raise ApiError(409, describe(exc)) from None
-    return ManualOut(done=move.text(), machine=await _machine_out(ctx, state))
+    return ManualOut(done=move.text(), machine=await _machine_out(ctx, state, time.time(), True))
 
 
 def _refused(message: str, state: State, allowed: Iterable[Command]) -> ApiError:

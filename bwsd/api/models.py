@@ -117,6 +117,8 @@ class MachineOut(BaseModel):
     axes: list[AxisOut]
     occupancy: list[list[bool]] = Field(description="the occupancy sensors, by row")
     estop: bool
+    read_at: float = Field(description="when the bus answered this read (Unix time)")
+    connected: bool = Field(description="the bus answers now (false: this is the last read)")
     twin_occupancy: list[list[int]] | None = Field(
         description="yarn id of the case in each cell per the twin, -1 where empty"
     )

@@ -35,6 +35,7 @@ class MachineView:
         self._worse = worse  # told (old, new) when the machine is lost or its e-stop pressed
         self.status = BusStatus()
         self.last: MachineState | None = None
+        self.last_at: float | None = None  # when ``last`` was read (epoch seconds)
 
     async def read(self) -> MachineState:
         """Read the machine now, connecting (again) if needed; FieldbusError when it cannot."""
@@ -67,7 +68,7 @@ class MachineView:
 
     def observe(self, state: MachineState, twin: BoolGrid | None) -> None:
         """A good read; ``twin``: the twin's occupancy to compare with (None while moving)."""
-        self.last = state
+        self.last, self.last_at = state, time.time()
         faulted = tuple(self.bus.axes[i].name for i, a in enumerate(state.axes) if a.fault)
         self._set(
             BusStatus(

@@ -233,3 +233,25 @@ def test_resume_allowed_says_when_start_with_resume_is_taken(live: Live):
     assert state["resume_allowed"] is True and "start" not in state["allowed"]
     answer = operator.post("/commands/start", json={"resume": True})
     assert answer.status_code == 200 and answer.json()["name"] == "Execute"
+
+
+@pytest.mark.slow
+def test_the_last_read_answers_from_memory_and_while_the_bus_is_lost(live: Live, mock):
+    """`?last=true` is the daemon's last good read: no request on the bus (the same read_at
+    as the read before it), and still an answer while the loom is mute, said as such."""
+    viewer = live.client("viewer")
+    now = viewer.get("/machine").json()
+    assert now["connected"] is True and abs(now["read_at"] - time.time()) < 60
+    last = viewer.get("/machine", params={"last": "true"}).json()
+    assert last == now  # the same read: nothing was asked of the bus
+    control = ("127.0.0.1", mock.ports["control"])
+    asyncio.run(request(*control, {"cmd": "fault", "kind": "mute"}))
+    try:
+        lost = viewer.get("/machine")
+        assert lost.status_code == 503, lost.text
+        last = viewer.get("/machine", params={"last": "true"})
+        assert last.status_code == 200, last.text
+        assert last.json() == {**now, "connected": False}  # the read before, said as old
+    finally:
+        asyncio.run(request(*control, {"cmd": "clear"}))
+    assert viewer.get("/machine", params={"last": "yes please"}).status_code == 422

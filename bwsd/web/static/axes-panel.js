@@ -1,7 +1,9 @@
 // @ts-check
 // The axes as the bus reports them: every axis with its position, the last set-point the
-// daemon wrote and its fault, read from `GET /api/v1/machine` every second while the page
-// is logged in and the daemon answers (and at once after a manual move, from its answer).
+// daemon wrote and its fault, from the daemon's last read of the machine
+// (`GET /api/v1/machine?last=true`: no request on the bus, and an answer while the bus is
+// lost) every second while the page is logged in and the daemon answers (and at once after
+// a manual move, from its answer).
 
 import { errorText, request } from './api.js';
 import { byId as $ } from './dom.js';
@@ -60,7 +62,7 @@ export class AxesPanel {
     this.reading = true;
     const asked = this.generation;
     try {
-      const answer = await request('api/v1/machine');
+      const answer = await request('api/v1/machine?last=true');
       if (asked !== this.generation) return;
       if (answer.ok) this.show(answer.body);
       else {
@@ -82,7 +84,9 @@ export class AxesPanel {
     const faulted = machine.axes.filter((axis) => axis.fault !== 0).length;
     const estop = machine.estop ? '; the e-stop is pressed' : '';
     const faults = faulted ? `; ${faulted} faulted` : '';
-    this.note(`${machine.axes.length} axes, read at ${clock(new Date())}${faults}${estop}`, faulted || machine.estop ? 'error' : '');
+    const at = clock(new Date(machine.read_at * 1000));
+    const lost = machine.connected ? '' : ' (the bus is lost: its last read)';
+    this.note(`${machine.axes.length} axes, read at ${at}${lost}${faults}${estop}`, faulted || machine.estop || lost ? 'error' : '');
     this.page.onAxes(machine.axes);
   }
 

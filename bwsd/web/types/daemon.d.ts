@@ -175,6 +175,8 @@ export interface MachineRead {
   axes: AxisRead[];
   occupancy: boolean[][];
   estop: boolean;
+  read_at: number; // when the bus answered this read (Unix time)
+  connected: boolean; // the bus answers now (false: the last read before it was lost)
 }
 
 /** A line of the daemon's log (`GET /api/v1/log`, and the `log` event). */
