@@ -298,8 +298,9 @@ def test_a_faulted_axis_marks_its_line(
     bus = loom.bus_until(lambda bus: axis in bus["faulted"])
     page.page.wait_for_selector(f'#grid .faulted[data-axis="{axis}"]', timeout=MS)
     assert _covered(page, "#grid", f'.faulted[data-axis="{axis}"]') == cells
-    label = page.page.locator(f'#grid .rulers text[data-row="{cells[0][0]}"]')
-    assert label.get_attribute("class") == "axis line-faulted"
+    label = f'#grid .rulers text[data-row="{cells[0][0]}"]'
+    page.page.wait_for_selector(f"{label}.line-faulted", timeout=MS)  # the rulers: a frame on
+    assert page.page.locator(label).get_attribute("class") == "axis line-faulted"
     status = page.page.locator("#grid .matrix-machine").inner_text()
     assert f"faulted: {', '.join(bus['faulted'])}" in status
     assert page.errors == []
