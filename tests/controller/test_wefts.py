@@ -85,8 +85,11 @@ def loom(tmp_path: Path, generated: Generated) -> Iterator[Mock]:
     mock.stop()
 
 
-async def controller(mock: Mock, tmp: Path, backend: str, generated: Generated) -> Controller:
-    config = client_config(backend, mock.ports, machine=machine_table(generated))
+async def controller(
+    mock: Mock, tmp: Path, backend: str, generated: Generated, **settings: Any
+) -> Controller:
+    """A Controller on ``mock`` for ``generated``'s machine (``settings``: [fieldbus] keys)."""
+    config = client_config(backend, mock.ports, machine=machine_table(generated), **settings)
     bus = open_bus(config)
     await bus.connect()
     return Controller(config.machine, bus, Journal.open(tmp / "journal.db"))
@@ -232,12 +235,7 @@ def test_unhold_while_a_placing_axis_still_travels_waits_for_it(tmp_path, backen
         poke(loom, {"cmd": "fault", "kind": "stall", "axis": "weft_z"})
 
     async def scenario() -> None:
-        config = client_config(
-            backend, loom.ports, machine=machine_table(generated), timeout=scaled(10.0)
-        )
-        bus = open_bus(config)
-        await bus.connect()
-        ctl = Controller(config.machine, bus, Journal.open(tmp_path / "journal.db"))
+        ctl = await controller(loom, tmp_path, backend, generated, timeout=scaled(10.0))
         try:
             await ctl.load("wefts.bws", generated.program)
             await ctl.command(Command.RESET)
