@@ -226,7 +226,9 @@ def test_unhold_while_a_placing_axis_still_travels_waits_for_it(tmp_path, backen
     rest before it places the weft again: the run completes, every weft in once."""
     generated = PROGRAMS["weave-3d U"]()
     program = parse_program(generated.program)
-    later = moving(program, "weft_x")
+    later = moving(program, "weft_z")  # a stall of weft_z shows at the first weft it moves for
+    wefts = [ins for ins in program.instructions[:later] if isinstance(ins, Weft)]
+    assert wefts[-1].x != wefts[-2].x  # weft_x travels for that weft too
     slow = {"cmd": "speeds", "travel": 10.0}  # mm/s: 3.4 s to instruction 13's place
     loom = start_mock(tmp_path, SPEEDS, machine=machine_table(generated), program=generated.program)
 
