@@ -2,7 +2,9 @@
 
 Written independently of ``bwsd.twin``: only the plain input data classes (``Machine``,
 ``Shift``, ``TakeUp``, ``Weft``) are imported. Brute force by design: every decision and every
-number is exact, in Python ints and Fractions, with no float filter.
+number is exact, in Python ints and Fractions, with no float filter. Its only shortcut is an
+exact one, on the grid's ints: a segment whose bounding box lies apart from the triangle's
+(or further than a diameter from the weft's) cannot touch it, and is not computed.
 
 Number conventions (decided for the project):
 
@@ -219,10 +221,15 @@ def _point_segment_distance2(p: Sequence[int], q0: Sequence[int], q1: Sequence[i
     """Exact squared distance from point p to segment q0-q1 (clamped 1-D minimum)."""
     v = _sub(q1, q0)
     w = _sub(p, q0)
-    vv = _dot(v, v)
-    s = Fraction(0) if vv == 0 else min(Fraction(1), max(Fraction(0), Fraction(_dot(w, v), vv)))
-    r = tuple(w[k] - s * v[k] for k in range(3))
-    return Fraction(_dot(r, r))
+    vv, wv = _dot(v, v), _dot(w, v)
+    if vv == 0 or wv <= 0:  # the nearest point is q0
+        return Fraction(_dot(w, w))
+    if wv >= vv:  # q1
+        r = _sub(p, q1)
+        return Fraction(_dot(r, r))
+    # at s = wv / vv inside: |w - s v|^2 = |vv w - wv v|^2 / vv^2, in ints until the division
+    inside = tuple(vv * w[k] - wv * v[k] for k in range(3))
+    return Fraction(_dot(inside, inside), vv * vv)
 
 
 def segment_distance2(p0: Point, p1: Point, q0: Point, q1: Point) -> Fraction:
@@ -437,11 +444,17 @@ class RefTwin:
         end = (round_grid(cx + half * cos), round_grid(cy + half * sin), round_grid(cz))
         dd = self.diameter * SCALE
         limit = dd * dd
+        lo = tuple(min(start[k], end[k]) for k in range(3))
+        hi = tuple(max(start[k], end[k]) for k in range(3))
         for yarn, ids in enumerate(self.yarns):
-            best = min(
-                segment_distance2(start, end, self.nodes[ids[i]], self.nodes[ids[i + 1]])
-                for i in range(len(ids) - 1)
-            )
+            near = []  # segments whose box is within dd of the weft's along every axis: a
+            for i in range(len(ids) - 1):  # gap of dd or more along one is a distance of as much
+                c, d = self.nodes[ids[i]], self.nodes[ids[i + 1]]
+                if all(
+                    min(c[k], d[k]) - hi[k] < dd and lo[k] - max(c[k], d[k]) < dd for k in range(3)
+                ):
+                    near.append(segment_distance2(start, end, c, d))
+            best = min(near, default=limit)
             if best < limit:
                 distance = math.sqrt(best) / SCALE
                 raise ShedClosed(
@@ -457,8 +470,8 @@ class RefTwin:
         self, moving: int, b: Point, a1: Point, a2: Point, skip: tuple[int, int]
     ) -> tuple[Fraction, FPoint, int, int] | None:
         """The first contact of triangle (B, A1, A2): (t, P, hit yarn, segment index) or None."""
-        lo = tuple(min(b[k], a1[k], a2[k]) for k in range(3))
-        hi = tuple(max(b[k], a1[k], a2[k]) for k in range(3))
+        lx, ly, lz = (min(b[k], a1[k], a2[k]) for k in range(3))
+        hx, hy, hz = (max(b[k], a1[k], a2[k]) for k in range(3))
         best: tuple[Fraction, FPoint, int, int] | None = None
         for yarn, ids in enumerate(self.yarns):
             if yarn == moving:
@@ -467,7 +480,14 @@ class RefTwin:
                 if yarn == skip[0] and skip[1] in (ids[i], ids[i + 1]):
                     continue
                 c, d = self.nodes[ids[i]], self.nodes[ids[i + 1]]
-                if any(max(c[k], d[k]) < lo[k] or min(c[k], d[k]) > hi[k] for k in range(3)):
+                if (
+                    (c[0] < lx and d[0] < lx)
+                    or (c[0] > hx and d[0] > hx)
+                    or (c[1] < ly and d[1] < ly)
+                    or (c[1] > hy and d[1] > hy)
+                    or (c[2] < lz and d[2] < lz)
+                    or (c[2] > hz and d[2] > hz)
+                ):
                     continue  # boxes apart: P would lie in both
                 hit = crossing(b, a1, a2, c, d)
                 if hit is not None and (best is None or hit[0] < best[0]):

@@ -289,7 +289,7 @@ def test_every_kernel_path_matches_reference(kernel_path, case):
         ("weave-U", None),
         ("braid-24x24", 5),
         ("paper-L", None),
-        ("paper-U", 160),  # 5 of its 10 cycles, past the climb of the wefts: 2 s, not 10
+        ("paper-U", 160),  # 5 of its 10 cycles, past the climb of the wefts
     ],
 )
 def test_every_example_matches_the_reference_node_for_node(stem, count):
