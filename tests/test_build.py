@@ -14,6 +14,18 @@ from pathlib import Path
 import pytest
 from packaging.version import Version
 
+from tests.support.build import (
+    THREE,
+    THREE_ROOT,
+    built_wheel,
+    core_venv,
+    fresh_venv,
+    installed,
+    normal_name,
+    pip_install,
+    unavailable,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -54,16 +66,6 @@ def test_the_compiled_kernel_has_no_fused_multiply_add():
     assert not re.search(r"\b(v?fn?m(add|sub)\w*)\b", code)
 
 
-# The files of three.js the preview page imports (docs/preview.md), shipped in the wheel when
-# `npm ci` has put them in bwsd/web/node_modules before the build.
-THREE = (
-    "LICENSE",
-    "package.json",
-    "build/three.module.js",
-    "build/three.core.js",
-    "examples/jsm/controls/OrbitControls.js",
-)
-THREE_ROOT = ROOT / "bwsd" / "web" / "node_modules" / "three"
 # The extras' distributions, and meshio, which nothing needs any more.
 NOT_CORE = ("vtk", "pytexgen", "matplotlib", "canopen", "python-can", "meshio")
 ALL_FREE = [
@@ -78,107 +80,12 @@ ALL_FREE = [
     "--control-port",
     "0",
 ]
-_OFFLINE = (
-    "NewConnectionError",
-    "Temporary failure in name resolution",
-    "Network is unreachable",
-    "ConnectTimeout",
-    "ReadTimeout",
-    "Could not fetch URL",
-)
-
-
-def unavailable(message: str) -> None:
-    """Skip for want of something the machine lacks; under CI (``CI=true``) that fails."""
-    if os.environ.get("CI") == "true":
-        pytest.fail(message)
-    pytest.skip(message)
-
-
-def clean_tree(tree: Path) -> Path:
-    """A copy of what a checkout holds (no build/ left by an earlier build, no compiled
-    kernel), with the three.js files the page needs when ``npm ci`` has installed them."""
-    tree.mkdir()
-    for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in", "LICENSE"):
-        shutil.copy(ROOT / name, tree / name)
-    skip = shutil.ignore_patterns("*.so", "node_modules", "__pycache__")
-    for folder in ("bwsd", "simulator_hw", "config", "examples", "systemd"):
-        shutil.copytree(ROOT / folder, tree / folder, ignore=skip, symlinks=True)
-    for name in THREE:
-        if (THREE_ROOT / name).is_file():
-            target = tree / "bwsd" / "web" / "node_modules" / "three" / name
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy(THREE_ROOT / name, target)
-    return tree
 
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The wheel built from a clean copy of the tree, once for this module; what the build
-    printed is beside it in build.log."""
-    where = tmp_path_factory.mktemp("wheel")
-    tree = clean_tree(where / "tree")
-    command = [sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "-w", str(where)]
-    run = subprocess.run([*command, str(tree)], capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    (where / "build.log").write_text(run.stdout + run.stderr)
-    (built,) = where.glob("bwsd-*.whl")
-    return built
-
-
-def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
-    """A new venv at ``folder`` with ``install`` put in by pip from the package index; its
-    bin folder and an environment that leaves this test run's Python out of it."""
-    env = {
-        k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
-    }
-    env.update(PIP_DISABLE_PIP_VERSION_CHECK="1", PIP_NO_INPUT="1", PYTHONUNBUFFERED="1")
-    made = subprocess.run(
-        [sys.executable, "-m", "venv", str(folder)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=env,
-    )
-    if made.returncode != 0:
-        unavailable(f"python -m venv failed: {made.stderr.strip()[-500:]}")
-    bin_dir = folder / "bin"
-    pip_install(bin_dir, env, *install)
-    return bin_dir, env
-
-
-def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
-    run = subprocess.run(
-        [str(bin_dir / "python"), "-m", "pip", "install", "-q", *install],
-        capture_output=True,
-        text=True,
-        timeout=900,
-        env=env,
-    )
-    if run.returncode != 0 and any(sign in run.stderr for sign in _OFFLINE):
-        unavailable(f"the package index cannot be reached: {run.stderr.strip()[-500:]}")
-    assert run.returncode == 0, run.stderr[-3000:]
-
-
-def installed(bin_dir: Path, env: dict[str, str]) -> dict[str, str]:
-    """Name -> version of every distribution in the venv."""
-    code = (
-        "import importlib.metadata as m\n"
-        "for d in m.distributions(): print(d.metadata['Name'].lower(), d.version)"
-    )
-    out = subprocess.run(
-        [str(bin_dir / "python"), "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=env,
-        check=True,
-    ).stdout
-    return {_normal(name): version for name, version in (line.split() for line in out.splitlines())}
-
-
-def _normal(name: str) -> str:
-    return re.sub(r"[-_.]+", "-", name).lower()
+    """The run's wheel (tests/support/build.py); what the build printed is in build.log."""
+    return built_wheel(tmp_path_factory)
 
 
 def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
@@ -281,10 +188,10 @@ def test_the_wheel_carries_the_demo_and_the_page(wheel):
 
 
 @pytest.mark.slow
-def test_the_wheel_runs_the_demo_in_a_fresh_venv_from_an_empty_folder(wheel, tmp_path):
+def test_the_wheel_runs_the_demo_in_a_fresh_venv_from_an_empty_folder(tmp_path_factory, tmp_path):
     """Installed with pip and its core dependencies only, from nothing but the wheel."""
-    bin_dir, env = fresh_venv(tmp_path / "venv", str(wheel))
-    assert not set(installed(bin_dir, env)) & {_normal(name) for name in NOT_CORE}
+    bin_dir, env = core_venv(tmp_path_factory)
+    assert not set(installed(bin_dir, env)) & {normal_name(name) for name in NOT_CORE}
     run_demo(bin_dir, env, tmp_path / "empty")
     export = subprocess.run(
         [
@@ -318,7 +225,7 @@ def test_the_wheel_runs_the_demo_in_a_fresh_venv_from_an_empty_folder(wheel, tmp
         check=True,
     )
     root, lacking = page.stdout.split(" ", 1)
-    assert Path(root).is_relative_to(tmp_path / "venv")
+    assert Path(root).is_relative_to(bin_dir.parent)
     if (THREE_ROOT / "build" / "three.module.js").is_file():
         assert lacking.strip() == "[]"
 
@@ -363,5 +270,5 @@ def test_the_wheel_runs_on_the_lowest_versions_it_admits(wheel, tmp_path):
     versions = installed(bin_dir, env)
     for pin in [*pins, f"starlette=={starlette}"]:
         name, version = pin.split("==")
-        assert Version(versions[_normal(name)]) == Version(version), (pin, versions)
+        assert Version(versions[normal_name(name)]) == Version(version), (pin, versions)
     run_demo(bin_dir, env, tmp_path / "empty")

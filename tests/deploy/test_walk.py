@@ -9,12 +9,11 @@ import os
 import re
 import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.test_build import clean_tree, fresh_venv
+from tests.support.build import core_venv
 from tests.test_readme import _namespaced
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -40,21 +39,9 @@ def test_the_install_block_is_a_venv_in_opt_and_the_walk_uses_it():
 
 
 @pytest.mark.slow
-def test_docs_service_walk_runs_from_the_wheel_alone(tmp_path):
-    where = tmp_path / "build"
-    where.mkdir()
-    tree = clean_tree(where / "tree")
-    built = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(where), str(tree)],
-        capture_output=True,
-        text=True,
-        timeout=900,
-        check=False,
-    )
-    assert built.returncode == 0, built.stderr[-2000:]
-    (wheel,) = where.glob("bwsd-*.whl")
-    opt = tmp_path / "opt" / "bwsd"
-    _, env = fresh_venv(opt, str(wheel))
+def test_docs_service_walk_runs_from_the_wheel_alone(tmp_path_factory, tmp_path):
+    bin_dir, env = core_venv(tmp_path_factory)  # the wheel in a fresh venv of its own
+    opt = bin_dir.parent
     walk = section_blocks((ROOT / "docs" / "service.md").read_text(), "A loom in the foreground")
     script = tmp_path / "walk.sh"
     script.write_text(walk.replace("/opt/bwsd", str(opt)))  # the venv stands for /opt/bwsd
