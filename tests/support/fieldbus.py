@@ -5,8 +5,10 @@ them where its tests use them."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator, Mapping
@@ -80,6 +82,15 @@ class Mock:
     ports: dict[str, int]
     config_path: Path
     program_path: Path
+
+    def control(self, message: dict[str, Any]) -> dict[str, Any]:
+        """One request on the mock loom's control channel (simulator_hw/control.py), which
+        must succeed: its answer."""
+        with socket.create_connection(("127.0.0.1", self.ports["control"]), timeout=10) as conn:
+            conn.sendall(json.dumps(message).encode() + b"\n")
+            answer: dict[str, Any] = json.loads(conn.makefile().readline())
+        assert answer["ok"], answer
+        return answer
 
     def stop(self) -> None:
         if self.proc.poll() is None:

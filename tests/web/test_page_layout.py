@@ -343,9 +343,14 @@ def test_while_it_runs_the_yarn_colours_wait_and_the_image_is_not_drawn_whole_ag
     a large preform undone). The colours catch up once the machine stands."""
     loom = running(26)
     deadline = time.monotonic() + 6 * WAIT
-    while loom.served.state()["index"] < 60:  # over 10,000 nodes: the settled image in use
-        assert time.monotonic() < deadline
-        time.sleep(1)
+    loom.mock.control({"cmd": "speeds", "stroke": 0, "takeup": 0})  # instant, until then
+    try:
+        while loom.served.state()["index"] < 60:  # over 10,000 nodes: the settled image in use
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+    finally:
+        speeds = {"stroke": SLOW["stroke_speed"], "takeup": SLOW["takeup_speed"]}
+        loom.mock.control({"cmd": "speeds", **speeds})
     page = loom.open(browser, 1024, 768)
     try:
         assert page.page.input_value("#colour-by") == "yarn"
