@@ -211,6 +211,7 @@ def test_the_top_preset_cuts_at_the_same_height_whenever_the_page_is_opened(
         while served.state()["index"] < 12:
             time.sleep(0.05)
         early = preset_height()
+        mock.control({"cmd": "speeds", "stroke": 0, "takeup": 0})  # on to the end at once
         served.wait_for({"Complete"}, limit=600)
         late = preset_height()
         assert early == late
