@@ -164,6 +164,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "host": Text("127.0.0.1"),
         "modbus_port": Num(int, 0, 65535, 15020),
         "socketcand_port": Num(int, 0, 65535, 29536),
+        "canopen": Text("auto", ("auto", "on", "off")),
         "control_port": Num(int, 0, 65535, 15021),
         "stroke_speed": Num(float, 0.0, 1e6, 0.0),
         "takeup_speed": Num(float, 0.0, 1e6, 0.0),

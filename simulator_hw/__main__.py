@@ -45,8 +45,9 @@ async def serve(
         from bwsd.program import load_program
 
         fill = load_program(program_path, config.machine).fill
-    required = config.table("fieldbus")["backend"] == "canopen"
-    if not required:
+    wanted = config.table("simulator")["canopen"]
+    required = config.table("fieldbus")["backend"] == "canopen" or wanted == "on"
+    if wanted == "auto" and not required:
         installed = canopen_installed()
         note = canopen_ids_problem(config) if installed else missing_message(CANOPEN_PART, CANOPEN)
         if note:

@@ -77,9 +77,11 @@ class MockLoom:
     ``[fieldbus.modbus]``, so the daemon and the mock loom read the same config.
 
     ``canopen``: serve the socketcand hub with the CANopen drives. ``None`` (the default)
-    serves them when their libraries (the package's ``canopen`` extra) are installed and the
-    node ids hold a drive per axis; ``True`` requires them (``ExtraMissingError`` without,
-    ``ConfigError`` when the ids do not fit); ``False`` serves Modbus only.
+    does as ``[simulator] canopen`` says: ``"auto"`` serves them when their libraries (the
+    package's ``canopen`` extra) are installed and the node ids hold a drive per axis,
+    ``"off"`` never (an error when ``[fieldbus] backend = "canopen"`` asks for them);
+    ``True`` requires them (``ExtraMissingError`` without, ``ConfigError`` when the ids do
+    not fit); ``False`` serves Modbus only.
     """
 
     def __init__(
@@ -99,8 +101,16 @@ class MockLoom:
             self.loom, host, sim["modbus_port"], modbus["device_id"], modbus["map"]
         )
         ids = canopen_ids_problem(config)
+        wanted = sim["canopen"]
+        if wanted == "off" and (canopen or config.table("fieldbus")["backend"] == "canopen"):
+            raise ConfigError(
+                'is "off", but the CANopen drives are asked for ([fieldbus] backend = "canopen")',
+                path=config.path,
+                table="simulator",
+                key="canopen",
+            )
         if canopen is None:
-            canopen = canopen_installed() and not ids
+            canopen = wanted != "off" and canopen_installed() and not ids
         elif canopen and not canopen_installed():
             raise ExtraMissingError(missing_message(CANOPEN_PART, CANOPEN))
         elif canopen and ids:

@@ -124,7 +124,8 @@ def travelling(
     request: pytest.FixtureRequest, tmp_path: Path
 ) -> Iterator[tuple[Path, Path, str, Mock]]:
     """A loom whose inserter travels at 20 mm/s (to the first weft: 0.75 s), on either bus."""
-    mock = start_mock(tmp_path, {"weft_travel_speed": 20.0, "stroke_speed": 50.0})
+    speeds = {"weft_travel_speed": 20.0, "stroke_speed": 50.0}
+    mock = start_mock(tmp_path, speeds, canopen=request.param == "canopen")
     state = tmp_path / "state"
     state.mkdir()
     token = TokenStore.load(state / "tokens.json").add("tester", "operator")

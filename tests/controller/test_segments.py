@@ -24,7 +24,7 @@ from bwsd.program import parse_program
 from bwsd.twin import Shift, simulate
 from tests.controller.test_faults import after, machine_occupancy, poke
 from tests.support.controller import bits, run, state_now
-from tests.support.fieldbus import Mock, client_config, start_mock
+from tests.support.fieldbus import Mock, client_config, start_mock, wants_canopen
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
@@ -66,8 +66,9 @@ COUNT = 18
 
 
 @pytest.fixture
-def segment_mock(tmp_path: Path) -> Iterator[Mock]:
-    running = start_mock(tmp_path, {}, machine=MACHINE, program=TEXT)
+def segment_mock(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Mock]:
+    canopen = wants_canopen(request)
+    running = start_mock(tmp_path, {}, machine=MACHINE, program=TEXT, canopen=canopen)
     yield running
     running.stop()
 

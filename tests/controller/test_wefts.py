@@ -40,7 +40,7 @@ from simulator_hw.app import canopen_installed
 from simulator_hw.control import request
 from tests.controller.test_faults import after, poke
 from tests.support.controller import bits, state_now
-from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock, wants_canopen
 from tests.timing import scaled
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
@@ -78,9 +78,10 @@ def generated(request: pytest.FixtureRequest) -> Generated:
 
 
 @pytest.fixture
-def loom(tmp_path: Path, generated: Generated) -> Iterator[Mock]:
+def loom(tmp_path: Path, generated: Generated, request: pytest.FixtureRequest) -> Iterator[Mock]:
     machine = machine_table(generated)
-    mock = start_mock(tmp_path, SPEEDS, machine=machine, program=generated.program)
+    canopen = wants_canopen(request)
+    mock = start_mock(tmp_path, SPEEDS, machine=machine, program=generated.program, canopen=canopen)
     yield mock
     mock.stop()
 
@@ -230,7 +231,13 @@ def test_unhold_while_a_placing_axis_still_travels_waits_for_it(tmp_path, backen
     wefts = [ins for ins in program.instructions[:later] if isinstance(ins, Weft)]
     assert wefts[-1].x != wefts[-2].x  # weft_x travels for that weft too
     slow = {"cmd": "speeds", "travel": 10.0}  # mm/s: 3.4 s to instruction 13's place
-    loom = start_mock(tmp_path, SPEEDS, machine=machine_table(generated), program=generated.program)
+    loom = start_mock(
+        tmp_path,
+        SPEEDS,
+        machine=machine_table(generated),
+        program=generated.program,
+        canopen=backend == "canopen",
+    )
 
     def sluggish_then_stall() -> None:
         poke(loom, slow)

@@ -24,7 +24,7 @@ from bwsd.fieldbus.base import FAULT_DRIVE, FAULT_JAM, FAULT_POSITION, FAULT_STA
 from bwsd.twin import Shift, Twin
 from bwsd.twin.instructions import Axis
 from simulator_hw.control import request
-from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock
+from tests.support.fieldbus import MACHINE, Mock, client_config, start_mock, wants_canopen
 
 FILL = [(1, 1), (1, 2), (2, 1), (2, 2)]
 
@@ -210,8 +210,9 @@ SEGMENT_PROGRAM = "FILL row=0 col=0\n..X..\nXX..X\n.....\n..X..\nEND\n"
 
 
 @pytest.fixture
-def segment_mock(tmp_path) -> Any:
-    running = start_mock(tmp_path, {}, machine=SEGMENTED, program=SEGMENT_PROGRAM)
+def segment_mock(tmp_path, request) -> Any:
+    canopen = wants_canopen(request)
+    running = start_mock(tmp_path, {}, machine=SEGMENTED, program=SEGMENT_PROGRAM, canopen=canopen)
     yield running
     running.stop()
 
@@ -313,7 +314,13 @@ def test_a_killed_loom_is_seen_at_once_not_after_each_requests_timeout(tmp_path,
     """With a 30 s I/O timeout, a loom killed during a 24-line shift (or between moves) is
     seen as lost at once: the request on the wire and every request queued behind it fail
     when the connection closes, instead of waiting out their timeouts one after another."""
-    mock = start_mock(tmp_path, {"stroke_speed": 20.0}, machine=WIDE, program=WIDE_FILL)
+    mock = start_mock(
+        tmp_path,
+        {"stroke_speed": 20.0},
+        machine=WIDE,
+        program=WIDE_FILL,
+        canopen=backend == "canopen",
+    )
     config = client_config(backend, mock.ports, machine=WIDE, io_timeout=30.0, timeout=60.0)
 
     async def body() -> None:

@@ -81,7 +81,7 @@ def test_every_drive_has_the_node_the_table_gives_it():
 
 @pytest.fixture
 def mock(tmp_path: Path) -> Iterator[Mock]:
-    running = start_mock(tmp_path, {"weft_travel_speed": 500.0})
+    running = start_mock(tmp_path, {"weft_travel_speed": 500.0}, canopen=True)
     yield running
     running.stop()
 

@@ -29,7 +29,7 @@ def hw_config(tmp: Path, mock: Mock, backend: str, machine: Mapping[str, Any] = 
                 "fieldbus": {"backend": backend, **BUS},
                 "fieldbus.modbus": {"port": mock.ports["modbus"]},
                 "fieldbus.canopen": {
-                    "port": mock.ports["socketcand"],
+                    "port": mock.ports["socketcand"] if backend == "canopen" else 1,
                     "heartbeat_ms": HEARTBEAT_MS,
                 },
             }
@@ -92,7 +92,8 @@ def test_bad_requests_and_configs_are_refused_by_name(tmp_path, mock):
 @pytest.mark.parametrize("backend", ["modbus", "canopen"])
 def test_a_segment_is_shifted_by_its_own_axis(tmp_path, backend):
     machine = {**MACHINE, "segments": ["ROW 1[0..2]"]}
-    mock = start_mock(tmp_path, {}, machine=machine, program="FILL row=1 col=0\nX..X\nEND\n")
+    fill = "FILL row=1 col=0\nX..X\nEND\n"
+    mock = start_mock(tmp_path, {}, machine=machine, program=fill, canopen=backend == "canopen")
     try:
         config = hw_config(tmp_path, mock, backend, machine)
         status = hw(config, "status")

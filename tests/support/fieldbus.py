@@ -109,15 +109,22 @@ def start_mock(
     machine: Mapping[str, Any] = MACHINE,
     program: str = PROGRAM,
     tables: dict[str, dict[str, Any]] | None = None,
+    canopen: bool | None = None,
 ) -> Mock:
     """The mock loom in its own process; ``program`` gives its FILL (the cases' places),
-    ``tables`` more of its config (``{"fieldbus.modbus": {"map": 2}}``)."""
+    ``tables`` more of its config (``{"fieldbus.modbus": {"map": 2}}``). It serves the
+    CANopen drives only when ``canopen`` asks for them: their heartbeats would cost every
+    other test CPU time. By default, a loom started again on the ``ports`` of one before
+    serves what that one did."""
+    if canopen is None:
+        canopen = ports is not None and "socketcand" in ports
     ports = ports or {"modbus": 0, "socketcand": 0, "control": 0}
     sim = {
         "modbus_port": ports["modbus"],
-        "socketcand_port": ports["socketcand"],
+        "socketcand_port": ports.get("socketcand", 0),
         "control_port": ports["control"],
         "heartbeat_ms": HEARTBEAT_MS,
+        "canopen": "on" if canopen else "off",
         **simulator,
     }
     config_path = tmp / "mock.toml"
@@ -154,6 +161,8 @@ def client_config(
     backend: str, ports: dict[str, int], *, machine: Mapping[str, Any] = MACHINE, **bus: Any
 ) -> Config:
     """A config for bwsd's side, pointing at the mock loom's ports."""
+    if backend == "canopen":
+        assert "socketcand" in ports, "this mock loom serves no CANopen: start it with canopen"
     return parse_config(
         {
             "machine": machine,
@@ -164,7 +173,7 @@ def client_config(
                 "modbus": {"port": ports["modbus"]},
                 "canopen": {
                     "interface": "socketcand",
-                    "port": ports["socketcand"],
+                    "port": ports.get("socketcand", 1),  # unused but for CANopen
                     "heartbeat_ms": HEARTBEAT_MS,
                 },
             },
@@ -172,16 +181,23 @@ def client_config(
     )
 
 
+def wants_canopen(request: pytest.FixtureRequest) -> bool:
+    """Whether the test asking runs on the CANopen backend (its ``backend`` parameter)."""
+    callspec = getattr(request.node, "callspec", None)
+    return callspec is not None and callspec.params.get("backend") == "canopen"
+
+
 @pytest.fixture
-def mock(tmp_path: Path) -> Iterator[Mock]:
-    running = start_mock(tmp_path, {})
+def mock(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Mock]:
+    running = start_mock(tmp_path, {}, canopen=wants_canopen(request))
     yield running
     running.stop()
 
 
 @pytest.fixture
-def slow_mock(tmp_path: Path) -> Iterator[Mock]:
+def slow_mock(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Mock]:
     """Strokes take time (10 mm at 100 mm/s), so a stall or e-stop can catch one moving."""
-    running = start_mock(tmp_path, {"stroke_speed": 100.0, "takeup_speed": 100.0})
+    speeds = {"stroke_speed": 100.0, "takeup_speed": 100.0}
+    running = start_mock(tmp_path, speeds, canopen=wants_canopen(request))
     yield running
     running.stop()
