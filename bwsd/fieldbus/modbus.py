@@ -13,8 +13,6 @@ from dataclasses import fields
 from functools import partial
 from typing import TYPE_CHECKING
 
-import numpy as np
-import numpy.typing as npt
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -40,6 +38,9 @@ from bwsd.limits import (
 from bwsd.twin.machine import Machine
 
 if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
     from bwsd.config import Config
 
 # ----- the register map (docs/fieldbus-modbus.md) -----
@@ -154,6 +155,8 @@ def decode_image(
 ) -> tuple[int, npt.NDArray[np.bool_], list[AxisState]]:
     """The status image (or its first part: the axes it covers) as machine status, the
     occupancy grid and the axes' states."""
+    import numpy as np  # here, not at the top: the mock loom imports this module without it
+
     n = occupancy_words(rows * cols)
     packed = np.array(words[1 : 1 + n], dtype="<u2").view(np.uint8)
     bits = np.unpackbits(packed, bitorder="little")[: rows * cols].astype(np.bool_)
@@ -292,6 +295,8 @@ class ModbusBus(Fieldbus):
             for (lo, hi), words in zip(groups, blocks, strict=True)
             for i in range(lo, hi)
         }
+        import numpy as np  # as in decode_image
+
         grid = np.array(bits[:cells], dtype=np.bool_).reshape(self.machine.rows, self.machine.cols)
         return self._merge(read, grid, bool(bits[cells]))
 
