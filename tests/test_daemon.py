@@ -32,6 +32,7 @@ from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.control import request
 from tests.support.fieldbus import BUS, MACHINE, Mock, start_mock, toml
+from tests.support.processes import owned
 from tests.timing import scaled
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
@@ -71,21 +72,23 @@ class Served:
     def __init__(self, config: Path, state: Path, token: str) -> None:
         self.log = state.parent / "daemon.log"  # appended to by every daemon of the test
         with self.log.open("a") as log:
-            self.proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "bwsd.cli",
-                    "serve",
-                    "--config",
-                    str(config),
-                    "--state-dir",
-                    str(state),
-                ],
-                stdout=subprocess.PIPE,
-                stderr=log,
-                stdin=subprocess.DEVNULL,
-                text=True,
+            self.proc = owned(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "bwsd.cli",
+                        "serve",
+                        "--config",
+                        str(config),
+                        "--state-dir",
+                        str(state),
+                    ],
+                    stdout=subprocess.PIPE,
+                    stderr=log,
+                    stdin=subprocess.DEVNULL,
+                    text=True,
+                )
             )
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline()

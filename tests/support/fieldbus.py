@@ -19,6 +19,7 @@ from typing import Any, TypedDict
 import pytest
 
 from bwsd.config import Config, parse_config
+from tests.support.processes import owned
 from tests.timing import scaled
 
 # The drives' heartbeat period; a drive is lost after three missed (bwsd.fieldbus.canopen).
@@ -131,22 +132,24 @@ def start_mock(
     config_path.write_text(toml({"machine": machine, "simulator": sim, **(tables or {})}))
     program_path = tmp / "fill.bws"
     program_path.write_text(program)
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "simulator_hw",
-            "--config",
-            str(config_path),
-            "--program",
-            str(program_path),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
-        cwd=ROOT,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    proc = owned(
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "simulator_hw",
+                "--config",
+                str(config_path),
+                "--program",
+                str(program_path),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            cwd=ROOT,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
     )
     assert proc.stdout is not None and proc.stderr is not None  # both are PIPE
     line = proc.stdout.readline()
