@@ -74,8 +74,7 @@ def venv_env() -> dict[str, str]:
 def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
     """A new venv at ``folder`` with ``install`` put in by pip from the package index; its
     bin folder and an environment that leaves this test run's Python out of it. The venv gets
-    no pip of its own: this run's pip installs into it (``pip --python``), without compiling
-    the bytecode ahead (Python compiles what is imported)."""
+    no pip of its own: this run's pip installs into it (``pip --python``)."""
     env = venv_env()
     made = subprocess.run(
         [sys.executable, "-m", "venv", "--without-pip", str(folder)],
@@ -95,7 +94,7 @@ def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
     """``install`` into the venv of ``bin_dir`` by this run's pip."""
     command = [sys.executable, "-m", "pip", "--python", str(bin_dir / "python"), "install"]
     run = subprocess.run(
-        [*command, "-q", "--no-compile", *install],
+        [*command, "-q", *install],
         capture_output=True,
         text=True,
         timeout=900,
