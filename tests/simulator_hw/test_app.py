@@ -77,3 +77,17 @@ def test_the_mock_loom_says_when_it_serves_modbus_only(tmp_path: Path):
     finally:
         mock.terminate()
         mock.communicate(timeout=20)
+
+
+def test_canopen_off_serves_modbus_only_and_refuses_a_canopen_backend():
+    """``[simulator] canopen = "off"``: no hub, without a word; an error naming the key when
+    the config's backend is CANopen, which the drives would then be missing for."""
+    machine = {"rows": 4, "cols": 4, "pitch_x": 10.0, "pitch_y": 10.0, "d_mat": 100.0, "c_mat": 0.5}
+    off = parse_config({"machine": machine, "simulator": {"canopen": "off"}})
+    assert MockLoom(off, []).hub is None
+    backend = {"backend": "canopen"}
+    wrong = parse_config({"machine": machine, "simulator": {"canopen": "off"}, "fieldbus": backend})
+    with pytest.raises(ConfigError, match=r"\[simulator\.canopen\]: is \"off\", but"):
+        MockLoom(wrong, [])
+    with pytest.raises(ConfigError, match=r"\[simulator\.canopen\]: must be one of"):
+        parse_config({"machine": machine, "simulator": {"canopen": "maybe"}})
