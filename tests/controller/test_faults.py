@@ -8,9 +8,7 @@ exactly between two instructions.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
-import socket
 import sqlite3
 import time
 from pathlib import Path
@@ -39,11 +37,7 @@ FILL = [[0, 0, 0, 0], [0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
 
 def poke(mock: Mock, message: dict[str, Any]) -> dict[str, Any]:
     """One control request, synchronously (from inside an event subscriber)."""
-    with socket.create_connection(("127.0.0.1", mock.ports["control"]), timeout=5) as conn:
-        conn.sendall(json.dumps(message).encode() + b"\n")
-        answer: dict[str, Any] = json.loads(conn.makefile().readline())
-    assert answer["ok"], answer
-    return answer
+    return mock.control(message)
 
 
 def after(ctl: Controller, index: int, action: Any) -> None:
