@@ -4,19 +4,24 @@ API clients, the loom's control channel."""
 from __future__ import annotations
 
 import asyncio
+import json
 import socket
+import time
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 import httpx
+from websockets.sync.client import ClientConnection, connect
 
 from bwsd.api.auth import TokenStore
 from simulator_hw.control import request
 from tests.api.conftest import WAIT, Live
 from tests.support.fieldbus import BUS, Mock, start_mock, toml
 from tests.test_daemon import Served
+from tests.timing import scaled
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -96,3 +101,28 @@ def restart(served: Served, token: str) -> Served:
     """Stop ``served`` (SIGTERM) and start it again."""
     served.stop()
     return again(served, token)
+
+
+def crowd(
+    url: str, headers: dict[str, str], held: ExitStack, *, alone: bool = False
+) -> list[ClientConnection]:
+    """Event streams (``url``, ``headers``) from this address until the daemon refuses one:
+    the address then holds its limit. Those it took are returned, held open in ``held``.
+
+    ``alone``: until the daemon refuses one while it counts only these. A connection of
+    the page's or of the test's that it counts too closes in time (an idle one when uvicorn's
+    keep-alive ends), and the page's next try would take its place; once alone, nothing else
+    from this address gets in, neither the page's event stream nor its REST requests."""
+    taken: list[ClientConnection] = []
+    deadline = time.monotonic() + scaled(60)
+    while True:
+        ws = held.enter_context(connect(url, additional_headers=headers, open_timeout=WAIT))
+        first = json.loads(ws.recv(timeout=WAIT))
+        if first["event"] != "refused":
+            taken.append(ws)
+            assert len(taken) <= 64, "the daemon never refused a connection"
+        elif not alone or first["open"] == len(taken) + 1:  # "open" counts the refused one
+            return taken
+        else:
+            assert time.monotonic() < deadline, f"other connections stay open: {first}"
+            time.sleep(0.25)

@@ -17,13 +17,12 @@ from typing import Any
 
 import pytest
 from playwright.sync_api import Browser, Page
-from websockets.sync.client import ClientConnection, connect
 
 from bwsd.api.doors import DEFAULT_DOORS
-from tests.api.conftest import WAIT, Live, start_live
+from tests.api.conftest import Live, start_live
 from tests.support.fieldbus import Mock
 from tests.web.conftest import ARGS, MS, Browsing
-from tests.web.serving import again, example, free_port, serve
+from tests.web.serving import again, crowd, example, free_port, serve
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
@@ -110,22 +109,6 @@ def kept_alive(mock: Mock, tmp_path: Path) -> Iterator[Live]:
     yield from start_live(mock, tmp_path, timeout_keep_alive=600)
 
 
-def _fill(live: Live, held: ExitStack) -> list[ClientConnection]:
-    """Event streams from this address until the daemon refuses one (then it holds its
-    limit); those it took, kept open in ``held``."""
-    taken: list[ClientConnection] = []
-    while True:
-        ws = held.enter_context(
-            connect(live.ws, additional_headers=live.headers("viewer"), open_timeout=WAIT)
-        )
-        first = json.loads(ws.recv(timeout=WAIT))
-        if first["event"] == "refused":
-            assert first["limit"] == DEFAULT_DOORS.max_connections_per_client, first
-            return taken
-        taken.append(ws)
-        assert len(taken) <= 64, "the daemon never refused a connection"
-
-
 def test_too_many_connections_are_said_retried_and_left_once_one_is_freed(
     kept_alive: Live, browser: Browser
 ):
@@ -136,7 +119,8 @@ def test_too_many_connections_are_said_retried_and_left_once_one_is_freed(
         page = context.new_page()
         page.goto(live.base + "/")
         page.locator("#login").wait_for(state="visible", timeout=MS)
-        taken = _fill(live, held)  # the page's own connections and these: the address's limit
+        # The page's own connections and these: the address's limit.
+        taken = crowd(live.ws, live.headers("viewer"), held)
         _log_in(page, live.tokens["operator"])
         banner = page.locator("#offline-banner")
         page.wait_for_selector('#offline-banner[data-cause="crowded"]', timeout=MS)
@@ -158,3 +142,32 @@ def test_too_many_connections_are_said_retried_and_left_once_one_is_freed(
         )
         assert banner.is_hidden()
         assert page.evaluate("window.bwsd.online") is True
+
+
+def test_a_tab_opened_while_its_address_holds_the_limit_says_so_and_gets_in_once_one_is_freed(
+    live: Live, browser: Browser
+):
+    """Its REST requests are refused too (503): no error line, the crowded banner, and the
+    tries of its event stream until one gets in, which then fetches everything (the browser
+    asks with up to 6 HTTP connections besides its stream: a closed tab frees as many)."""
+    context = browser.new_context(viewport={"width": 1024, "height": 768})
+    with ExitStack() as held:
+        held.callback(context.close)
+        page = context.new_page()
+        page.goto(live.base + "/")
+        page.locator("#login").wait_for(state="visible", timeout=MS)
+        taken = crowd(live.ws, live.headers("viewer"), held, alone=True)
+        _log_in(page, live.tokens["operator"])
+        page.wait_for_selector('#offline-banner[data-cause="crowded"]', timeout=MS)
+        assert page.locator("#link").inner_text() == "too many connections"
+        assert page.locator("#message").inner_text() == ""  # the banner says it, once
+        assert page.evaluate("window.bwsd.online") is False
+        for ws in taken[:7]:  # a tab closed: its event stream and the browser's 6 HTTP ones
+            ws.close()
+        page.wait_for_function(
+            "() => document.querySelector('#link').textContent === 'connected'", timeout=MS
+        )
+        page.wait_for_selector('#state[data-state="Stopped"]', timeout=MS)
+        assert page.locator("#message").inner_text() == ""
+        assert page.locator("#offline-banner").is_hidden()
+        assert page.evaluate("window.bwsd.role") == "operator"

@@ -9,7 +9,6 @@ With ``BWSD_SCREENSHOTS=DIR`` each is saved as ``DIR/preview-<state>-<width>.png
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -17,13 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from websockets.sync.client import connect
 
-from tests.api.conftest import WAIT
 from tests.support.fieldbus import Mock
-from tests.test_daemon import Served
 from tests.web.conftest import Browsing
-from tests.web.serving import again, example, free_port, loom_control, serve
+from tests.web.serving import again, crowd, example, free_port, loom_control, serve
 
 pytestmark = pytest.mark.slow  # every test here is in the slow tier
 
@@ -74,17 +70,6 @@ def _everywhere(page: Browsing, name: str, needs: list[str], shown: list[str]) -
             page.page.screenshot(path=folder / f"preview-{name}-{width}.png")
 
 
-def _crowd(served: Served, token: str, held: ExitStack) -> None:
-    """Event streams from this address until the daemon refuses one: the address's limit."""
-    url = served.urls["api"].replace("http", "ws", 1) + "/api/v1/events"
-    header = {"Authorization": f"Bearer {token}"}
-    for _ in range(64):
-        ws = held.enter_context(connect(url, additional_headers=header, open_timeout=WAIT))
-        if json.loads(ws.recv(timeout=WAIT))["event"] == "refused":
-            return
-    raise AssertionError("the daemon never refused a connection")
-
-
 def test_every_state_of_a_shift_is_readable_at_every_size(shift: dict[str, Any], page: Browsing):
     served, mock, token = shift["served"], shift["mock"], shift["token"]
     assert isinstance(mock, Mock)
@@ -130,12 +115,13 @@ def test_every_state_of_a_shift_is_readable_at_every_size(shift: dict[str, Any],
     page.page.click("#logout")  # the page's stream is closed; the crowd takes its place
     page.page.locator("#login").wait_for(state="visible")
     with ExitStack() as held:
-        _crowd(served, token, held)
+        url = served.urls["api"].replace("http", "ws", 1) + "/api/v1/events"
+        crowd(url, {"Authorization": f"Bearer {token}"}, held, alone=True)  # nothing else gets in
         page.page.fill("#token-input", token)
         page.page.click("#login button[type=submit]")
         page.until("() => document.querySelector('#link').textContent === 'too many connections'")
         crowded = ["Too many tabs/connections open to this daemon", "too many connections"]
         _everywhere(page, "crowded", crowded, ["#link"])
-    crowd = ("ERR_CONNECTION_REFUSED", "1013", "status of 503")  # the browser's notes of refusals
-    errors = [e for e in page.errors if not any(note in e for note in crowd)]
+    notes = ("ERR_CONNECTION_REFUSED", "1013", "status of 503")  # the browser's notes of refusals
+    errors = [e for e in page.errors if not any(note in e for note in notes)]
     assert errors == []

@@ -156,6 +156,15 @@ export async function download(path, name) {
 }
 
 /**
+ * True for the answer to a connection over its address's limit (503 with the limit): the
+ * event link says so in its banner, and gets in once a connection is freed.
+ * @param {Pick<Answer, 'status' | 'body'>} answer
+ */
+export function crowdedAnswer(answer) {
+  return answer.status === 503 && typeof answer.body?.limit === 'number';
+}
+
+/**
  * The `error` of a refused request, with a fallback naming the status.
  * @param {Pick<Answer, 'status' | 'body'>} answer
  */

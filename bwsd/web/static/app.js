@@ -18,7 +18,7 @@
 // means events were missed, and the whole skeleton is fetched again. Events that arrive
 // while a fetch is under way wait, then go through the same rule.
 
-import { EventLink, errorText, getToken, request, takeTokenFromFragment } from './api.js';
+import { EventLink, crowdedAnswer, errorText, getToken, request, takeTokenFromFragment } from './api.js';
 import * as colours from './colours.js';
 import { Coalesced } from './coalesced.js';
 import { Commands } from './commands.js';
@@ -441,7 +441,8 @@ function accept(answer) {
   heard();
   if (answer.ok) return true;
   if (answer.status === 401) loggedOut(true);
-  else say(errorText(answer), 'error');
+  // Over the address's limit while the event link is down, the link's banner says so.
+  else if (!crowdedAnswer(answer) || connection.linkUp) say(errorText(answer), 'error');
   return false;
 }
 
@@ -907,6 +908,13 @@ async function start() {
     return;
   }
   drawSession();
+  if (crowdedAnswer(answer)) {
+    // This address holds its limit of connections: the event link says so, and keeps
+    // trying; once a connection is freed, its "hello" fetches everything.
+    heard();
+    link.start();
+    return;
+  }
   if (!accept(answer)) return;
   showState(answer.body);
   link.start(); // its "hello" fetches the skeleton
