@@ -102,6 +102,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "reconnect_delay_max": Num(float, 1e-3, 600.0, 2.0),
         "reconnect_attempts": Num(int, 1, 1000, 5),
         "position_tolerance": Num(int, 0, 1_000_000, 10),
+        "poll_max": Num(float, 1e-3, 1.0, 0.01),
     },
     "fieldbus.modbus": {
         "host": Text("127.0.0.1"),

@@ -15,7 +15,7 @@ import socket
 import time
 import zlib
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -164,6 +164,20 @@ class BusSettings:
     reconnect_delay_max: float = 2.0  # s: backoff ceiling
     reconnect_attempts: int = 5  # before FieldbusConnectionError
     position_tolerance: int = 10  # micrometres (millidegrees) accepted on read-back
+    poll_max: float = 0.01  # s: the longest wait between two reads while axes move
+
+
+FIRST_POLL = 0.002  # s: the first wait between two reads of a move under way
+
+
+def poll_waits(most: float) -> Iterator[float]:
+    """The waits between the reads of a move under way: 2 ms, doubling up to ``most``. A
+    short move is seen done within a few ms; a long stroke costs the bus (and the loom's
+    server) a read every ``most``, not every 2 ms."""
+    wait = min(FIRST_POLL, most)
+    while True:
+        yield wait
+        wait = min(wait * 2, most)
 
 
 class Fieldbus(ABC):
@@ -301,6 +315,7 @@ class Fieldbus(ABC):
     async def wait(self, axes: Sequence[int], timeout: float | None = None) -> MachineState:
         """Wait until every axis in ``axes`` completed its last set-point; check the read-back."""
         limit = time.monotonic() + (self.settings.timeout if timeout is None else timeout)
+        waits = poll_waits(self.settings.poll_max)
         while True:
             state = await self._read_state(axes)
             self._check(state, axes)
@@ -312,7 +327,7 @@ class Fieldbus(ABC):
                 raise FieldbusTimeout(
                     f"axes {', '.join(late)} did not complete in time", lost=False
                 )
-            await asyncio.sleep(0.002)
+            await asyncio.sleep(next(waits))
 
     async def rest(self, timeout: float | None = None) -> MachineState:
         """The machine once no axis moves: a drive takes no set-point while it moves, so a
@@ -320,6 +335,7 @@ class Fieldbus(ABC):
         FieldbusTimeout names the axes still moving after ``timeout`` (the move timeout)."""
         wait = self.settings.timeout if timeout is None else timeout
         limit = time.monotonic() + wait
+        waits = poll_waits(self.settings.poll_max)
         while True:
             state = await self.state()
             moving = [self.axes[i].name for i, axis in enumerate(state.axes) if axis.busy]
@@ -330,7 +346,7 @@ class Fieldbus(ABC):
                     f"axes {', '.join(moving)} still move after {wait:g} s",
                     lost=False,
                 )
-            await asyncio.sleep(0.002)
+            await asyncio.sleep(next(waits))
 
     async def execute(
         self, moves: Sequence[AxisMove], timeout: float | None = None

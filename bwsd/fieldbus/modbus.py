@@ -28,6 +28,7 @@ from bwsd.fieldbus.base import (
     FieldbusError,
     FieldbusTimeout,
     MachineState,
+    poll_waits,
 )
 from bwsd.limits import (
     MODBUS_AXIS_BASE,
@@ -341,12 +342,13 @@ class ModbusBus(Fieldbus):
         )
         loop = asyncio.get_running_loop()
         limit = loop.time() + self.settings.timeout
+        waits = poll_waits(self.settings.poll_max)
         while (await self._read_registers(REG_COMMAND, 1))[0] != CMD_NONE:
             if loop.time() > limit:
                 raise FieldbusTimeout(
                     f"{self.where}: machine command {code} was not taken", lost=False
                 )
-            await asyncio.sleep(0.002)
+            await asyncio.sleep(next(waits))
 
     async def _read_registers(self, start: int, count: int) -> list[int]:
         """Holding registers, in as few requests as the protocol allows."""

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import math
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -110,6 +112,31 @@ class TestBackendContract:
             await bus.execute([stroke(bus, "row1", -1)])
 
         run(with_bus(mock, backend, body))
+
+    @pytest.mark.slow
+    def test_a_long_stroke_is_read_every_poll_max_not_every_2_ms(self, slow_mock, backend):
+        """A stroke out and back (0.2 s at the slow mock loom's 100 mm/s): the reads of
+        the wait come at once, after 2 ms, then doubling up to ``poll_max`` (10 ms)."""
+        reads = 0
+
+        async def body(bus: Fieldbus) -> None:
+            nonlocal reads
+            read = bus._read_state
+
+            async def counted(axes: Any = None) -> Any:
+                nonlocal reads
+                reads += 1
+                return await read(axes)
+
+            bus._read_state = counted  # type: ignore[method-assign]
+            began = time.monotonic()
+            await bus.execute([stroke(bus, "row1", 1)])
+            took = time.monotonic() - began
+            assert took > 0.1, took  # the stroke did travel
+            # At most: the first read, the 3 of the doubling, one every 10 ms after them.
+            assert reads <= 4 + math.ceil(took / bus.settings.poll_max) + 1, (reads, took)
+
+        run(with_bus(slow_mock, backend, body))
 
     @pytest.mark.slow
     @pytest.mark.parametrize(

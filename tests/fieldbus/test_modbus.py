@@ -333,13 +333,14 @@ def test_from_config_takes_every_setting():
                 "reconnect_delay_max": 3.0,
                 "reconnect_attempts": 9,
                 "position_tolerance": 25,
+                "poll_max": 0.05,
                 "modbus": {"host": "10.0.0.5", "port": 1502, "device_id": 17},
             },
         }
     )
     bus = ModbusBus.from_config(config)
     assert (bus.host, bus.port, bus.device_id) == ("10.0.0.5", 1502, 17)
-    assert bus.settings == BusSettings(7.0, 0.5, 0.2, 3.0, 9, 25)
+    assert bus.settings == BusSettings(7.0, 0.5, 0.2, 3.0, 9, 25, 0.05)
     assert bus.machine == config.machine and len(bus.axes) == 12  # 9 and weft_x, weft_y, weft_z
 
 
