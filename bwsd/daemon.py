@@ -95,6 +95,7 @@ async def start(config: Config, state_dir: Path) -> Daemon:
         # would otherwise stall the event loop now and then, whichever thread triggers it).
         gc.collect()
         gc.freeze()
+        gc.enable()  # `bwsd serve` starts with it disabled
     except BaseException:
         await stop(daemon)  # what did start is closed again
         raise

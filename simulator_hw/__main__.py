@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
+import gc
 import signal
 import sys
 from collections.abc import Sequence
@@ -54,6 +55,9 @@ async def serve(
             print(f"simulator_hw: serving Modbus only: {note}", file=sys.stderr, flush=True)
     mock = MockLoom(config, fill, canopen=True if required else None)
     await mock.start()
+    gc.collect()  # once, started (`run` disabled it): what start-up made lives on
+    gc.freeze()
+    gc.enable()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -87,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     only of a library's (pymodbus appends the raw frames of what it could not decode)."""
     from bwsd import logs
 
+    gc.disable()  # starting makes many objects and hardly a cycle: collected once, started
     logs.setup()
     ports = {k: getattr(args, k) for k in PORT_OPTIONS if getattr(args, k) is not None}
     try:
