@@ -157,12 +157,22 @@ def test_a_weft_killed_between_its_placing_and_its_insert_resumes_identically(tr
     served.http.post("/programs", json={"name": "placed.bws", "text": PLACED}).raise_for_status()
     served.command("reset")
     served.command("start")
-    until(lambda: loom(mock, "weft_x")["busy"], "the inserter never travelled")
-    served.kill()
     travel = ("weft_x", "weft_y", "weft_z")
+    target = {"weft_x": 15_000, "weft_y": -5_000, "weft_z": 2_000}
+    # Killed once the loom has every set-point of the placing (each axis travels or is
+    # there): the daemon writes them one after the other, and a kill between two would
+    # leave an axis that never got its own.
+    until(
+        lambda: (
+            loom(mock, "weft_x")["busy"]
+            and all(loom(mock, a)["busy"] or loom(mock, a)["position"] == target[a] for a in travel)
+        ),
+        "the inserter never travelled to the weft's place",
+    )
+    served.kill()
     until(lambda: not any(loom(mock, a)["busy"] for a in travel), "the inserter kept moving")
     placed = {a: loom(mock, a)["position"] for a in travel}
-    assert placed == {"weft_x": 15_000, "weft_y": -5_000, "weft_z": 2_000}  # placed ...
+    assert placed == target  # placed ...
     assert loom(mock, "weft_insert")["strokes"] == 0  # ... and not inserted
     served = Served(config, state, token)
     try:
