@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import gc
 import importlib
 import logging
 import signal
@@ -25,6 +24,7 @@ from typing import Any
 
 import uvicorn
 
+from bwsd import heap
 from bwsd.config import Config
 from bwsd.controller.facade import Controller, Settings
 from bwsd.controller.packml import Command, State
@@ -90,12 +90,7 @@ async def start(config: Config, state_dir: Path) -> Daemon:
         await _serve_plc(daemon)
         await _serve_opcua(daemon)
         await controller.start()  # the reads at rest and the journal's stall watch
-        # Everything made so far (modules, the app, its schemas) lives as long as the daemon:
-        # out of the collector's reach, a full collection no longer walks it (60-70 ms that
-        # would otherwise stall the event loop now and then, whichever thread triggers it).
-        gc.collect()
-        gc.freeze()
-        gc.enable()  # `bwsd serve` starts with it disabled
+        heap.started()  # modules, the app, its schemas: they live as long as the daemon
     except BaseException:
         await stop(daemon)  # what did start is closed again
         raise

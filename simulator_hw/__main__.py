@@ -15,11 +15,11 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
-import gc
 import signal
 import sys
 from collections.abc import Sequence
 
+from bwsd import heap
 from bwsd.config import Config, load_config, port_option
 from bwsd.errors import BwsdError
 
@@ -55,9 +55,7 @@ async def serve(
             print(f"simulator_hw: serving Modbus only: {note}", file=sys.stderr, flush=True)
     mock = MockLoom(config, fill, canopen=True if required else None)
     await mock.start()
-    gc.collect()  # once, started (`run` disabled it): what start-up made lives on
-    gc.freeze()
-    gc.enable()
+    heap.started()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -91,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     only of a library's (pymodbus appends the raw frames of what it could not decode)."""
     from bwsd import logs
 
-    gc.disable()  # starting makes many objects and hardly a cycle: collected once, started
+    heap.starting()  # until `serve` has started
     logs.setup()
     ports = {k: getattr(args, k) for k in PORT_OPTIONS if getattr(args, k) is not None}
     try:
