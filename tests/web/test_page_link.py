@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 from playwright.sync_api import Browser, Page
+from websockets.sync.client import ClientConnection
 
 from bwsd.api.doors import DEFAULT_DOORS
 from tests.api.conftest import Live, start_live
@@ -109,21 +110,37 @@ def kept_alive(mock: Mock, tmp_path: Path) -> Iterator[Live]:
     yield from start_live(mock, tmp_path, timeout_keep_alive=600)
 
 
+def _crowded_tab(
+    live: Live, browser: Browser, held: ExitStack, *, alone: bool
+) -> tuple[Page, list[ClientConnection]]:
+    """A 1024x768 tab at the login form, the address filled to its limit with event streams
+    (``crowd``, ``alone`` as there), then logged in as the operator: the tab once it shows
+    the crowded banner, and the streams, held open in ``held``."""
+    context = browser.new_context(viewport={"width": 1024, "height": 768})
+    held.callback(context.close)
+    page = context.new_page()
+    page.goto(live.base + "/")
+    page.locator("#login").wait_for(state="visible", timeout=MS)
+    taken = crowd(live.ws, live.headers("viewer"), held, alone=alone)
+    _log_in(page, live.tokens["operator"])
+    page.wait_for_selector('#offline-banner[data-cause="crowded"]', timeout=MS)
+    return page, taken
+
+
+def _connected(page: Page) -> None:
+    page.wait_for_function(
+        "() => document.querySelector('#link').textContent === 'connected'", timeout=MS
+    )
+
+
 def test_too_many_connections_are_said_retried_and_left_once_one_is_freed(
     kept_alive: Live, browser: Browser
 ):
     live = kept_alive
-    context = browser.new_context(viewport={"width": 1024, "height": 768})
     with ExitStack() as held:
-        held.callback(context.close)
-        page = context.new_page()
-        page.goto(live.base + "/")
-        page.locator("#login").wait_for(state="visible", timeout=MS)
         # The page's own connections and these: the address's limit.
-        taken = crowd(live.ws, live.headers("viewer"), held)
-        _log_in(page, live.tokens["operator"])
+        page, taken = _crowded_tab(live, browser, held, alone=False)
         banner = page.locator("#offline-banner")
-        page.wait_for_selector('#offline-banner[data-cause="crowded"]', timeout=MS)
         text = banner.inner_text()
         limit = DEFAULT_DOORS.max_connections_per_client
         assert f"Too many tabs/connections open to this daemon (limit {limit}): close some" in (
@@ -137,9 +154,7 @@ def test_too_many_connections_are_said_retried_and_left_once_one_is_freed(
             folder = ROOT / SHOTS if not Path(SHOTS).is_absolute() else Path(SHOTS)
             page.screenshot(path=folder / "preview-crowded-1024.png")
         taken[0].close()  # one freed: the page's next try gets in
-        page.wait_for_function(
-            "() => document.querySelector('#link').textContent === 'connected'", timeout=MS
-        )
+        _connected(page)
         assert banner.is_hidden()
         assert page.evaluate("window.bwsd.online") is True
 
@@ -150,23 +165,14 @@ def test_a_tab_opened_while_its_address_holds_the_limit_says_so_and_gets_in_once
     """Its REST requests are refused too (503): no error line, the crowded banner, and the
     tries of its event stream until one gets in, which then fetches everything (the browser
     asks with up to 6 HTTP connections besides its stream: a closed tab frees as many)."""
-    context = browser.new_context(viewport={"width": 1024, "height": 768})
     with ExitStack() as held:
-        held.callback(context.close)
-        page = context.new_page()
-        page.goto(live.base + "/")
-        page.locator("#login").wait_for(state="visible", timeout=MS)
-        taken = crowd(live.ws, live.headers("viewer"), held, alone=True)
-        _log_in(page, live.tokens["operator"])
-        page.wait_for_selector('#offline-banner[data-cause="crowded"]', timeout=MS)
+        page, taken = _crowded_tab(live, browser, held, alone=True)
         assert page.locator("#link").inner_text() == "too many connections"
         assert page.locator("#message").inner_text() == ""  # the banner says it, once
         assert page.evaluate("window.bwsd.online") is False
         for ws in taken[:7]:  # a tab closed: its event stream and the browser's 6 HTTP ones
             ws.close()
-        page.wait_for_function(
-            "() => document.querySelector('#link').textContent === 'connected'", timeout=MS
-        )
+        _connected(page)
         page.wait_for_selector('#state[data-state="Stopped"]', timeout=MS)
         assert page.locator("#message").inner_text() == ""
         assert page.locator("#offline-banner").is_hidden()
