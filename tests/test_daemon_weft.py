@@ -7,7 +7,6 @@ and the inserter's positioning axes, read back too, where.
 
 from __future__ import annotations
 
-import asyncio
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,7 +20,6 @@ from bwsd.export.skeleton_json import skeleton_to_dict
 from bwsd.program import parse_program
 from bwsd.twin import simulate
 from simulator_hw.app import canopen_installed
-from simulator_hw.control import request
 from tests.controller.test_wefts import loom_wefts, twin_wefts
 from tests.support.fieldbus import BUS, HEARTBEAT_MS, MACHINE, Mock, start_mock, toml
 from tests.test_daemon import Served, daemon_config, same_geometry
@@ -35,10 +33,14 @@ STRAIGHT = FILL + "WEFT x=15 y=-5 z=2 angle=0 length=20\nTAKEUP 2\n"  # it is at
 LIMIT = scaled(60.0)  # s: a bound for waiting, never an expected duration
 
 
-def loom(mock: Mock, axis: str) -> dict[str, Any]:
-    answer = asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "state"}))
-    found: dict[str, Any] = answer["axes"][axis]
+def axes(mock: Mock) -> dict[str, dict[str, Any]]:
+    """Every axis of the loom, by name, from one reading of its state."""
+    found: dict[str, dict[str, Any]] = mock.control({"cmd": "state"})["axes"]
     return found
+
+
+def loom(mock: Mock, axis: str) -> dict[str, Any]:
+    return axes(mock)[axis]
 
 
 def until(check: Any, what: str) -> None:
@@ -162,16 +164,16 @@ def test_a_weft_killed_between_its_placing_and_its_insert_resumes_identically(tr
     # Killed once the loom has every set-point of the placing (each axis travels or is
     # there): the daemon writes them one after the other, and a kill between two would
     # leave an axis that never got its own.
-    until(
-        lambda: (
-            loom(mock, "weft_x")["busy"]
-            and all(loom(mock, a)["busy"] or loom(mock, a)["position"] == target[a] for a in travel)
-        ),
-        "the inserter never travelled to the weft's place",
-    )
+
+    def sent(now: dict[str, dict[str, Any]]) -> bool:
+        return now["weft_x"]["busy"] and all(
+            now[a]["busy"] or now[a]["position"] == target[a] for a in travel
+        )
+
+    until(lambda: sent(axes(mock)), "the inserter never travelled to the weft's place")
     served.kill()
-    until(lambda: not any(loom(mock, a)["busy"] for a in travel), "the inserter kept moving")
-    placed = {a: loom(mock, a)["position"] for a in travel}
+    until(lambda: not any(axes(mock)[a]["busy"] for a in travel), "the inserter kept moving")
+    placed = {a: now["position"] for a, now in axes(mock).items() if a in travel}
     assert placed == target  # placed ...
     assert loom(mock, "weft_insert")["strokes"] == 0  # ... and not inserted
     served = Served(config, state, token)
@@ -187,7 +189,7 @@ def test_a_weft_killed_between_its_placing_and_its_insert_resumes_identically(tr
         machine = parse_config({"machine": MACHINE}).machine
         whole = simulate(machine, parse_program(PLACED))
         assert same_geometry(skeleton, skeleton_to_dict(whole.skeleton()))
-        answer = asyncio.run(request("127.0.0.1", mock.ports["control"], {"cmd": "state"}))
+        answer = mock.control({"cmd": "state"})
         assert answer["axes"]["weft_insert"]["strokes"] == 2  # each weft inserted once
         assert loom_wefts(answer["wefts"]) == twin_wefts(whole)  # where the twin put them
     finally:
