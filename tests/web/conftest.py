@@ -76,6 +76,26 @@ class Browsing:
         """Wait until the page shows PackML state ``name``."""
         self.page.wait_for_selector(f'#state[data-state="{name}"]', timeout=MS)
 
+    def restored(self, program: str) -> list[str]:
+        """After a restart, the notes that say ``program`` ("name (#id)") was restored, once
+        the page says so. The page's first state of the new start may come before the daemon
+        has rebuilt the job, or after: "Program P was restored; ..." at once, or "Program P
+        is being restored; ..." and then "After the restart: program P is restored, at ...".
+        """
+        first: str = self.until(
+            "p => window.bwsd.notices().find(n => n.cause === 'program' && n.text.includes(p))"
+            "?.text",
+            program,
+        )
+        if first.startswith(f"Program {program} is being restored; "):
+            rebuilt = f"After the restart: program {program} is restored, at "
+            then: str = self.until(
+                "t => window.bwsd.notices().find(n => n.text.startsWith(t))?.text", rebuilt
+            )
+            return [first, then]
+        assert first.startswith(f"Program {program} was restored; "), first
+        return [first]
+
 
 def watched(page: Page) -> Browsing:
     """``page``, its console's errors and warnings and its uncaught errors kept."""

@@ -107,9 +107,8 @@ def test_every_state_of_a_shift_is_readable_at_every_size(shift: dict[str, Any],
 
     served.stop()
     shift["served"] = served = again(served, token)
-    page.until("() => window.bwsd.notices().some(n => n.cause === 'program')")
+    restored = ["The daemon restarted", *page.restored("shift.bws (#1)"), "Aborted"]
     page.state("Aborted")
-    restored = ["The daemon restarted", "Program shift.bws (#1) was restored", "Aborted"]
     _everywhere(page, "restart", restored, ["#notice-banner", *head])
 
     page.page.click("#logout")  # the page's stream is closed; the crowd takes its place
