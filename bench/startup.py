@@ -46,6 +46,7 @@ COMMANDS = {
 }
 TARGETS = {"`bwsd --help`": 0.3, PROGRAM: 0.3}
 API_LINE = "REST API and the page on "
+MODES = (False, True)  # `bwsd serve` with OPC UA off, and on
 LIMIT = 120.0  # s: a bound for waiting, never an expected duration
 
 
@@ -167,17 +168,20 @@ def measure(runs: int, serve_runs: int) -> tuple[dict[str, list[float]], dict[st
         tmp = Path(where)
         mock = start_mock(tmp, {})
         try:
-            for opcua in (False, True):
-                config, state = serve_config(tmp, mock.ports["modbus"], opcua)
-                label = "OPC UA on" if opcua else "OPC UA off"
-                first = served(config, state)
-                times[f"`bwsd serve`, {label}, first start: to `/healthz` 200"] = [first[0]]
-                times[f"`bwsd serve`, {label}, first start: to `ready`"] = [first[1]]
-                again = [served(config, state) for _ in range(serve_runs)]
-                times[f"`bwsd serve`, {label}: to `/healthz` 200"] = [h for h, _ in again]
-                times[f"`bwsd serve`, {label}: to `ready`"] = [r for _, r in again]
+            modes = {opcua: serve_config(tmp, mock.ports["modbus"], opcua) for opcua in MODES}
+            first = {opcua: served(*modes[opcua]) for opcua in MODES}
+            again: dict[bool, list[tuple[float, float]]] = {opcua: [] for opcua in MODES}
+            for _ in range(serve_runs):  # the modes' restarts interleaved, as the commands'
+                for opcua in MODES:
+                    again[opcua].append(served(*modes[opcua]))
         finally:
             mock.stop()
+    for opcua in MODES:
+        label = "OPC UA on" if opcua else "OPC UA off"
+        times[f"`bwsd serve`, {label}, first start: to `/healthz` 200"] = [first[opcua][0]]
+        times[f"`bwsd serve`, {label}, first start: to `ready`"] = [first[opcua][1]]
+        times[f"`bwsd serve`, {label}: to `/healthz` 200"] = [h for h, _ in again[opcua]]
+        times[f"`bwsd serve`, {label}: to `ready`"] = [r for _, r in again[opcua]]
     return times, cpu
 
 
