@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -36,6 +37,8 @@ _OFFLINE = (
     "ReadTimeout",
     "Could not fetch URL",
 )
+# What pip says of a download cut midway, once it has given up resuming it.
+_CUT = ("incomplete-download", "Connection interrupted", "ConnectionResetError")
 
 
 def unavailable(message: str) -> None:
@@ -86,21 +89,31 @@ def fresh_venv(folder: Path, *install: str) -> tuple[Path, dict[str, str]]:
     if made.returncode != 0:
         unavailable(f"python -m venv failed: {made.stderr.strip()[-500:]}")
     bin_dir = folder / "bin"
-    pip_install(bin_dir, env, *install)
+    if install:
+        pip_install(bin_dir, env, *install)
     return bin_dir, env
 
 
-def pip_install(bin_dir: Path, env: dict[str, str], *install: str) -> None:
-    """``install`` into the venv of ``bin_dir`` by this run's pip."""
+def pip_install(
+    bin_dir: Path, env: dict[str, str], *install: str, attempts: int = 3, pause_s: float = 15.0
+) -> None:
+    """``install`` into the venv of ``bin_dir`` by this run's pip. A download the index cut
+    midway, that pip gave up resuming, is tried again after a pause (``pause_s`` times the
+    attempt's number), at most ``attempts`` times in all."""
     command = [sys.executable, "-m", "pip", "--python", str(bin_dir / "python"), "install"]
-    run = subprocess.run(
-        [*command, "-q", *install],
-        capture_output=True,
-        text=True,
-        timeout=900,
-        env=env,
-    )
-    if run.returncode != 0 and any(sign in run.stderr for sign in _OFFLINE):
+    for attempt in range(1, attempts + 1):
+        run = subprocess.run(
+            [*command, "-q", *install],
+            capture_output=True,
+            text=True,
+            timeout=900,
+            env=env,
+        )
+        cut = run.returncode != 0 and any(sign in run.stderr for sign in _CUT)
+        if not cut or attempt == attempts:
+            break
+        time.sleep(pause_s * attempt)
+    if run.returncode != 0 and any(sign in run.stderr for sign in _OFFLINE + _CUT):
         unavailable(f"the package index cannot be reached: {run.stderr.strip()[-500:]}")
     assert run.returncode == 0, run.stderr[-3000:]
 
