@@ -18,6 +18,7 @@ from tests.support.build import (
     THREE,
     THREE_ROOT,
     built_wheel,
+    clean_tree,
     core_venv,
     fresh_venv,
     installed,
@@ -89,8 +90,10 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
-    """``bwsd demo --exit-when-done`` on free ports in ``cwd``: its output, once it completed."""
-    cwd.mkdir()
+    """``bwsd demo --exit-when-done`` on free ports in ``cwd`` (made if missing): its output,
+    once it completed."""
+    cwd.mkdir(exist_ok=True)
+    before = {p.name for p in cwd.iterdir()}
     done = subprocess.run(
         [str(bin_dir / "bwsd"), "demo", "--exit-when-done", *ALL_FREE],
         capture_output=True,
@@ -108,7 +111,7 @@ def run_demo(bin_dir: Path, env: dict[str, str], cwd: Path) -> str:
     assert re.search(r"^api: http://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert re.search(r"^plc: modbus-tcp://127\.0\.0\.1:\d+$", done.stdout, re.MULTILINE)
     assert "Complete: 50 instructions done, 73 contacts" in done.stdout
-    assert sorted(p.name for p in cwd.iterdir()) == ["out"]  # its journal, nothing else
+    assert sorted({p.name for p in cwd.iterdir()} - before) == ["out"]  # its journal alone
     return done.stdout
 
 
@@ -242,6 +245,21 @@ def _lower_bounds() -> list[str]:
         assert match, f"no lower bound in {requirement!r}"
         pins.append(f"{match[1]}=={match[4]}")
     return pins
+
+
+@pytest.mark.slow
+def test_the_wheel_runs_the_demo_from_inside_an_unbuilt_source_tree(tmp_path_factory, tmp_path):
+    """Installed from the wheel, run in a clone's folder: the mock loom the demo starts
+    imports the installed package, not the clone's unbuilt one (no compiled kernel). Here
+    the clone's packages refuse to be imported, so using them would show."""
+    bin_dir, env = core_venv(tmp_path_factory)
+    clone = clean_tree(tmp_path / "clone")
+    assert not list(clone.rglob("*.so"))
+    for package in ("bwsd", "simulator_hw"):
+        with (clone / package / "__init__.py").open("a") as init:
+            init.write(f"\nraise ImportError('the clone\\'s {package} was imported')\n")
+    said = run_demo(bin_dir, env, clone)
+    assert "the mock loom did not start" not in said
 
 
 @pytest.mark.slow
