@@ -118,11 +118,8 @@ class _CuttingIndex:
                     self._send(body, "text/html")
                 elif self.path == f"/files/{index.wheel.name}":
                     index.downloads += 1
-                    data = index.wheel.read_bytes()
-                    if index.downloads <= index.cuts:
-                        self._send(data, "application/octet-stream", cut=True)
-                    else:
-                        self._send(data, "application/octet-stream")
+                    cut = index.downloads <= index.cuts
+                    self._send(index.wheel.read_bytes(), "application/octet-stream", cut)
                 else:
                     self.send_error(404)
 
